@@ -1,0 +1,5 @@
+import sys
+
+from gonio.cli import main
+
+sys.exit(main())

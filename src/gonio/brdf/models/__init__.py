@@ -1,0 +1,19 @@
+"""Analytic BRDF models (JAX). Each model lives in its own module; this package re-exports them.
+
+>>> from gonio.brdf import models
+>>> m = models.Lambert(albedo=[0.5, 0.4, 0.3])
+"""
+
+from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
+from gonio.brdf.models._sum import Sum
+from gonio.brdf.models.lambert import Lambert
+
+__all__ = [
+    "BRDFModel",
+    "BRDFSample",
+    "Lambert",
+    "Node",
+    "Param",
+    "Sum",
+    "registry",
+]

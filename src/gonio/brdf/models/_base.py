@@ -1,0 +1,474 @@
+"""Base classes shared by every analytic model: parameters, pytrees, sampling records, mixtures.
+
+A model is an immutable JAX pytree. Its array leaves are the parameters listed in ``PARAMS``
+(so ``jax.grad`` and ``jax.vmap`` see them), nested nodes (for example a Fresnel term) are listed
+in ``CHILDREN``, and hashable options such as ``variant="duer"`` in ``STATIC``. Subclasses write
+the geometry in ``_f``, ``_pdf`` and ``_sample``; the public ``f``, ``pdf`` and ``sample`` add the
+conventions every model shares (below-horizon directions give 0, ``weight = f cos / pdf``, channels
+last).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from gonio.brdf.frames import safe_div, upper
+from gonio.errors import ParameterError
+
+Array = jnp.ndarray
+
+#: Largest float32 below 1: uniform numbers are clamped to ``[0, ONE_MINUS_EPS]``.
+ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+
+_REGISTRY: dict[str, type[Node]] = {}
+
+
+@dataclass(frozen=True)
+class Param:
+    """Metadata of one model parameter, used by validation and by the fitter.
+
+    Attributes
+    ----------
+    name : keyword argument name of the model's constructor.
+    default : value used when the argument is omitted (and a fitter's starting point).
+    lower, upper : inclusive physical bounds; construction outside them raises ParameterError.
+    unit : unit of the value, e.g. ``"1"`` (dimensionless), ``"rad"``.
+    per_channel : whether the value may be an array of shape ``(C,)`` (one per channel).
+    scale : reparameterization a fitter should use: ``"linear"``, ``"log"`` (positive, spans
+        decades, e.g. roughness) or ``"logit"`` (bounded on both sides, e.g. albedo).
+    doc : one-line description.
+    """
+
+    name: str
+    default: float
+    lower: float
+    upper: float
+    unit: str = "1"
+    per_channel: bool = False
+    scale: Literal["linear", "log", "logit"] = "linear"
+    doc: str = ""
+
+
+class BRDFSample(NamedTuple):
+    """Result of ``sample(wo, u)``.
+
+    Attributes
+    ----------
+    wi : (..., 3) sampled incident direction (toward the light).
+    pdf : (...) its density per unit solid angle; for a delta lobe, the discrete probability of
+        having chosen it. 0 marks a failed sample (then ``weight`` is 0 too).
+    weight : (..., C) ``f(wi, wo) cos(theta_i) / pdf`` (for delta lobes, the lobe's reflectance
+        divided by its selection probability).
+    delta : (...) bool, True where ``wi`` came from a delta lobe and must not be evaluated as a
+        density (``f`` and ``pdf`` of a delta lobe are 0 for every given pair of directions).
+    """
+
+    wi: Array
+    pdf: Array
+    weight: Array
+    delta: Array
+
+
+def _is_concrete(x: Any) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+class Node:
+    """An immutable pytree with named parameters, nested nodes and static options."""
+
+    PARAMS: ClassVar[tuple[Param, ...]] = ()
+    CHILDREN: ClassVar[tuple[str, ...]] = ()
+    STATIC: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        jax.tree_util.register_pytree_node(cls, cls._tree_flatten, cls._tree_unflatten)
+        _REGISTRY[cls.__name__] = cls
+
+    # -- pytree -------------------------------------------------------------------------------
+    def _tree_flatten(self) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+        leaves = tuple(getattr(self, p.name) for p in self.PARAMS)
+        leaves += tuple(getattr(self, c) for c in self.CHILDREN)
+        return leaves, tuple(getattr(self, s) for s in self.STATIC)
+
+    @classmethod
+    def _tree_unflatten(cls, aux: tuple[Any, ...], leaves: Sequence[Any]) -> Node:
+        obj = object.__new__(cls)
+        names = [p.name for p in cls.PARAMS] + list(cls.CHILDREN)
+        for name, value in zip(names, leaves, strict=True):
+            object.__setattr__(obj, name, value)
+        for name, value in zip(cls.STATIC, aux, strict=True):
+            object.__setattr__(obj, name, value)
+        return obj
+
+    # -- construction -------------------------------------------------------------------------
+    def _set_params(self, **values: Any) -> None:
+        """Validate and store parameters; raise ParameterError naming the bad one."""
+        known = {p.name: p for p in self.PARAMS}
+        for name in values:
+            if name not in known:
+                raise ParameterError(f"{type(self).__name__}: unknown parameter {name!r}")
+        for p in self.PARAMS:
+            value = values.get(p.name)
+            if value is None:
+                value = p.default
+            if _is_concrete(value):
+                value = self._check(p, value)
+            object.__setattr__(self, p.name, value)
+        if _is_concrete(self._own_values()):
+            self._own_channels()  # raises on mismatched per-channel lengths
+
+    def _check(self, p: Param, value: Any) -> Array:
+        cls = type(self).__name__
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{cls}: {p.name} must be a number, got {value!r}") from None
+        if arr.ndim > 1 or (arr.ndim == 1 and not p.per_channel):
+            shape = "a scalar or one value per channel" if p.per_channel else "a scalar"
+            raise ParameterError(f"{cls}: {p.name} must be {shape}, got shape {arr.shape}")
+        if arr.size == 0:
+            raise ParameterError(f"{cls}: {p.name} is empty")
+        if not np.all(np.isfinite(arr)):
+            raise ParameterError(f"{cls}: {p.name} must be finite, got {arr.tolist()}")
+        if np.any(arr < p.lower) or np.any(arr > p.upper):
+            raise ParameterError(
+                f"{cls}: {p.name}={arr.tolist()} is outside [{p.lower:g}, {p.upper:g}] {p.unit}"
+            )
+        return jnp.asarray(arr)
+
+    def _own_values(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, p.name) for p in self.PARAMS)
+
+    def _own_channels(self) -> int:
+        sizes = {int(np.size(getattr(self, p.name))) for p in self.PARAMS if p.per_channel}
+        sizes.discard(1)
+        if len(sizes) > 1:
+            raise ParameterError(
+                f"{type(self).__name__}: per-channel parameters disagree on the channel count "
+                f"({sorted(sizes)})"
+            )
+        return sizes.pop() if sizes else 1
+
+    def children(self) -> dict[str, Any]:
+        """Nested nodes by field name."""
+        return {c: getattr(self, c) for c in self.CHILDREN}
+
+    @property
+    def channels(self) -> int:
+        """Number of output channels C (1 when every per-channel parameter is a scalar)."""
+        sizes = {self._own_channels()}
+        for child in jax.tree_util.tree_leaves(
+            list(self.children().values()), is_leaf=lambda x: isinstance(x, Node)
+        ):
+            if isinstance(child, Node):
+                sizes.add(child.channels)
+        sizes.discard(1)
+        if len(sizes) > 1:
+            raise ParameterError(
+                f"{type(self).__name__}: parts disagree on the channel count ({sorted(sizes)})"
+            )
+        return sizes.pop() if sizes else 1
+
+    # -- parameters as a flat dictionary (for the fitter) --------------------------------------
+    def param_specs(self) -> dict[str, Param]:
+        """Every parameter of this node and its children, keyed ``"name"`` or ``"child.name"``."""
+        out = {p.name: p for p in self.PARAMS}
+        for cname, child in self.children().items():
+            if isinstance(child, Node):
+                out.update({f"{cname}.{k}": v for k, v in child.param_specs().items()})
+        return out
+
+    def params(self) -> dict[str, Array]:
+        """Current values, keyed like :meth:`param_specs`."""
+        out = {p.name: getattr(self, p.name) for p in self.PARAMS}
+        for cname, child in self.children().items():
+            if isinstance(child, Node):
+                out.update({f"{cname}.{k}": v for k, v in child.params().items()})
+        return out
+
+    def replace(self, **values: Any) -> Node:
+        """A copy with some parameters replaced (keys as in :meth:`params`).
+
+        Works with traced values inside ``jit``/``grad`` (no validation is possible there);
+        concrete values are validated like the constructor does.
+        """
+        own: dict[str, Any] = {}
+        nested: dict[str, dict[str, Any]] = {}
+        specs = {p.name: p for p in self.PARAMS}
+        for key, value in values.items():
+            head, dot_, rest = key.partition(".")
+            if dot_:
+                if head not in self.CHILDREN:
+                    raise ParameterError(f"{type(self).__name__}: unknown parameter {key!r}")
+                nested.setdefault(head, {})[rest] = value
+            elif head in specs:
+                own[head] = self._check(specs[head], value) if _is_concrete(value) else value
+            else:
+                raise ParameterError(f"{type(self).__name__}: unknown parameter {key!r}")
+        leaves, aux = self._tree_flatten()
+        names = [p.name for p in self.PARAMS] + list(self.CHILDREN)
+        new_leaves = []
+        for name, leaf in zip(names, leaves, strict=True):
+            if name in own:
+                leaf = own[name]
+            elif name in nested:
+                leaf = leaf.replace(**nested[name])
+            new_leaves.append(leaf)
+        return type(self)._tree_unflatten(aux, new_leaves)
+
+    # -- serialization (fit results, model files) ----------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description: ``{"type", "params", "static", "children"}``."""
+        return {
+            "type": type(self).__name__,
+            "params": {p.name: np.asarray(getattr(self, p.name)).tolist() for p in self.PARAMS},
+            "static": {s: getattr(self, s) for s in self.STATIC},
+            "children": {c: _child_to_json(getattr(self, c)) for c in self.CHILDREN},
+        }
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> Node:
+        """Inverse of :meth:`to_dict`; raises ParameterError on unknown types or bad values."""
+        try:
+            cls = _REGISTRY[d["type"]]
+        except (KeyError, TypeError):
+            raise ParameterError(f"unknown model description {str(d)[:80]!r}") from None
+        return cls._from_dict(d)
+
+    @classmethod
+    def _from_dict(cls, d: dict[str, Any]) -> Node:
+        kwargs = dict(d.get("params", {}))
+        kwargs.update(d.get("static", {}))
+        for name, child in d.get("children", {}).items():
+            kwargs[name] = _child_from_json(child)
+        return cls(**kwargs)
+
+    def __repr__(self) -> str:
+        parts = []
+        for p in self.PARAMS:
+            v = getattr(self, p.name)
+            parts.append(f"{p.name}={np.asarray(v).tolist() if _is_concrete(v) else '<traced>'}")
+        parts += [f"{c}={getattr(self, c)!r}" for c in self.CHILDREN]
+        parts += [f"{s}={getattr(self, s)!r}" for s in self.STATIC]
+        return f"{type(self).__name__}({', '.join(parts)})"
+
+
+def _child_to_json(child: Any) -> Any:
+    if isinstance(child, Node):
+        return child.to_dict()
+    if isinstance(child, (tuple, list)):
+        return [_child_to_json(c) for c in child]
+    return child
+
+
+def _child_from_json(d: Any) -> Any:
+    if isinstance(d, dict):
+        return Node.from_dict(d)
+    if isinstance(d, list):
+        return tuple(_child_from_json(c) for c in d)
+    return d
+
+
+def as_float(x: Any, dtype: Any = None) -> Array:
+    """``jnp.asarray`` with a floating dtype (float64 unless ``dtype`` or the input says so)."""
+    x = jnp.asarray(x)
+    if dtype is None:
+        dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.float64
+    return x.astype(dtype)
+
+
+def clamp_u(u: Array) -> Array:
+    """Clamp uniform numbers to ``[0, 1 - eps]`` so warps never see exactly 1."""
+    return jnp.clip(u, 0.0, ONE_MINUS_EPS)
+
+
+def channel_mean(x: Array) -> Array:
+    """Mean over the channel axis of a per-channel parameter (scalar stays scalar)."""
+    return jnp.mean(jnp.atleast_1d(x), axis=-1)
+
+
+class BRDFModel(Node):
+    """An analytic BRDF in the local frame (see the module docstring of :mod:`gonio.brdf`).
+
+    Subclasses implement:
+
+    ``_f(wi, wo) -> (..., C)`` or ``(..., 1)``
+        the BRDF in sr^-1 for directions both above the horizon (the caller masks the rest);
+    ``_pdf(wi, wo) -> (...)``
+        the density of ``_sample`` per unit solid angle;
+    ``_sample(wo, u) -> wi``
+        a direction drawn with density ``_pdf``; it may fall below the horizon (then the sample
+        is marked failed);
+    ``sampling_weight(wo) -> (...)``
+        a cheap estimate of the directional albedo, used to pick lobes in a mixture.
+    """
+
+    #: True for lobes that are Dirac deltas (perfect mirror, smooth glass).
+    is_delta: ClassVar[bool] = False
+
+    # -- to implement --------------------------------------------------------------------------
+    def _f(self, wi: Array, wo: Array) -> Array:
+        raise NotImplementedError
+
+    def _pdf(self, wi: Array, wo: Array) -> Array:
+        raise NotImplementedError
+
+    def _sample(self, wo: Array, u: Array) -> Array:
+        raise NotImplementedError
+
+    def sampling_weight(self, wo: Array) -> Array:
+        """Estimate of the directional albedo at ``wo`` (shape ``(...)``), for lobe selection."""
+        raise NotImplementedError
+
+    # -- public interface ----------------------------------------------------------------------
+    def f(self, wi: Array, wo: Array) -> Array:
+        """BRDF value in sr^-1, without the cosine: ``(..., 3), (..., 3) -> (..., C)``.
+
+        Zero where either direction is on or below the horizon.
+        """
+        wi, wo = _directions(wi, wo)
+        C = self.channels
+        ok = upper(wi) & upper(wo)
+        wi_s, wo_s = _safe_pair(wi, wo, ok)
+        val = self._f(wi_s, wo_s)
+        shape = (*ok.shape, C)
+        val = jnp.broadcast_to(val, shape)
+        return jnp.where(ok[..., None], val, 0.0).astype(wi.dtype)
+
+    def pdf(self, wi: Array, wo: Array) -> Array:
+        """Density of :meth:`sample` over ``wi`` per unit solid angle, shape ``(...)``."""
+        wi, wo = _directions(wi, wo)
+        ok = upper(wi) & upper(wo)
+        wi_s, wo_s = _safe_pair(wi, wo, ok)
+        return jnp.where(ok, self._pdf(wi_s, wo_s), 0.0).astype(wi.dtype)
+
+    def sample(self, wo: Array, u: Array) -> BRDFSample:
+        """Importance-sample ``wi`` for outgoing ``wo`` ``(..., 3)`` from ``u`` ``(..., 2)``."""
+        wo = as_float(wo)
+        u = clamp_u(as_float(u, wo.dtype))
+        wo, u = _broadcast_dir_u(wo, u)
+        ok_o = upper(wo)
+        wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        wi = self._sample(wo_s, u).astype(wo.dtype)
+        return self._finish(wi, wo_s, ok_o)
+
+    def _finish(self, wi: Array, wo: Array, ok_o: Array) -> BRDFSample:
+        ok = ok_o & upper(wi)
+        wi_s, _ = _safe_pair(wi, wo, ok)
+        pdf = jnp.where(ok, self._pdf(wi_s, wo), 0.0)
+        ok = ok & (pdf > 0)
+        pdf = jnp.where(ok, pdf, 0.0)
+        val = jnp.broadcast_to(self._f(wi_s, wo), (*ok.shape, self.channels))
+        weight = safe_div(val * wi_s[..., 2:3], pdf[..., None])
+        weight = jnp.where(ok[..., None], weight, 0.0)
+        return BRDFSample(wi, pdf.astype(wo.dtype), weight.astype(wo.dtype), jnp.zeros_like(ok))
+
+    def directional_albedo(self, wo: Array, n: int = 128) -> Array:
+        """Directional albedo ``int f(wi, wo) cos(theta_i) dwi`` at ``wo`` (..., 3) -> (..., C).
+
+        Estimated with the model's own importance sampler on a stratified ``n x n`` grid of
+        ``u`` (deterministic). For delta lobes the sample weights already carry their mass.
+        """
+        wo = as_float(wo)
+        g = (jnp.arange(n, dtype=wo.dtype) + 0.5) / n
+        uu = jnp.stack(jnp.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+        s = self.sample(wo[..., None, :], uu)
+        return jnp.mean(s.weight, axis=-2)
+
+    def __add__(self, other: BRDFModel) -> BRDFModel:
+        from gonio.brdf.models._sum import Sum
+
+        if not isinstance(other, BRDFModel):
+            return NotImplemented
+        left = self.lobes if isinstance(self, Sum) else (self,)
+        right = other.lobes if isinstance(other, Sum) else (other,)
+        return Sum(*left, *right)
+
+
+def _directions(wi: Any, wo: Any) -> tuple[Array, Array]:
+    wi = as_float(wi)
+    wo = as_float(wo)
+    dtype = jnp.result_type(wi, wo)
+    wi, wo = jnp.broadcast_arrays(wi.astype(dtype), wo.astype(dtype))
+    return wi, wo
+
+
+def _broadcast_dir_u(w: Array, u: Array) -> tuple[Array, Array]:
+    shape = jnp.broadcast_shapes(w.shape[:-1], u.shape[:-1])
+    return jnp.broadcast_to(w, (*shape, 3)), jnp.broadcast_to(u, (*shape, 2))
+
+
+def _safe_pair(wi: Array, wo: Array, ok: Array) -> tuple[Array, Array]:
+    """Replace masked-out directions by the normal so model code never sees degenerate input.
+
+    This is what keeps gradients finite: ``jnp.where`` differentiates both branches, so the
+    masked branch must itself be finite.
+    """
+    z = jnp.array([0.0, 0.0, 1.0], dtype=wi.dtype)
+    return jnp.where(ok[..., None], wi, z), jnp.where(ok[..., None], wo, z)
+
+
+def choose_lobe(u0: Array, weights: Sequence[Array]) -> tuple[Array, Array, list[Array]]:
+    """Pick one of K lobes with probability proportional to ``weights`` and reuse ``u0``.
+
+    Parameters
+    ----------
+    u0 : (...) uniform numbers in [0, 1).
+    weights : K arrays broadcastable to ``u0``'s shape, non-negative (not necessarily normalized).
+
+    Returns
+    -------
+    index : (...) int, the chosen lobe.
+    u0_remapped : (...) uniform in [0, 1) again, independent of the choice.
+    probs : K arrays, the normalized selection probabilities (uniform where all weights are 0).
+    """
+    ws = [jnp.broadcast_to(jnp.maximum(w, 0.0), u0.shape).astype(u0.dtype) for w in weights]
+    total = sum(ws)
+    k = len(ws)
+    probs = [jnp.where(total > 0, safe_div(w, total), 1.0 / k) for w in ws]
+    index = jnp.zeros(u0.shape, dtype=jnp.int32)
+    lo = jnp.zeros_like(u0)
+    chosen_lo = jnp.zeros_like(u0)
+    chosen_p = probs[0]
+    for i, p in enumerate(probs):
+        hi = lo + p
+        take = (u0 >= lo) & ((u0 < hi) | (i == k - 1))
+        # A lobe of probability 0 is never taken, even when float rounding says u0 == lo.
+        take = take & (p > 0)
+        index = jnp.where(take, i, index)
+        chosen_lo = jnp.where(take, lo, chosen_lo)
+        chosen_p = jnp.where(take, p, chosen_p)
+        lo = hi
+    remapped = clamp_u(safe_div(u0 - chosen_lo, chosen_p))
+    return index, remapped, probs
+
+
+def mixture_sample(
+    wo: Array,
+    u: Array,
+    weights: Sequence[Array],
+    samplers: Sequence[Callable[[Array, Array], Array]],
+) -> tuple[Array, list[Array]]:
+    """Sample ``wi`` from a mixture of per-lobe samplers; returns ``(wi, probs)``.
+
+    Every sampler runs on the whole batch (vectorized code has no cheaper way) and the chosen
+    lobe's direction is kept. The caller's pdf is ``sum_k probs_k * pdf_k``.
+    """
+    index, u0, probs = choose_lobe(u[..., 0], weights)
+    uu = jnp.stack([u0, u[..., 1]], -1)
+    wi = samplers[0](wo, uu)
+    for i, s in enumerate(samplers[1:], start=1):
+        wi = jnp.where((index == i)[..., None], s(wo, uu), wi)
+    return wi, probs
+
+
+def registry() -> dict[str, type[Node]]:
+    """Every model and Fresnel class by class name (used by :meth:`Node.from_dict`)."""
+    return dict(_REGISTRY)

@@ -1,0 +1,50 @@
+"""Typed exceptions raised by gonio library code.
+
+Every error that bad *input* can cause derives from :class:`GonioError`. The command line catches
+``GonioError``, prints ``gonio: <message>`` on one line to stderr and exits with the error's
+``exit_code``; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+
+class GonioError(Exception):
+    """Base class of all expected gonio errors (bad input, refused operations, device faults)."""
+
+    exit_code: int = 1
+
+
+class ParameterError(GonioError, ValueError):
+    """A model or command parameter is out of its documented range or has the wrong shape."""
+
+    exit_code = 2
+
+
+class FormatError(GonioError, ValueError):
+    """A file is malformed, truncated, of an unknown version, or not the format it claims to be."""
+
+    exit_code = 2
+
+
+class RigConfigError(GonioError, ValueError):
+    """A rig file is invalid: a missing or mistyped key, an impossible value."""
+
+    exit_code = 2
+
+
+class PlanError(GonioError, ValueError):
+    """An acquisition plan asks for something the rig cannot do (out of limits, occluded pose)."""
+
+    exit_code = 2
+
+
+class DeviceError(GonioError, RuntimeError):
+    """A device (servo bus, camera, light) failed and could not be recovered by retrying."""
+
+    exit_code = 3
+
+
+class FitError(GonioError, RuntimeError):
+    """A fit cannot be carried out on this data (too few samples, no valid cells, ...)."""
+
+    exit_code = 4

@@ -1,0 +1,148 @@
+"""Reusable property checks for anything with the model interface (analytic models, tables).
+
+Each ``check_*`` raises AssertionError with a message naming the model and the failing input.
+Test modules call them with their own parameter sets.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from gonio.brdf import frames
+from gonio.brdf.chi2 import chi2_test, model_sampler
+
+EPS1 = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+
+
+def random_upper(n: int, seed: int, max_theta: float = np.pi / 2 * 0.999) -> np.ndarray:
+    """``n`` directions uniform in (theta, phi) over the upper hemisphere, ``(n, 3)``."""
+    rng = np.random.default_rng(seed)
+    th = rng.uniform(0, max_theta, n)
+    ph = rng.uniform(0, 2 * np.pi, n)
+    return np.asarray(frames.spherical_to_direction(th, ph))
+
+
+def stress_directions() -> np.ndarray:
+    """Normal, grazing, exactly-horizon, below-horizon and opposite directions, ``(K, 3)``."""
+    th = [0.0, 1e-8, 0.3, 1.0, np.pi / 2 - 1e-7, np.pi / 2, np.pi / 2 + 1e-7, 2.0, np.pi]
+    ph = [0.0, 0.5, np.pi, 2 * np.pi - 1e-12]
+    t, p = np.meshgrid(th, ph, indexing="ij")
+    return np.asarray(frames.spherical_to_direction(t.ravel(), p.ravel()))
+
+
+def check_reciprocity(model, n: int = 2000, rtol: float = 1e-5, seed: int = 1) -> None:
+    wi, wo = random_upper(n, seed), random_upper(n, seed + 1)
+    a, b = np.asarray(model.f(wi, wo)), np.asarray(model.f(wo, wi))
+    np.testing.assert_allclose(a, b, rtol=rtol, atol=1e-12, err_msg=f"{model!r} not reciprocal")
+
+
+def check_nonnegative_and_masked(model, n: int = 2000, seed: int = 2) -> None:
+    wi, wo = random_upper(n, seed), random_upper(n, seed + 1)
+    v = np.asarray(model.f(wi, wo))
+    assert v.shape == (n, model.channels), f"{model!r}: f shape {v.shape}"
+    assert np.all(np.isfinite(v)) and np.all(v >= 0), f"{model!r}: negative or non-finite f"
+    below = wi * [1, 1, -1]
+    assert np.all(np.asarray(model.f(below, wo)) == 0), f"{model!r}: f != 0 below the horizon"
+    assert np.all(np.asarray(model.pdf(below, wo)) == 0), f"{model!r}: pdf != 0 below horizon"
+    assert np.all(np.asarray(model.f(wi, below)) == 0), f"{model!r}: f != 0 for wo below"
+
+
+def check_isotropy(model, n: int = 1000, seed: int = 3, rtol: float = 1e-5) -> None:
+    """f and pdf are invariant under a common rotation about the normal."""
+    wi, wo = random_upper(n, seed), random_upper(n, seed + 1)
+    ang = np.random.default_rng(seed).uniform(0, 2 * np.pi, (n, 1))
+    c, s = np.cos(ang), np.sin(ang)
+
+    def rot(w):
+        return np.concatenate(
+            [c * w[:, :1] - s * w[:, 1:2], s * w[:, :1] + c * w[:, 1:2], w[:, 2:]], 1
+        )
+
+    np.testing.assert_allclose(
+        np.asarray(model.f(rot(wi), rot(wo))), np.asarray(model.f(wi, wo)), rtol=rtol, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        np.asarray(model.pdf(rot(wi), rot(wo))),
+        np.asarray(model.pdf(wi, wo)),
+        rtol=rtol,
+        atol=1e-12,
+    )
+
+
+def check_stress(model) -> None:
+    """No NaN/Inf from f, pdf or sample on degenerate directions and extreme u."""
+    d = stress_directions()
+    wi = np.repeat(d, len(d), axis=0)
+    wo = np.tile(d, (len(d), 1))
+    for arr, what in ((model.f(wi, wo), "f"), (model.pdf(wi, wo), "pdf")):
+        arr = np.asarray(arr)
+        assert np.all(np.isfinite(arr)), f"{model!r}: non-finite {what}"
+        assert np.all(arr >= 0), f"{model!r}: negative {what}"
+    below = (wi[:, 2] <= 0) | (wo[:, 2] <= 0)
+    assert np.all(np.asarray(model.f(wi, wo))[below] == 0), f"{model!r}: f != 0 below horizon"
+    assert np.all(np.asarray(model.pdf(wi, wo))[below] == 0), f"{model!r}: pdf != 0 below"
+    us = np.array([[0, 0], [0, EPS1], [EPS1, 0], [EPS1, EPS1], [0.5, 0.5], [1e-12, 0.25]])
+    uu = np.tile(us, (len(d), 1))
+    ww = np.repeat(d, len(us), axis=0)
+    for dtype in (np.float64, np.float32):
+        s = model.sample(ww.astype(dtype), uu.astype(dtype))
+        for name in ("wi", "pdf", "weight"):
+            arr = np.asarray(getattr(s, name))
+            assert np.all(np.isfinite(arr)), f"{model!r}: non-finite sample.{name} ({dtype})"
+        assert np.all(np.asarray(s.pdf) >= 0)
+        assert np.all(np.asarray(s.weight)[ww[:, 2] <= 0] == 0), f"{model!r}: weight for wo below"
+
+
+def check_param_gradients(model, names=None) -> None:
+    """jax.grad of f, pdf and sample weight w.r.t. every parameter is finite on stress input."""
+    d = stress_directions()
+    wi = jnp.asarray(np.repeat(d, len(d), axis=0))
+    wo = jnp.asarray(np.tile(d, (len(d), 1)))
+    u = jnp.asarray(np.random.default_rng(0).random((wi.shape[0], 2)))
+    params = model.params()
+    names = names or list(params)
+    for name in names:
+        v0 = params[name]
+
+        def loss(v, name=name):
+            m = model.replace(**{name: v})
+            s = m.sample(wo, u)
+            return (
+                jnp.sum(m.f(wi, wo)) + jnp.sum(m.pdf(wi, wo)) + jnp.sum(s.weight) + jnp.sum(s.pdf)
+            )
+
+        g = np.asarray(jax.grad(loss)(v0))
+        assert np.all(np.isfinite(g)), f"{model!r}: non-finite gradient w.r.t. {name}"
+
+
+def check_sample_weight_consistent(model, n: int = 4000, seed: int = 4) -> None:
+    """``weight == f cos / pdf`` and ``pdf == model.pdf(wi, wo)`` for the samples drawn."""
+    wo = random_upper(n, seed, max_theta=np.radians(85))
+    u = np.random.default_rng(seed).random((n, 2))
+    s = model.sample(wo, u)
+    ok = np.asarray(s.pdf) > 0
+    wi = np.asarray(s.wi)[ok]
+    np.testing.assert_allclose(
+        np.asarray(s.pdf)[ok], np.asarray(model.pdf(wi, wo[ok])), rtol=1e-4, atol=1e-10
+    )
+    expect = np.asarray(model.f(wi, wo[ok])) * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
+    np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-4, atol=1e-10)
+
+
+def check_chi2(model, theta_o_deg, n_tests: int, n_samples: int = 1_000_000, **kw) -> None:
+    """Chi-square test of ``model.sample`` against ``model.pdf`` at each theta_o (phi_o = 0.3)."""
+    for t in theta_o_deg:
+        wo = np.asarray(frames.spherical_to_direction(np.radians(t), 0.3))
+        sample, pdf = model_sampler(model, wo)
+        r = chi2_test(sample, pdf, n_samples=n_samples, n_tests=n_tests, **kw)
+        assert r.passed, f"{model!r} at theta_o={t} deg: {r.message}"
+
+
+def check_albedo_at_most_one(model, theta_o_deg=(0, 30, 60, 85), tol: float = 1e-3) -> np.ndarray:
+    """Directional albedo <= 1 + tol at each theta_o; returns the albedos ``(K, C)``."""
+    wo = np.asarray(frames.spherical_to_direction(np.radians(np.asarray(theta_o_deg)), 0.0))
+    a = np.asarray(model.directional_albedo(wo, n=256))
+    assert np.all(a <= 1 + tol), f"{model!r}: directional albedo {a.max():.4f} > 1"
+    return a
