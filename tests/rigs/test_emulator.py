@@ -1,0 +1,152 @@
+"""The emulator against the real dynamixel_sdk over a pseudo-terminal (conformance)."""
+
+from __future__ import annotations
+
+import os
+import select
+import time
+import tty
+
+import dynamixel_sdk as sdk
+import pytest
+
+from gonio.rigs import control_table as ct
+from gonio.rigs import protocol as p
+from gonio.rigs.sim import FaultConfig, ServoChainEmulator, ServoSpec
+
+
+@pytest.fixture
+def emu():
+    e = ServoChainEmulator(
+        [ServoSpec(1, "XM430-W350", 52), ServoSpec(2, "XL430-W250", 46, 1000)], time_scale=50.0
+    )
+    e.start()
+    yield e
+    e.stop()
+
+
+@pytest.fixture
+def sdk_port(emu):
+    port = sdk.PortHandler(emu.port)
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    yield port, sdk.PacketHandler(2.0)
+    port.closePort()
+
+
+def test_sdk_bytes_are_the_packets_we_decode():
+    """What the SDK writes on the wire equals our encoder's packet, byte for byte."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        port = sdk.PortHandler(os.ttyname(slave))
+        assert port.openPort()
+        ph = sdk.PacketHandler(2.0)
+        ph.write4ByteTxOnly(port, 1, 116, 512)
+        grp = sdk.GroupSyncWrite(port, ph, 116, 4)
+        grp.addParam(1, [150, 0, 0, 0])
+        grp.addParam(2, [170, 0, 0, 0])
+        grp.txPacket()
+        time.sleep(0.02)
+        select.select([master], [], [], 0.5)
+        wire = os.read(master, 4096)
+        port.closePort()
+    finally:
+        os.close(master)
+        os.close(slave)
+    expected = p.encode(1, p.WRITE, p.u16(116) + p.u32(512)) + p.encode(
+        p.BROADCAST_ID,
+        p.SYNC_WRITE,
+        p.u16(116) + p.u16(4) + b"\x01" + p.u32(150) + b"\x02" + p.u32(170),
+    )
+    assert wire == expected
+
+
+def test_ping_models_and_firmware(sdk_port):
+    port, ph = sdk_port
+    assert ph.ping(port, 1) == (ct.MODELS["XM430-W350"], sdk.COMM_SUCCESS, 0)
+    assert ph.ping(port, 2)[0] == ct.MODELS["XL430-W250"]
+    assert ph.read1ByteTxRx(port, 2, ct.FIRMWARE_VERSION[0])[0] == 46
+    assert ph.ping(port, 3)[1] == sdk.COMM_RX_TIMEOUT
+    found, res = ph.broadcastPing(port)
+    assert res == sdk.COMM_SUCCESS
+    assert found == {1: [1020, 52], 2: [1060, 46]}
+
+
+def test_register_semantics(sdk_port):
+    port, ph = sdk_port
+    # EEPROM is writable with torque off, refused (access error) with torque on
+    assert ph.write1ByteTxRx(port, 1, 11, 4) == (sdk.COMM_SUCCESS, 0)
+    assert ph.read1ByteTxRx(port, 1, 11)[0] == 4
+    assert ph.write1ByteTxRx(port, 1, 11, 3) == (sdk.COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, 64, 1) == (sdk.COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, 11, 4)[1] == sdk.ERRNUM_ACCESS
+    # goal beyond the position limits -> data limit error, and nothing moves
+    assert ph.write4ByteTxRx(port, 1, 116, 5000)[1] == sdk.ERRNUM_DATA_LIMIT
+    assert ph.read4ByteTxRx(port, 1, 132)[0] == 2048
+    # unknown instruction -> instruction error
+    assert ph.action(port, 1) == sdk.COMM_SUCCESS  # action expects no status by SDK design
+
+
+def test_motion_follows_profile_and_group_sync_read(sdk_port, emu):
+    port, ph = sdk_port
+    for sid in (1, 2):
+        ph.write4ByteTxRx(port, sid, 108, 20)
+        ph.write4ByteTxRx(port, sid, 112, 100)
+        ph.write1ByteTxRx(port, sid, 64, 1)
+    sw = sdk.GroupSyncWrite(port, ph, 116, 4)
+    sw.addParam(1, list((3000).to_bytes(4, "little")))
+    sw.addParam(2, list((1500).to_bytes(4, "little")))
+    assert sw.txPacket() == sdk.COMM_SUCCESS
+    v = ct.velocity_raw_to_deg_s(100) * 4096 / 360
+    a = ct.acceleration_raw_to_deg_s2(20) * 4096 / 360
+    expect_T = ct.trapezoid_time(952, v, a) / emu.time_scale
+    sr = sdk.GroupSyncRead(port, ph, 122, 1)
+    sr.addParam(1)
+    sr.addParam(2)
+    t0 = time.monotonic()
+    saw_moving = False
+    while time.monotonic() - t0 < 2.0:
+        assert sr.txRxPacket() == sdk.COMM_SUCCESS
+        if sr.getData(1, 122, 1):
+            saw_moving = True
+        elif saw_moving:
+            break
+    elapsed = time.monotonic() - t0
+    assert saw_moving
+    assert elapsed == pytest.approx(expect_T, rel=0.5, abs=0.03)
+    pos = sdk.GroupSyncRead(port, ph, 132, 4)
+    pos.addParam(1)
+    pos.addParam(2)
+    time.sleep(0.05)
+    assert pos.txRxPacket() == sdk.COMM_SUCCESS
+    assert abs(pos.getData(1, 132, 4) - 3000) <= 2
+    assert abs(pos.getData(2, 132, 4) - 1500) <= 2
+    assert [(g.id, g.ticks) for g in emu.goal_log] == [(1, 3000), (2, 1500)]
+
+
+def test_overload_sets_alert_bit_and_torque_off_until_reboot(sdk_port, emu):
+    port, ph = sdk_port
+    ph.write1ByteTxRx(port, 1, 64, 1)
+    emu.overload(1)
+    hw, res, err = ph.read1ByteTxRx(port, 1, 70)
+    assert res == sdk.COMM_SUCCESS and hw & ct.HW_OVERLOAD and err & sdk.ERRBIT_ALERT
+    assert ph.read1ByteTxRx(port, 1, 64)[0] == 0
+    assert ph.write1ByteTxRx(port, 1, 64, 1)[1] == sdk.ERRNUM_RESULT_FAIL | sdk.ERRBIT_ALERT
+    assert ph.reboot(port, 1) == (sdk.COMM_SUCCESS, 0)
+    assert ph.read1ByteTxRx(port, 1, 70)[:3:2] == (0, 0)
+    assert ph.write1ByteTxRx(port, 1, 64, 1) == (sdk.COMM_SUCCESS, 0)
+
+
+def test_dead_servo_and_crc_faults(sdk_port, emu):
+    port, ph = sdk_port
+    emu.kill(2, 0.2)
+    assert ph.ping(port, 2)[1] == sdk.COMM_RX_TIMEOUT
+    time.sleep(0.25)
+    assert ph.ping(port, 2)[1] == sdk.COMM_SUCCESS
+    emu.faults = FaultConfig(crc=1.0)
+    _, res, err = ph.ping(port, 1)
+    assert res == sdk.COMM_SUCCESS and err == p.ERR_CRC
+    emu.faults = FaultConfig(garble=1.0)
+    assert ph.ping(port, 1)[1] in (sdk.COMM_RX_CORRUPT, sdk.COMM_RX_TIMEOUT)
+    emu.faults = FaultConfig(drop=1.0)
+    assert ph.ping(port, 1)[1] == sdk.COMM_RX_TIMEOUT
