@@ -354,11 +354,13 @@ class ServoChainEmulator:
                 return [self._reply(s, p.ERR_CRC)]
             if self._chance(self.faults.drop):
                 return []
-            if pkt.id != p.BROADCAST_ID and self._chance(self.faults.crc):
+            if self._chance(self.faults.crc):
+                # the packet arrives corrupted: addressed servos answer "CRC error"; a broadcast
+                # (sync read/write) is ignored, since a servo cannot tell it was meant for it
+                self.crc_errors_seen += 1
                 s = self._servos.get(pkt.id)
                 if s is None or not self._alive(s):
                     return []
-                self.crc_errors_seen += 1
                 return [self._reply(s, p.ERR_CRC)]
             for s in self._servos.values():
                 s.refresh(now)
