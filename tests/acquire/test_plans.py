@@ -80,9 +80,14 @@ def test_adaptive_refines_around_measured_peak():
     [
         ({"kind": "nope"}, "kind"),
         ({"kind": "isotropic", "theta_i_deg": [10]}, "theta_o_deg: missing"),
-        ({"kind": "isotropic", "theta_i_deg": [10], "theta_o_deg": [95], "dphi_deg": [0]}, "[0, 90]"),
-        ({"kind": "isotropic", "theta_i_deg": {"start": 0}, "theta_o_deg": [1], "dphi_deg": [0]},
-         "start, stop, step"),
+        (
+            {"kind": "isotropic", "theta_i_deg": [10], "theta_o_deg": [95], "dphi_deg": [0]},
+            "[0, 90]",
+        ),
+        (
+            {"kind": "isotropic", "theta_i_deg": {"start": 0}, "theta_o_deg": [1], "dphi_deg": [0]},
+            "start, stop, step",
+        ),
         ({"kind": "grid4d", "theta_i_deg": [1], "bogus": 1}, "bogus"),
     ],
 )
@@ -93,8 +98,10 @@ def test_bad_plan_specs(spec, match):
 
 def test_plan_file(tmp_path):
     p = tmp_path / "mine.toml"
-    p.write_text('kind = "isotropic"\ntheta_i_deg = [20]\ntheta_o_deg = [40, 60]\ndphi_deg = [180]\n')
-    plan, spec = load_plan(p)
+    p.write_text(
+        'kind = "isotropic"\ntheta_i_deg = [20]\ntheta_o_deg = [40, 60]\ndphi_deg = [180]\n'
+    )
+    plan, _ = load_plan(p)
     assert plan.name == "mine" and len(list(plan.stage(0))) == 2
     with pytest.raises(PlanError, match="unknown plan"):
         load_plan(tmp_path / "missing.toml")

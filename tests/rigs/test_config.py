@@ -40,6 +40,12 @@ def test_tick_conversion_roundtrip_with_gear_and_direction():
         assert abs(j.from_ticks(j.to_ticks(a)) - a) <= 360 / 4096 / j.gear_ratio / 2 + 1e-12
 
 
+TAIL = (
+    'operating_mode = "position"\ngear_ratio = 1.0\nzero_offset_deg = 0.0\ndirection = 1\n'
+    "min_deg = -179.0"
+)
+
+
 def _line_of(text: str, needle: str) -> int:
     # the last line containing needle (the edited key is the later of two equal lines)
     return max(i + 1 for i, l in enumerate(text.splitlines()) if needle in l)
@@ -50,18 +56,28 @@ def _line_of(text: str, needle: str) -> int:
     [
         ("baudrate = 1000000", "baudrate = 1234", "bus.baudrate", "baudrate = 1234"),
         ("max_deg = 85.0", 'max_deg = "85"', "joints[2].max_deg", 'max_deg = "85"'),
-        ("settle_tolerance_deg = 0.3\n\n[[joints]]\nname = \"tilt\"",
-         "settle_tolerance_deg = 0.3\nspeed = 3\n\n[[joints]]\nname = \"tilt\"",
-         "joints[1].speed", "speed = 3"),
+        (
+            'settle_tolerance_deg = 0.3\n\n[[joints]]\nname = "tilt"',
+            'settle_tolerance_deg = 0.3\nspeed = 3\n\n[[joints]]\nname = "tilt"',
+            "joints[1].speed",
+            "speed = 3",
+        ),
         ('camera = "camera_arm"', 'camera = "cam"', "layout.camera", 'camera = "cam"'),
-        ("min_light_camera_deg = 8.0", "min_light_camera_deg = 200.0",
-         "safety.min_light_camera_deg", "min_light_camera_deg = 200.0"),
+        (
+            "min_light_camera_deg = 8.0",
+            "min_light_camera_deg = 200.0",
+            "safety.min_light_camera_deg",
+            "min_light_camera_deg = 200.0",
+        ),
         ("tilt = 0.0\nturntable = 0.0", "tilt = 99.0\nturntable = 0.0", "park.tilt", "tilt = 99.0"),
         ("id = 4", "id = 3", "joints[3].id", "id = 3"),
         ("min_deg = -85.0", "min_deg = 90.0", "joints[2].min_deg", "min_deg = 90.0"),
-        ('model = "XM430-W350"\noperating_mode = "position"\ngear_ratio = 1.0\nzero_offset_deg = 0.0\ndirection = 1\nmin_deg = -179.0',
-         'model = "XM999"\noperating_mode = "position"\ngear_ratio = 1.0\nzero_offset_deg = 0.0\ndirection = 1\nmin_deg = -179.0',
-         "joints[3].model", 'model = "XM999"'),
+        (
+            'model = "XM430-W350"\n' + TAIL,
+            'model = "XM999"\n' + TAIL,
+            "joints[3].model",
+            'model = "XM999"',
+        ),
     ],
 )
 def test_bad_rig_files_name_key_and_line(old, new, key, needle):

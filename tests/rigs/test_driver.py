@@ -111,7 +111,7 @@ def test_model_mismatch_is_refused():
     rig_file = parse_rig(text, "x.toml")
     with make_emulator(RIG) as emu:  # the bus really has XM430s
         chain = ServoChain(rig_file, port=emu.port)
-        with chain, pytest.raises(DeviceError, match="light_arm.*XM430-W350.*XL430-W250"):
+        with chain, pytest.raises(DeviceError, match=r"light_arm.*XM430-W350.*XL430-W250"):
             chain.initialize()
 
 

@@ -50,7 +50,7 @@ azim = st.floats(0.0, 2 * math.pi)
 @given(angle, azim, angle, azim)
 def test_inverse_then_forward_roundtrip(ti, pi, to, po):
     wi, wo = direction(ti, pi), direction(to, po)
-    pose, why = KIN.inverse(wi, wo)
+    pose, _ = KIN.inverse(wi, wo)
     assume(pose is not None)  # refusals are tested separately
     a, b = KIN.forward(pose)
     np.testing.assert_allclose(a, wi, atol=1e-9)
@@ -72,9 +72,7 @@ def test_isotropic_inverse_keeps_relative_geometry(ti, to, dphi):
 
 
 @settings(max_examples=100, deadline=None)
-@given(
-    st.floats(-2.9, 2.9), st.floats(-2.9, 2.9), st.floats(-1.4, 1.4), st.floats(-3.1, 3.1)
-)
+@given(st.floats(-2.9, 2.9), st.floats(-2.9, 2.9), st.floats(-1.4, 1.4), st.floats(-3.1, 3.1))
 def test_forward_then_inverse_reaches_same_directions(al, ac, tilt, rot):
     wi, wo = forward(al, ac, tilt, rot)
     assume(wi[2] > 0.2 and wo[2] > 0.2)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 
 import numpy as np
 
@@ -88,6 +87,14 @@ def register(sub) -> None:
         "--time-scale",
         type=float,
         help="simulated rig only: simulated seconds per wall second (default: rig file)",
+    )
+    a.add_argument(
+        "--strict",
+        action="store_true",
+        help=(
+            "refuse the whole plan before any motion if any pose is refused (default: skip"
+            " refused poses, journal and log them with the reason)"
+        ),
     )
     a.add_argument("--no-progress", action="store_true", help="no progress bar")
     a.add_argument("--json", action="store_true", help="print the run summary as JSON")
@@ -186,15 +193,23 @@ def _acquire(args: argparse.Namespace) -> int:
         if args.out and args.out != args.resume:
             raise ParameterError("give either --out (new run) or --resume RUN, not both")
         summary = acquire(
-            args.resume, resume=True, faults=faults, progress=not args.no_progress,
+            args.resume,
+            resume=True,
+            faults=faults,
+            progress=not args.no_progress,
             time_scale=args.time_scale,
         )
     else:
         if not args.out or not args.plan:
             raise ParameterError("a new run needs --plan and --out (or --resume RUN)")
         summary = acquire(
-            args.out, args.rig, args.plan, faults=faults, progress=not args.no_progress,
+            args.out,
+            args.rig,
+            args.plan,
+            faults=faults,
+            progress=not args.no_progress,
             time_scale=args.time_scale,
+            strict=args.strict,
         )
     out = {
         "run": summary.run_dir,

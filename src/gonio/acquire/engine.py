@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from gonio.acquire.journal import Journal, PlannedConfig
-from gonio.acquire.ordering import move_times, plan_route
+from gonio.acquire.ordering import move_times, path_time, plan_route
 from gonio.acquire.plans import Plan, Result, load_plan, plan_from_spec
 from gonio.errors import DeviceError, FormatError, PlanError
 from gonio.rigs.config import RigConfig, load_rig, parse_rig
@@ -100,6 +100,20 @@ def plan_stage(
         base.append(np.degrees(best.as_tuple()))
         cands.append(np.degrees(np.array([c.as_tuple() for c in poses])))
     order, choice = plan_route(start, cands, joints, time_budget_s=time_budget_s)
+    if len(cands):
+        # keep the plan's own order (with the reference-nearest poses) if the heuristic lost
+        base_arr = np.array(base)
+        routed = np.array([cands[k][choice[k]] for k in range(len(cands))])
+        if path_time(start, base_arr, np.arange(len(base)), joints) < path_time(
+            start, routed, order, joints
+        ):
+            order = np.arange(len(base))
+            choice = np.array(
+                [
+                    int(np.argmin(np.abs(cands[k] - base_arr[k]).sum(axis=1)))
+                    for k in range(len(cands))
+                ]
+            )
     configs: list[PlannedConfig] = []
     seq_of = {int(o): s for s, o in enumerate(order)}
     for k, i in enumerate(accepted):
@@ -270,6 +284,7 @@ def acquire(
     time_scale: float | None = None,
     on_sample: Callable[[int], None] | None = None,
     write_table: bool = True,
+    strict: bool = False,
 ) -> RunSummary:
     """Run (or resume) an acquisition; see the module docstring.
 
@@ -280,6 +295,8 @@ def acquire(
         copies are used so a resumed run is the same run).
     faults : :class:`gonio.rigs.sim.FaultConfig` for the simulated bus (overrides the rig file).
     progress : show a rich progress bar with ETA.
+    strict : refuse the whole plan (PlanError, nothing moved, no run directory) if any of its
+        poses is refused; later stages of an adaptive plan are checked before their motion.
     time_scale : simulated-rig speed-up (overrides ``[sim] time_scale``).
     on_sample : called with the number of samples measured so far in this process (tests).
     """
@@ -295,15 +312,18 @@ def acquire(
             raise PlanError("a new run needs --rig and --plan")
         rig_cfg = rig if isinstance(rig, RigConfig) else load_rig(rig)
         plan_obj, spec = load_plan(plan)
-        # validate the first stage before creating anything
+        if strict:
+            # plan the first stage before creating anything or opening the bus
+            first = dry_run(rig_cfg, plan_obj)[0]
+            _refuse_if_any(first)
         journal = _start_new(run_dir, rig_cfg, spec)
+        journal.set_meta({"strict": "1" if strict else "0"})
     log = RunLog(run_dir / "log.jsonl")
     log("resume" if resume else "start", rig=rig_cfg.name, plan=plan_obj.name, pid=os.getpid())
     stop = _StopFlag()
     stop.install()
     measured_now = 0
     kin = Kinematics(rig_cfg)
-    names, _ = _joint_order(kin, rig_cfg)
     goal_log = run_dir / "sim_goals.jsonl" if rig_cfg.is_sim else None
     try:
         with open_rig(rig_cfg, faults=faults, goal_log_path=goal_log, time_scale=time_scale) as ses:
@@ -323,6 +343,8 @@ def acquire(
                         sp = plan_stage(
                             rig_cfg, plan_obj, stage, results, start_deg, journal.next_index()
                         )
+                        if journal.get_meta("strict") == "1":
+                            _refuse_if_any(sp)
                         journal.plan_stage(stage, sp.configs)
                         log(
                             "stage_planned",
@@ -389,6 +411,15 @@ def acquire(
         bus,
         time.monotonic() - t_start,
     )
+
+
+def _refuse_if_any(sp: StagePlan) -> None:
+    if sp.refused:
+        c = sp.refused[0]
+        raise PlanError(
+            f"plan refused before any motion: {len(sp.refused)} pose(s) refused in stage"
+            f" {sp.stage}, first #{c.idx}: {c.reason}"
+        )
 
 
 def camera_channels(rig: RigConfig) -> tuple[str, ...]:

@@ -86,7 +86,7 @@ def _angles(spec, key: str) -> np.ndarray:
             raise PlanError(f"plan key {key}: a range needs numeric start, stop, step") from None
         if step <= 0 or stop < start:
             raise PlanError(f"plan key {key}: need step > 0 and stop >= start")
-        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        n = math.floor((stop - start) / step + 1e-9) + 1
         vals = start + step * np.arange(n)
     elif isinstance(spec, (list, tuple)) and spec:
         try:
@@ -146,8 +146,9 @@ class Isotropic3D(Plan):
     def stage(self, k: int = 0, results: Sequence[Result] = ()) -> Iterator[Target]:
         seen = set()
         for ti, to, dp in itertools.product(self.theta_i, self.theta_o, self.dphi):
-            if ti > to + 1e-12:
-                continue  # the reciprocal configuration (to, ti) is measured instead
+            # reciprocity: (ti, to) and (to, ti) are one configuration; measure it as
+            # theta_i <= theta_o (duplicates are removed below)
+            ti, to = (ti, to) if ti <= to else (to, ti)
             dp = abs(math.remainder(dp, 2 * math.pi))  # mirror symmetry: dphi and -dphi agree
             if ti < 1e-12 or to < 1e-12:
                 dp = 0.0 if ti < 1e-12 and to < 1e-12 else dp
@@ -242,7 +243,7 @@ class Adaptive(Plan):
             (round(t.wi[2], 9), round(t.wo[2], 9), round(t.wo[1], 9), round(t.wo[0], 9))
             for t in self.coarse.stage(0)
         }
-        n = int(math.floor(self.window / self.step + 1e-9))
+        n = math.floor(self.window / self.step + 1e-9)
         offs = self.step * np.arange(-n, n + 1)
         seen = set()
         for ti, (to0, dp0) in self.peaks(results).items():

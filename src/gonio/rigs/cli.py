@@ -13,7 +13,7 @@ def register(sub) -> None:
     p = sub.add_parser(
         "rig",
         help="inspect a rig: check its servos, print the rig-file schema",
-        description="Inspect a rig described by a rig file (TOML; see data-schema/rig.schema.json).",
+        description="Inspect a rig described by a rig file (TOML; data-schema/rig.schema.json).",
     )
     rs = p.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
     c = rs.add_parser(
@@ -80,16 +80,24 @@ def _check(args: argparse.Namespace) -> int:
         for col in ("joint", "id", "model", "fw", "hw error", "torque", "angle (deg)", "limits"):
             t.add_column(col)
         for i in infos:
-            model = i.model if i.model == i.expected_model else f"{i.model} (expected {i.expected_model})"
+            model = (
+                i.model
+                if i.model == i.expected_model
+                else f"{i.model} (expected {i.expected_model})"
+            )
             t.add_row(
-                i.joint, str(i.id), model, str(i.firmware), hardware_error_text(i.hardware_error),
-                "on" if i.torque else "off", f"{i.position_deg:.2f}", f"[{i.min_deg}, {i.max_deg}]",
+                i.joint,
+                str(i.id),
+                model,
+                str(i.firmware),
+                hardware_error_text(i.hardware_error),
+                "on" if i.torque else "off",
+                f"{i.position_deg:.2f}",
+                f"[{i.min_deg}, {i.max_deg}]",
             )
         Console(file=sys.stdout).print(t)
     if bad:
-        raise DeviceError(
-            "servo check failed: " + ", ".join(f"{i.joint} (id {i.id})" for i in bad)
-        )
+        raise DeviceError("servo check failed: " + ", ".join(f"{i.joint} (id {i.id})" for i in bad))
     return 0
 
 

@@ -50,7 +50,7 @@ def sample_to_world(tilt, rot) -> np.ndarray:
 
 
 def forward(a_light, a_camera, tilt, rot) -> tuple[np.ndarray, np.ndarray]:
-    """Joint angles (radians, broadcastable) -> (wi, wo), unit vectors (..., 3) in the sample frame."""
+    """Joint angles (radians, broadcastable) -> (wi, wo): unit vectors (..., 3), sample frame."""
     m = sample_to_world(tilt, rot)
     a_light = np.asarray(a_light, dtype=float)
     a_camera = np.asarray(a_camera, dtype=float)
@@ -254,6 +254,7 @@ class Kinematics:
             th_o, ph_o = spherical(np.asarray(wo))
             raise PlanError(
                 f"pose theta_i={math.degrees(th_i):.1f} phi_i={math.degrees(ph_i):.1f}"
-                f" theta_o={math.degrees(th_o):.1f} phi_o={math.degrees(ph_o):.1f} deg refused: {why}"
+                f" theta_o={math.degrees(th_o):.1f} phi_o={math.degrees(ph_o):.1f} deg"
+                f" refused: {why}"
             )
         return pose
