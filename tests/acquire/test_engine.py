@@ -243,3 +243,37 @@ def test_ctrl_c_parks_the_rig_then_resume_completes(reference, tmp_path, plan_fi
     assert 5 <= done < len(ref)
     s = acquire(run, resume=True, progress=False)
     assert s.complete and s.measured_now == len(ref) - done
+
+
+def test_servo_silent_briefly_is_ridden_out(reference, tmp_path, plan_file):
+    ref, _ = reference
+
+    def hook(n, ses):
+        if n == 4:
+            ses.emulator.kill(2, 0.05)  # silent for 50 ms: retries with backoff cover it
+
+    s = acquire(tmp_path / "run", "sim", plan_file, progress=False, on_sample=hook)
+    assert s.complete and s.done == len(ref) and s.bus["timeouts"] > 0
+
+
+def test_dead_servo_stops_run_cleanly_and_resume_finishes(reference, tmp_path, plan_file):
+    from gonio.errors import DeviceError
+
+    ref, _ = reference
+
+    def hook(n, ses):
+        if n == 6:
+            ses.emulator.kill(3)  # the tilt servo never answers again
+
+    run = tmp_path / "run"
+    with pytest.raises(DeviceError, match=r"servo 3 gave no valid reply"):
+        acquire(run, "sim", plan_file, progress=False, on_sample=hook)
+    got, counts = samples_of(run)
+    assert counts["done"] == 6
+    events = [json.loads(x)["event"] for x in (run / "log.jsonl").read_text().splitlines()]
+    assert "device_error" in events
+    s = acquire(run, resume=True, progress=False)  # the servo was replaced: a fresh bus
+    assert s.complete and s.measured_now == len(ref) - 6
+    got, _ = samples_of(run)
+    for i, r in ref.items():
+        np.testing.assert_array_equal(got[i].value, r.value)

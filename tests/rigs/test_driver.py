@@ -123,3 +123,16 @@ def test_check_reports_models_and_hardware_errors():
     assert [i.firmware for i in infos] == [RIG.sim.firmware] * 4
     assert infos[0].hardware_error == ct.HW_OVERLOAD and not infos[0].ok
     assert all(i.ok for i in infos[1:])
+
+
+def test_pyserial_url_ports_open_through_the_sdk():
+    from gonio.rigs.dynamixel import DynamixelBus
+
+    # loop:// echoes our own instruction back: the SDK discards it (not a status packet), so
+    # the ping times out and is retried, then fails with a one-line DeviceError
+    with DynamixelBus("loop://", retries=1, backoff_s=0.0) as bus:
+        with pytest.raises(DeviceError, match=r"ping servo 1: no valid reply after 2 attempts"):
+            bus.ping(1)
+        assert bus.stats.timeouts + bus.stats.corrupt == 2
+    with pytest.raises(DeviceError, match="cannot open servo bus"):
+        DynamixelBus("socket://127.0.0.1:1").open()

@@ -282,7 +282,7 @@ def acquire(
     faults=None,
     progress: bool = True,
     time_scale: float | None = None,
-    on_sample: Callable[[int], None] | None = None,
+    on_sample: Callable[[int, object], None] | None = None,
     write_table: bool = True,
     strict: bool = False,
 ) -> RunSummary:
@@ -298,7 +298,9 @@ def acquire(
     strict : refuse the whole plan (PlanError, nothing moved, no run directory) if any of its
         poses is refused; later stages of an adaptive plan are checked before their motion.
     time_scale : simulated-rig speed-up (overrides ``[sim] time_scale``).
-    on_sample : called with the number of samples measured so far in this process (tests).
+    on_sample : called as ``on_sample(n, session)`` after each sample, with the number measured
+        so far in this process and the open :class:`gonio.rigs.session.RigSession` (tests use
+        it to inject faults into the emulator mid-run).
     """
     from gonio.rigs.session import open_rig
     from gonio.rigs.sim.sample import SimulatedSampleCamera
@@ -368,7 +370,7 @@ def acquire(
                         measured_now += 1
                         bar.advance()
                         if on_sample is not None:
-                            on_sample(measured_now)
+                            on_sample(measured_now, ses)
                     if stop.stop:
                         break
             if stop.stop:

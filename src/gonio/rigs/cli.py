@@ -35,6 +35,31 @@ def register(sub) -> None:
     c.set_defaults(func=_check)
     s = rs.add_parser("schema", help="print the JSON schema of rig files")
     s.set_defaults(func=_schema)
+    e = rs.add_parser(
+        "emulate",
+        help="run the servo-bus emulator of a rig in the foreground on a pseudo-terminal",
+        description=(
+            "Start the Dynamixel Protocol 2.0 emulator with the servos of a rig file (ids, models,"
+            " park pose) on a pseudo-terminal and print its port path ('port: /dev/pts/N'). Point"
+            " a copy of the rig file's bus.port at that path to drive it exactly like hardware"
+            " (gonio rig check, gonio acquire). Runs until Ctrl-C or SIGTERM."
+        ),
+    )
+    e.add_argument("--rig", default="sim", help="rig name or rig TOML path (default: sim)")
+    e.add_argument(
+        "--sim-faults",
+        metavar="SPEC",
+        help="inject faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,overload=0.005,seed=1'",
+    )
+    e.add_argument(
+        "--time-scale",
+        type=float,
+        help="simulated seconds per wall second (default: the rig file's [sim] time_scale)",
+    )
+    e.add_argument(
+        "--goal-log", metavar="FILE", help="append every received Goal Position (JSON lines)"
+    )
+    e.set_defaults(func=_emulate)
     lst = rs.add_parser("list", help="list the rigs shipped with gonio")
     lst.set_defaults(func=_list)
     p.set_defaults(func=lambda a: (p.print_help(), 0)[1])
@@ -98,6 +123,35 @@ def _check(args: argparse.Namespace) -> int:
         Console(file=sys.stdout).print(t)
     if bad:
         raise DeviceError("servo check failed: " + ", ".join(f"{i.joint} (id {i.id})" for i in bad))
+    return 0
+
+
+def _emulate(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from gonio.acquire.cli import parse_faults
+    from gonio.errors import ParameterError
+    from gonio.rigs.config import load_rig
+    from gonio.rigs.session import make_emulator
+
+    rig = load_rig(args.rig)
+    if args.time_scale is not None and not args.time_scale > 0:
+        raise ParameterError("--time-scale must be > 0")
+    faults = parse_faults(args.sim_faults) if args.sim_faults else None
+    emu = make_emulator(rig, faults, args.goal_log, args.time_scale)
+    done = threading.Event()
+    old = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with emu:
+            print(f"port: {emu.port}", flush=True)
+            ids = ", ".join(f"{j.name}={j.id} ({j.model})" for j in rig.joints)
+            print(f"servos: {ids}", flush=True)
+            while not done.wait(0.2):
+                pass
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
     return 0
 
 

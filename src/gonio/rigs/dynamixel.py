@@ -133,8 +133,11 @@ class DynamixelBus:
         return self._port
 
     # --- retry core ---------------------------------------------------------------------------
-    def _transact(self, what: str, fn: Callable[[], tuple]):
-        """Run ``fn() -> (value, comm_result, error_byte)`` with retries; return value, error."""
+    def _transact(self, what: str, fn: Callable[[], tuple], who: Callable[[], str] | None = None):
+        """Run ``fn() -> (value, comm_result, error_byte)`` with retries; return value, error.
+
+        ``who()`` names the servo at fault in the final error (for multi-servo transactions).
+        """
         delay = self.backoff_s
         last = ""
         for attempt in range(self.retries + 1):
@@ -161,7 +164,11 @@ class DynamixelBus:
             if num:
                 raise DeviceError(f"{what}: {self._ph.getRxPacketError(num)}")
             return value, error
-        raise DeviceError(f"{what}: no valid reply after {self.retries + 1} attempts ({last})")
+        culprit = who() if who is not None else ""
+        raise DeviceError(
+            f"{what}: {culprit + ' ' if culprit else ''}no valid reply after"
+            f" {self.retries + 1} attempts ({last})"
+        )
 
     def _note_alert(self, servo_id: int, error: int) -> None:
         if error & sdk.ERRBIT_ALERT:
@@ -221,7 +228,10 @@ class DynamixelBus:
         error byte of every status packet is seen: its alert bit flags a hardware error.
         """
 
+        failed: list[int] = []
+
         def call():
+            failed.clear()
             comm = self._ph.syncReadTx(self.port, addr, n, list(ids), len(ids), False)
             if comm != sdk.COMM_SUCCESS:
                 return None, comm, 0
@@ -231,8 +241,10 @@ class DynamixelBus:
                 data, comm, err = self._ph.readRx(self.port, sid, n)
                 if comm != sdk.COMM_SUCCESS:
                     self.port.is_using = False
+                    failed.append(sid)
                     return None, comm, 0
                 if len(data) != n:
+                    failed.append(sid)
                     return None, sdk.COMM_RX_CORRUPT, 0
                 self._note_alert(sid, err)
                 if err & 0x7F:
@@ -240,7 +252,11 @@ class DynamixelBus:
                 out[sid] = bytes(data)
             return out, sdk.COMM_SUCCESS, worst
 
-        value, _ = self._transact(f"sync read @{addr} from {ids}", call)
+        value, _ = self._transact(
+            f"sync read @{addr} from {ids}",
+            call,
+            lambda: f"servo {failed[0]} gave" if failed else "",
+        )
         return value
 
     def reboot(self, servo_id: int) -> None:
