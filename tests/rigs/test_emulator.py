@@ -150,3 +150,28 @@ def test_dead_servo_and_crc_faults(sdk_port, emu):
     assert ph.ping(port, 1)[1] in (sdk.COMM_RX_CORRUPT, sdk.COMM_RX_TIMEOUT)
     emu.faults = FaultConfig(drop=1.0)
     assert ph.ping(port, 1)[1] == sdk.COMM_RX_TIMEOUT
+
+
+def test_moving_status_profile_then_ringing_then_in_position():
+    with ServoChainEmulator([ServoSpec(1)], time_scale=1.0, settle_ticks=0) as emu:
+        port = sdk.PortHandler(emu.port)
+        port.openPort()
+        ph = sdk.PacketHandler(2.0)
+        ph.write4ByteTxRx(port, 1, 108, 100)
+        ph.write4ByteTxRx(port, 1, 112, 200)
+        ph.write1ByteTxRx(port, 1, 64, 1)
+        ph.write4ByteTxRx(port, 1, 116, 2148)
+        seen = []
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0:
+            status = ph.read1ByteTxRx(port, 1, 123)[0]
+            moving = ph.read1ByteTxRx(port, 1, 122)[0]
+            seen.append((bool(status & 2), bool(moving), bool(status & 1)))
+            if not moving and seen[-1][2]:
+                break
+        port.closePort()
+        # phases in order: profile ongoing -> ringing (moving, profile over) -> in position
+        assert seen[0] == (True, True, False)
+        assert (False, True, False) in seen
+        assert seen[-1] == (False, False, True)
+        assert emu.register(1, ct.PRESENT_POSITION) == 2148

@@ -538,7 +538,9 @@ class ServoChain:
                 self.bus.sync_write(ct.GOAL_POSITION, lost)
             else:
                 moving = any(_field(d, ct.MOVING) for d in data.values())
-                if not moving and t_stopped is None:
+                profile = any(_field(d, ct.MOVING_STATUS) & 0x02 for d in data.values())
+                if not profile and t_stopped is None:
+                    # motion = until every profile has ended; settle = from then until settled
                     t_stopped = time.monotonic()
                 settled = not moving and all(
                     abs(_field(d, ct.PRESENT_POSITION) - goals[sid])
@@ -555,7 +557,7 @@ class ServoChain:
                     }
                     t_stop = t_stopped if t_stopped is not None else t_end
                     return reached, t_stop - t0, t_end - t_stop, polls
-                if moving:
+                if profile:
                     t_stopped = None
             if time.monotonic() > deadline:
                 far = [

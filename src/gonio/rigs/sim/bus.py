@@ -14,6 +14,7 @@ so tests can prove that no goal beyond the limits was ever sent.
 from __future__ import annotations
 
 import hashlib
+import math
 import json
 import os
 import random
@@ -88,9 +89,12 @@ class _Servo:
     move_v: float = 1.0
     move_a: float = 0.0
     move_T: float = 0.0
+    ring_amp: float = 0.0
+    ring_T: float = 0.0
     frozen_at: float | None = None
     dead_until: float = 0.0
     overload_pending: bool = False
+    ring_time: float = 0.12
 
     # --- register helpers -------------------------------------------------------------------
     def get(self, reg: tuple[int, int], signed: bool = False) -> int:
@@ -106,12 +110,22 @@ class _Servo:
         if self.frozen_at is not None:
             return self.frozen_at
         t = now - self.move_start
-        return self.move_from + ct.trapezoid_position(
+        pos = self.move_from + ct.trapezoid_position(
             self.move_to - self.move_from, self.move_v, self.move_a, t
         )
+        tr = t - self.move_T
+        if 0.0 <= tr < self.ring_T:
+            # ringing after the profile: a damped oscillation about the final position that
+            # ends exactly at ring_T (so the settled position does not depend on timing)
+            x = tr / self.ring_T
+            pos += self.ring_amp * (1.0 - x) ** 2 * math.cos(3.0 * math.pi * x)
+        return pos
+
+    def profile_ongoing(self, now: float) -> bool:
+        return self.frozen_at is None and now - self.move_start < self.move_T
 
     def moving(self, now: float) -> bool:
-        return self.frozen_at is None and now - self.move_start < self.move_T
+        return self.frozen_at is None and now - self.move_start < self.move_T + self.ring_T
 
     def stop(self, now: float) -> None:
         self.frozen_at = self.position(now)
@@ -131,6 +145,14 @@ class _Servo:
         self.move_to = float(goal + err)
         self.move_start = now
         self.move_T = ct.trapezoid_time(self.move_to - here, self.move_v, self.move_a)
+        # overshoot grows with the cruise speed reached; moves of a few ticks do not ring
+        dist = abs(self.move_to - here)
+        if dist > 8:
+            v_peak = min(self.move_v, math.sqrt(dist * self.move_a) if self.move_a else self.move_v)
+            self.ring_amp = math.copysign(min(6.0, 1.0 + v_peak / 400.0), self.move_to - here)
+            self.ring_T = self.ring_time
+        else:
+            self.ring_amp, self.ring_T = 0.0, 0.0
         self.frozen_at = None
         self.overload_pending = overload
 
@@ -145,7 +167,10 @@ class _Servo:
         self.set(ct.PRESENT_POSITION, round(pos))
         mv = self.moving(now)
         self.set(ct.MOVING, 1 if mv else 0)
-        self.set(ct.MOVING_STATUS, (0x02 if mv else 0x01) | 0x30)
+        # Moving Status: bit 0 in position, bit 1 profile ongoing, bits 4-5 trapezoidal profile
+        in_pos = abs(pos - self.get(ct.GOAL_POSITION, signed=True)) <= 3
+        status = (0x01 if in_pos and not mv else 0) | (0x02 if self.profile_ongoing(now) else 0)
+        self.set(ct.MOVING_STATUS, status | 0x30)
         self.set(ct.PRESENT_VELOCITY, round(self.move_v / (ct.TICKS_PER_REV / 360.0)) if mv else 0)
         self.set(ct.REALTIME_TICK, int(now * 1000) % 32768)
 
