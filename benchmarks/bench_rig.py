@@ -4,7 +4,9 @@ Writes CSV + PNG into benchmarks/results/:
 
 * ``rig_ordering.csv/.png`` — predicted motion time (rig time, s) per plan and stage: the plan's
   own (lexicographic) order, a lexicographic sort of the directions (theta_i, phi_i, theta_o,
-  phi_o), and the travel-time-optimized order (nearest neighbour + 2-opt + pose choice).
+  phi_o), and the travel-time-optimized order (nearest neighbour + 2-opt + pose choice), with a
+  lower bound valid for every order (each target entered once by its cheapest move), hence the
+  best ratio any ordering could reach.
 * ``rig_latency.csv/.png`` — round-trip latency over the pseudo-terminal through dynamixel-sdk:
   ping of one servo, and the 20-byte Sync Read of 4 servos the driver polls while settling.
 * ``rig_time_split.csv/.png`` — wall time per configuration of a simulated run, split into
@@ -29,7 +31,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from gonio.acquire.engine import acquire, plan_stage
-from gonio.acquire.ordering import move_times
+from gonio.acquire.ordering import cost_matrix, move_times
 from gonio.acquire.plans import load_plan
 from gonio.rigs import control_table as ct
 from gonio.rigs.config import load_rig
@@ -66,6 +68,25 @@ def bench_ordering(rig, plans):
             lex_poses = np.array([p for _, p in keyed])
             lex = float(np.sum(move_times(st, lex_poses, np.arange(len(lex_poses)), joints)))
             opt = float(np.sum(sp.move_s))
+            # lower bound of any order: every target is entered once, at best by its cheapest
+            # incoming move (from the start or another target, over all equivalent poses)
+            cands = []
+            for c in acc:
+                poses = [
+                    p
+                    for p in kin.candidates(c.wi, c.wo, c.isotropic, near.rot if c.isotropic else 0)
+                    if kin.refusal(p) is None
+                ]
+                cands.append(np.degrees(np.array([p.as_tuple() for p in poses])))
+            allp = np.vstack([st[None], *cands])
+            owner = np.concatenate([[-1], *[np.full(len(c), i) for i, c in enumerate(cands)]])
+            d = cost_matrix(allp, joints)
+            d[owner[:, None] == owner[None, :]] = np.inf
+            d[:, 0] = np.inf
+            bound = 0.0
+            for i in range(len(cands)):
+                cols = np.nonzero(owner == i)[0]
+                bound += float(np.min(d[:, cols]))
             rows.append(
                 {
                     "plan": name,
@@ -74,10 +95,12 @@ def bench_ordering(rig, plans):
                     "plan_order_s": round(sp.lexicographic_s, 3),
                     "lexicographic_s": round(lex, 3),
                     "optimized_s": round(opt, 3),
+                    "lower_bound_s": round(bound, 3),
                     "ratio_vs_lexicographic": round(lex / opt, 3) if opt else float("nan"),
                     "ratio_vs_plan_order": round(sp.lexicographic_s / opt, 3)
                     if opt
                     else float("nan"),
+                    "best_possible_ratio": round(lex / bound, 3) if bound else float("nan"),
                     "planning_s": round(t_plan, 3),
                 }
             )
