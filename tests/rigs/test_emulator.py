@@ -175,3 +175,37 @@ def test_moving_status_profile_then_ringing_then_in_position():
         assert (False, True, False) in seen
         assert seen[-1] == (False, False, True)
         assert emu.register(1, ct.PRESENT_POSITION) == 2148
+
+
+def test_emulator_answers_manual_examples_byte_for_byte():
+    """The e-Manual's instruction packets, sent raw, get the e-Manual's status packets back."""
+    from tests.rigs.test_protocol import golden
+
+    specs = [ServoSpec(1, "XM430-W210", 38, 166), ServoSpec(2, "XM430-W210", 38, 2079)]
+    with ServoChainEmulator(specs, time_scale=50.0) as emu:
+        fd = os.open(emu.port, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(fd)
+
+        def exchange(raw: bytes, expect_len: int, wait: float = 1.0) -> bytes:
+            os.write(fd, raw)
+            got = b""
+            t0 = time.monotonic()
+            while len(got) < expect_len and time.monotonic() - t0 < wait:
+                r, _, _ = select.select([fd], [], [], 0.05)
+                if r:
+                    got += os.read(fd, 256)
+            return got
+
+        try:
+            assert exchange(golden("ping id1"), 14) == golden("ping status model 1030 fw 38")
+            assert exchange(golden("read present position id1"), 15) == golden("read status 166")
+            both = golden("read status 166") + golden("sync read status id2 2079")
+            assert exchange(golden("sync read 132x4 ids 1 2"), 30) == both
+            assert exchange(golden("write goal 512 id1"), 11) == golden("empty status id1")
+            assert exchange(golden("reboot id1"), 11) == golden("empty status id1")
+            # sync write has no reply; its effect is visible in the registers
+            assert exchange(golden("sync write 116 ids 1=150 2=170"), 1, 0.1) == b""
+            assert emu.register(1, ct.GOAL_POSITION) == 150
+            assert emu.register(2, ct.GOAL_POSITION) == 170
+        finally:
+            os.close(fd)

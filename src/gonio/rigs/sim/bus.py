@@ -14,8 +14,8 @@ so tests can prove that no goal beyond the limits was ever sent.
 from __future__ import annotations
 
 import hashlib
-import math
 import json
+import math
 import os
 import random
 import select
