@@ -33,6 +33,16 @@ def sdk_port(emu):
     port.closePort()
 
 
+def _retry(call, tries: int = 5) -> int:
+    """A GroupSyncRead transaction, retried on a timeout: on a loaded machine a reply can miss
+    the SDK's ~34 ms window; that is not a protocol failure (the driver retries too)."""
+    for _ in range(tries):
+        res = call()
+        if res != sdk.COMM_RX_TIMEOUT:
+            return res
+    return res
+
+
 def test_sdk_bytes_are_the_packets_we_decode():
     """What the SDK writes on the wire equals our encoder's packet, byte for byte."""
     master, slave = os.openpty()
@@ -107,19 +117,20 @@ def test_motion_follows_profile_and_group_sync_read(sdk_port, emu):
     t0 = time.monotonic()
     saw_moving = False
     while time.monotonic() - t0 < 2.0:
-        assert sr.txRxPacket() == sdk.COMM_SUCCESS
+        assert _retry(sr.txRxPacket) == sdk.COMM_SUCCESS
         if sr.getData(1, 122, 1):
             saw_moving = True
         elif saw_moving:
             break
     elapsed = time.monotonic() - t0
     assert saw_moving
-    assert elapsed == pytest.approx(expect_T, rel=0.3, abs=0.03)
+    # never done before the profile allows; a loaded machine may only observe it late
+    assert 0.8 * expect_T <= elapsed <= expect_T + 0.3
     pos = sdk.GroupSyncRead(port, ph, 132, 4)
     pos.addParam(1)
     pos.addParam(2)
     time.sleep(0.05)
-    assert pos.txRxPacket() == sdk.COMM_SUCCESS
+    assert _retry(pos.txRxPacket) == sdk.COMM_SUCCESS
     assert abs(pos.getData(1, 132, 4) - 3000) <= 2
     assert abs(pos.getData(2, 132, 4) - 1500) <= 2
     assert [(g.id, g.ticks) for g in emu.goal_log] == [(1, 3000), (2, 1500)]
