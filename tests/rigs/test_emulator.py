@@ -221,3 +221,17 @@ def test_emulator_answers_manual_examples_byte_for_byte():
             assert emu.register(2, ct.GOAL_POSITION) == 170
         finally:
             os.close(fd)
+
+
+def test_byte_stuffing_both_ways_through_the_sdk(sdk_port, emu):
+    """A register value whose bytes contain FF FF FD is stuffed by the SDK on the way in and by
+    the emulator on the way out; both sides unstuff it to the same value."""
+    port, ph = sdk_port
+    value = int.from_bytes(b"\xff\xff\xfd\x00", "little")
+    assert ph.write4ByteTxRx(port, 1, ct.HOMING_OFFSET[0], value) == (sdk.COMM_SUCCESS, 0)
+    assert emu.register(1, ct.HOMING_OFFSET) == value
+    got, res, err = ph.read4ByteTxRx(port, 1, ct.HOMING_OFFSET[0])
+    assert (got, res, err) == (value, sdk.COMM_SUCCESS, 0)
+    # and the status packet on the wire really carries the stuffing byte
+    raw = p.status_packet(1, 0, value.to_bytes(4, "little"))
+    assert b"\xff\xff\xfd\xfd" in raw

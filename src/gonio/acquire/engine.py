@@ -302,8 +302,8 @@ def acquire(
         so far in this process and the open :class:`gonio.rigs.session.RigSession` (tests use
         it to inject faults into the emulator mid-run).
     """
+    from gonio.rigs.devices import open_camera
     from gonio.rigs.session import open_rig
-    from gonio.rigs.sim.sample import SimulatedSampleCamera
 
     t_start = time.monotonic()
     run_dir = Path(out)
@@ -330,7 +330,7 @@ def acquire(
     try:
         with open_rig(rig_cfg, faults=faults, goal_log_path=goal_log, time_scale=time_scale) as ses:
             chain = ses.chain
-            camera = SimulatedSampleCamera(rig_cfg)
+            camera = open_camera(rig_cfg)
             bar = _Progress(progress)
             with bar:
                 start_deg = dict(rig_cfg.park_deg)
@@ -425,9 +425,9 @@ def _refuse_if_any(sp: StagePlan) -> None:
 
 
 def camera_channels(rig: RigConfig) -> tuple[str, ...]:
-    from gonio.rigs.sim.sample import SimulatedSampleCamera
+    from gonio.rigs.devices import open_camera
 
-    return SimulatedSampleCamera(rig).channels
+    return tuple(open_camera(rig).channels)
 
 
 def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig):

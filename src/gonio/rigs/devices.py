@@ -51,3 +51,15 @@ class Camera(Protocol):
     def capture(self, geometry: Geometry, exposure_s: float | None = None) -> Capture:
         """Take one measurement at ``geometry``; ``exposure_s`` overrides the default."""
         ...
+
+
+def open_camera(rig) -> Camera:
+    """The camera backend named by the rig file's ``[camera] kind`` (default ``"sim"``)."""
+    from gonio.errors import RigConfigError
+
+    kind = rig.camera.get("kind", "sim")
+    if kind == "sim":
+        from gonio.rigs.sim.sample import SimulatedSampleCamera
+
+        return SimulatedSampleCamera(rig)
+    raise RigConfigError(f"{rig.source}: camera.kind {kind!r} has no backend")
