@@ -144,3 +144,13 @@ def test_dry_run_counts_and_refusals():
         for s in stages:
             assert all(c.reason for c in s.refused)
             assert np.sum(s.move_s) <= s.lexicographic_s + 1e-9
+
+
+def test_published_example_plan_loads_and_plans():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "data-schema" / "examples" / "plan_adaptive.toml"
+    plan, spec = load_plan(path)
+    assert plan.kind == "adaptive" and spec["name"] == "example-adaptive"
+    stages = dry_run(RIG, plan, time_budget_s=1.0)
+    assert len(stages) == 2 and stages[1].accepted

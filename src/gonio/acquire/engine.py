@@ -381,8 +381,13 @@ def acquire(
                 chain.park()
                 log("parked", pose=rig_cfg.park_deg)
             bus = dict(vars(chain.bus.stats))
-    except DeviceError as exc:
-        log("device_error", message=str(exc))
+    except BaseException as exc:
+        if isinstance(exc, DeviceError):
+            log("device_error", message=str(exc))
+        else:
+            log("aborted", error=type(exc).__name__, message=str(exc))
+        log.close()
+        journal.close()
         raise
     finally:
         stop.restore()
