@@ -111,3 +111,20 @@ def test_stream_decoder_resyncs_after_noise_and_split_chunks():
         dec.feed(stream[i : i + 3])
     got = list(dec.packets())
     assert [g.instruction for g in got] == [p.PING, p.REBOOT]
+
+
+@given(
+    st.lists(st.tuples(st.integers(0, 252), st.binary(max_size=24)), min_size=1, max_size=6),
+    st.lists(st.binary(max_size=8).filter(lambda b: b"\xff" not in b), min_size=7, max_size=7),
+    st.integers(1, 9),
+)
+def test_stream_decoder_finds_every_packet_between_noise(packets, noise, chunk):
+    stream = b""
+    for (pid, params), junk in zip(packets, noise, strict=False):
+        stream += junk + p.encode(pid, p.WRITE, params)
+    dec = p.StreamDecoder()
+    got = []
+    for i in range(0, len(stream), chunk):
+        dec.feed(stream[i : i + chunk])
+        got.extend(dec.packets())
+    assert [(g.id, g.params) for g in got] == packets
