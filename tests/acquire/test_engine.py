@@ -277,3 +277,16 @@ def test_dead_servo_stops_run_cleanly_and_resume_finishes(reference, tmp_path, p
     got, _ = samples_of(run)
     for i, r in ref.items():
         np.testing.assert_array_equal(got[i].value, r.value)
+
+
+def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file):
+    gio = pytest.importorskip("gonio.io")
+    if not hasattr(gio, "save"):
+        pytest.skip("gonio.io.save not merged yet")
+    run = tmp_path / "run"
+    s = acquire(run, "sim", plan_file, progress=False)
+    assert s.table == str(run / "table.brdf.h5")
+    t = gio.load(run / "table.brdf.h5")
+    assert t.wi.shape == (s.done, 3)
+    got, _ = samples_of(run)
+    np.testing.assert_allclose(np.asarray(t.values), np.array([got[i].value for i in sorted(got)]))
