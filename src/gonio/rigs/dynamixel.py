@@ -397,6 +397,7 @@ class ServoChain:
             except DeviceError:
                 if time.monotonic() > deadline:
                     raise
+                time.sleep(0.05)  # a real servo takes a few hundred ms to boot
         if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
             raise DeviceError(f"joint {j.name}: hardware error persists after reboot")
 
