@@ -48,6 +48,7 @@ def test_initialize_configures_servos_and_move_reads_back():
         {**POSE, "light_arm": -171.0},
         {k: v for k, v in POSE.items() if k != "turntable"},
         {**POSE, "elbow": 0.0},
+        {**POSE, "light_arm": 167.0},  # keep-out sector 165..170 of the sim rig
     ],
 )
 def test_limits_checked_before_anything_is_sent(bad):

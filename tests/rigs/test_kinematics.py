@@ -106,3 +106,12 @@ def test_inverse_prefers_pose_near_reference():
     for c in cands:
         pose, _ = KIN.inverse(wi, wo, near=c)
         assert pose == c
+
+
+def test_keepout_sector_may_be_neither_entered_nor_crossed():
+    hw = Kinematics(load_rig("xm430_4axis"))  # camera arm keep-out 150..160, park -90
+    inside = Pose(math.radians(20), math.radians(155), 0.0, 0.0)
+    assert "keep-out sector (camera cable chain" in hw.refusal(inside)
+    across = Pose(math.radians(20), math.radians(163), 0.0, 0.0)
+    assert "across the keep-out sector" in hw.refusal(across)
+    assert hw.refusal(Pose(math.radians(20), math.radians(149), 0.0, 0.0)) is None

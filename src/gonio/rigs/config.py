@@ -149,7 +149,10 @@ SPEC: dict = {
         ),
         "keepout": [
             {
-                "__doc__": "A sector a joint must never enter (e.g. an arm would hit the column).",
+                "__doc__": (
+                    "A sector a joint must never enter or cross (e.g. an arm would hit the"
+                    " column): the joint stays on the park angle's side of it."
+                ),
                 "__required__": ["joint", "min_deg", "max_deg"],
                 "joint": _str("Joint name."),
                 "min_deg": _num("Sector start (deg)."),

@@ -420,6 +420,15 @@ class ServoChain:
                 raise PlanError(
                     f"joint {j.name}: {a:.3f} deg outside its limits [{j.min_deg}, {j.max_deg}]"
                 )
+            for k in self.rig.safety.keepout:
+                if k.joint != j.name:
+                    continue
+                park = self.rig.park_deg.get(j.name, j.zero_offset_deg)
+                if k.min_deg <= a <= k.max_deg or (a > k.max_deg) != (park > k.max_deg):
+                    raise PlanError(
+                        f"joint {j.name}: {a:.3f} deg in or across the keep-out sector"
+                        f" [{k.min_deg}, {k.max_deg}] ({k.reason})"
+                    )
             t = j.to_ticks(a)
             lo, hi = ct.POSITION_RANGE[ct.OPERATING_MODES[j.operating_mode]]
             if not lo <= t <= hi:

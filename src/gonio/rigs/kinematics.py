@@ -118,7 +118,14 @@ class Kinematics:
         self.min_sep = math.radians(rig.safety.min_light_camera_deg)
         self.max_theta = math.radians(rig.safety.max_theta_deg)
         self._keepout = [
-            (role, math.radians(k.min_deg), math.radians(k.max_deg), k.reason, k.joint)
+            (
+                role,
+                math.radians(k.min_deg),
+                math.radians(k.max_deg),
+                k.reason,
+                k.joint,
+                math.radians(rig.park_deg.get(k.joint, rig.joint(k.joint).zero_offset_deg)),
+            )
             for k in rig.safety.keepout
             for role, name in self.joint_names.items()
             if name == k.joint
@@ -150,11 +157,19 @@ class Kinematics:
                     f"joint {self.joint_names[role]} at {math.degrees(v):.2f} deg is outside"
                     f" its limits [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}]"
                 )
-        for role, lo, hi, reason, name in self._keepout:
+        for role, lo, hi, reason, name, park in self._keepout:
             v = getattr(pose, role)
             if lo <= v <= hi:
                 return (
                     f"joint {name} at {math.degrees(v):.2f} deg is in a keep-out sector ({reason})"
+                )
+            # every move is monotone in each joint, so a sector may never be crossed either:
+            # the joint stays on the park pose's side of it
+            if (v > hi) != (park > hi):
+                return (
+                    f"joint {name} at {math.degrees(v):.2f} deg is across the keep-out sector"
+                    f" [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] from its park angle"
+                    f" ({reason})"
                 )
         sep = abs(math.remainder(pose.light - pose.camera, 2 * math.pi))
         if sep < self.min_sep - 1e-12:
