@@ -25,9 +25,13 @@ from gonio.rigs.sim.sample import SimulatedSampleCamera
 RIG = load_rig("sim")
 SRC = str(Path(__file__).resolve().parents[2] / "src")
 
+# No configuration of this plan is the park pose (theta 60/60, dphi 180 on the sim rig): a servo
+# already resting at its goal stays put when that goal's Sync Write is lost (correctly: it is
+# within tolerance), so under packet faults its read-back could differ from a run where it moved
+# there, and the runs below compare samples bit for bit.
 PLAN = """kind = "isotropic"
-theta_i_deg = [20, 40, 60]
-theta_o_deg = [20, 40, 60]
+theta_i_deg = [20, 40, 55]
+theta_o_deg = [20, 40, 55]
 dphi_deg = [30, 90, 150, 180]
 """
 
@@ -180,7 +184,7 @@ def _run_until(cmd, run: Path, n_done: int, sig: int, timeout: float = 60.0) -> 
     return proc.returncode
 
 
-def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int):
+def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int, extra=()):
     ref, _ = reference
     run = tmp_path / "run"
     rng = random.Random(seed)
@@ -188,15 +192,15 @@ def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int):
     first = True
     for n in points:
         cmd = (
-            _acquire_cmd("--rig", "sim", "--plan", plan_file, "--out", run)
+            _acquire_cmd("--rig", "sim", "--plan", plan_file, "--out", run, *extra)
             if first
-            else (_acquire_cmd("--resume", run))
+            else (_acquire_cmd("--resume", run, *extra))
         )
         rc = _run_until(cmd, run, n, signal.SIGKILL)
         first = False
         assert rc == -signal.SIGKILL or rc == 0
     out = subprocess.run(
-        [*_acquire_cmd("--resume", run), "--json"],
+        [*_acquire_cmd("--resume", run, *extra), "--json"],
         env=_env(),
         capture_output=True,
         text=True,
@@ -218,8 +222,9 @@ def test_sigkill_and_resume_gives_the_uninterrupted_samples(reference, tmp_path,
 
 
 @pytest.mark.slow
-def test_sigkill_many_times(reference, tmp_path, plan_file):
-    _kill_and_resume(reference, tmp_path, plan_file, kills=6, seed=9)
+def test_sigkill_many_times_on_a_faulty_bus(reference, tmp_path, plan_file):
+    faults = ("--sim-faults", "drop=0.03,garble=0.03,crc=0.03,overload=0.01,seed=4")
+    _kill_and_resume(reference, tmp_path, plan_file, kills=6, seed=9, extra=faults)
 
 
 def test_ctrl_c_parks_the_rig_then_resume_completes(reference, tmp_path, plan_file):

@@ -18,7 +18,9 @@ from gonio.rigs.sim import FaultConfig, ServoChainEmulator, ServoSpec
 @pytest.fixture
 def emu():
     e = ServoChainEmulator(
-        [ServoSpec(1, "XM430-W350", 52), ServoSpec(2, "XL430-W250", 46, 1000)], time_scale=5.0
+        [ServoSpec(1, "XM430-W350", 52), ServoSpec(2, "XL430-W250", 46, 1000)],
+        time_scale=5.0,
+        settle_ticks=0,
     )
     e.start()
     yield e
@@ -131,8 +133,8 @@ def test_motion_follows_profile_and_group_sync_read(sdk_port, emu):
     pos.addParam(2)
     time.sleep(0.05)
     assert _retry(pos.txRxPacket) == sdk.COMM_SUCCESS
-    assert abs(pos.getData(1, 132, 4) - 3000) <= 2
-    assert abs(pos.getData(2, 132, 4) - 1500) <= 2
+    assert pos.getData(1, 132, 4) == 3000
+    assert pos.getData(2, 132, 4) == 1500
     assert [(g.id, g.ticks) for g in emu.goal_log] == [(1, 3000), (2, 1500)]
 
 
@@ -194,7 +196,7 @@ def test_emulator_answers_manual_examples_byte_for_byte():
     from tests.rigs.test_protocol import golden
 
     specs = [ServoSpec(1, "XM430-W210", 38, 166), ServoSpec(2, "XM430-W210", 38, 2079)]
-    with ServoChainEmulator(specs, time_scale=50.0) as emu:
+    with ServoChainEmulator(specs, time_scale=50.0, settle_ticks=0) as emu:
         fd = os.open(emu.port, os.O_RDWR | os.O_NOCTTY)
         tty.setraw(fd)
 
@@ -235,3 +237,21 @@ def test_byte_stuffing_both_ways_through_the_sdk(sdk_port, emu):
     # and the status packet on the wire really carries the stuffing byte
     raw = p.status_packet(1, 0, value.to_bytes(4, "little"))
     assert b"\xff\xff\xfd\xfd" in raw
+
+
+def test_settle_error_is_deterministic_per_goal_and_bounded():
+    specs = [ServoSpec(1, initial_position=1000)]
+    with ServoChainEmulator(specs, time_scale=100.0, settle_ticks=3, seed=5) as emu:
+        port = sdk.PortHandler(emu.port)
+        port.openPort()
+        ph = sdk.PacketHandler(2.0)
+        ph.write1ByteTxRx(port, 1, 64, 1)
+        ends = {}
+        for goal in (1500, 2500, 1500, 2500):
+            ph.write4ByteTxRx(port, 1, 116, goal)
+            while ph.read1ByteTxRx(port, 1, 122)[0]:
+                pass
+            end = ph.read4ByteTxRx(port, 1, 132)[0]
+            assert abs(end - goal) <= 3
+            assert ends.setdefault(goal, end) == end
+        port.closePort()

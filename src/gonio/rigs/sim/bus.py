@@ -106,6 +106,15 @@ class _Servo:
         self.table[a : a + n] = int(value & ((1 << (8 * n)) - 1)).to_bytes(n, "little")
 
     # --- motion -------------------------------------------------------------------------------
+    def settle_error(self, goal: int) -> int:
+        """Where the servo comes to rest relative to ``goal`` (ticks).
+
+        Deterministic per (seed, servo, goal): the same goal always ends at the same tick, so a
+        resumed run reads back exactly what an uninterrupted one would.
+        """
+        h = hashlib.blake2s(f"{self.seed}:{self.spec.id}:{goal}".encode(), digest_size=2).digest()
+        return (int.from_bytes(h, "little") % (2 * self.settle_ticks + 1)) - self.settle_ticks
+
     def position(self, now: float) -> float:
         if self.frozen_at is not None:
             return self.frozen_at
@@ -132,10 +141,7 @@ class _Servo:
 
     def start_move(self, goal: int, now: float, overload: bool) -> None:
         here = self.position(now)
-        # Deterministic per (servo, goal) settling error: the same goal always ends at the same
-        # tick, so a resumed run reads back exactly what an uninterrupted one would.
-        h = hashlib.blake2s(f"{self.seed}:{self.spec.id}:{goal}".encode(), digest_size=2).digest()
-        err = (int.from_bytes(h, "little") % (2 * self.settle_ticks + 1)) - self.settle_ticks
+        err = self.settle_error(goal)
         v_raw = self.get(ct.PROFILE_VELOCITY) or self.get(ct.VELOCITY_LIMIT) or 200
         a_raw = self.get(ct.PROFILE_ACCELERATION)
         tick_per_deg = ct.TICKS_PER_REV / 360.0
@@ -242,7 +248,12 @@ class ServoChainEmulator:
             if spec.model not in ct.MODELS:
                 raise ValueError(f"unknown servo model {spec.model!r}")
             servo = _Servo(spec, _default_table(spec), self.now, settle_ticks, seed)
-            servo.frozen_at = float(spec.initial_position)
+            # powered on where the last session left it: at rest after a move to
+            # initial_position (e.g. parked), Goal Position = Present Position
+            rest = spec.initial_position + servo.settle_error(spec.initial_position)
+            servo.frozen_at = float(rest)
+            servo.set(ct.PRESENT_POSITION, rest)
+            servo.set(ct.GOAL_POSITION, rest)
             self._servos[spec.id] = servo
         self._rng = random.Random(self.faults.seed)
         self._lock = threading.Lock()
