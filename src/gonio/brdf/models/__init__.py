@@ -7,12 +7,14 @@
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.oren_nayar import OrenNayar
 
 __all__ = [
     "BRDFModel",
     "BRDFSample",
     "Lambert",
     "Node",
+    "OrenNayar",
     "Param",
     "Sum",
     "registry",

@@ -1,0 +1,47 @@
+"""Deterministic hemisphere quadrature for energy checks that must not rely on a model's sampler.
+
+The directional albedo from ``model.directional_albedo`` uses the model's own importance
+sampler; these helpers integrate ``f cos`` with Gauss-Legendre cells instead (the cell rule of
+:func:`gonio.brdf.chi2.integrate_pdf_cells`), so a wrong sampler cannot hide a wrong albedo.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gonio.brdf import frames
+from gonio.brdf.chi2 import integrate_pdf_cells
+
+
+def direction(theta_deg: float, phi: float = 0.0) -> np.ndarray:
+    """Unit vector for a polar angle in degrees and an azimuth in radians, ``(3,)``."""
+    return np.asarray(frames.spherical_to_direction(np.radians(theta_deg), phi))
+
+
+def albedo_quadrature(
+    model, wo: np.ndarray, res_theta: int = 90, res_phi: int = 180, order: int = 8
+) -> np.ndarray:
+    """``int f(wi, wo) cos(theta_i) dwi`` per channel, ``(C,)``, by cell-wise Gauss-Legendre.
+
+    Cell edges lie on multiples of ``90/res_theta`` degrees in theta and ``360/res_phi`` in phi;
+    put kinks of the integrand (``theta_i = theta_o``, the horizon) on edges for full accuracy.
+    """
+    wo = np.asarray(wo, dtype=np.float64)
+    out = []
+    for c in range(model.channels):
+
+        def integrand(wi, c=c):
+            return np.asarray(model.f(wi, wo))[:, c] * wi[:, 2]
+
+        out.append(integrate_pdf_cells(integrand, res_theta, res_phi, order=order).sum())
+    return np.asarray(out)
+
+
+def pdf_integral(model, wo: np.ndarray, res_theta: int = 90, res_phi: int = 180, order: int = 8):
+    """``int pdf(wi, wo) dwi`` over the upper hemisphere by the same quadrature."""
+    wo = np.asarray(wo, dtype=np.float64)
+    return float(
+        integrate_pdf_cells(
+            lambda wi: np.asarray(model.pdf(wi, wo)), res_theta, res_phi, order=order
+        ).sum()
+    )
