@@ -5,7 +5,7 @@ import pytest
 from gonio.brdf import models
 from gonio.errors import ParameterError
 from tests.brdf import model_checks as mc
-from tests.brdf.quadrature import albedo_quadrature, direction, pdf_integral
+from tests.brdf.quadrature import albedo_quadrature, direction, jitted, pdf_integral
 
 N_CHI2 = 3  # chi-square tests in this file (Sidak correction)
 
@@ -94,7 +94,7 @@ def test_gradient_matches_finite_difference():
 
 
 def test_chi2():
-    mc.check_chi2(models.OrenNayar(0.7, 0.8), theta_o_deg=(0, 45, 85), n_tests=N_CHI2)
+    mc.check_chi2(jitted(models.OrenNayar(0.7, 0.8)), theta_o_deg=(0, 45, 85), n_tests=N_CHI2)
 
 
 def test_pdf_integrates_to_one():

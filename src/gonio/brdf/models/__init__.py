@@ -8,6 +8,7 @@ from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.lambert import Lambert
 from gonio.brdf.models.oren_nayar import OrenNayar
+from gonio.brdf.models.phong import Phong
 
 __all__ = [
     "BRDFModel",
@@ -16,6 +17,7 @@ __all__ = [
     "Node",
     "OrenNayar",
     "Param",
+    "Phong",
     "Sum",
     "registry",
 ]
