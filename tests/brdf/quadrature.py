@@ -29,6 +29,7 @@ def albedo_quadrature(
     put kinks of the integrand (``theta_i = theta_o``, the horizon) on edges for full accuracy.
     """
     wo = np.asarray(wo, dtype=np.float64)
+    model = model if isinstance(model, jitted) else jitted(model)
     out = []
     for c in range(model.channels):
 
@@ -42,6 +43,7 @@ def albedo_quadrature(
 def pdf_integral(model, wo: np.ndarray, res_theta: int = 90, res_phi: int = 180, order: int = 8):
     """``int pdf(wi, wo) dwi`` over the upper hemisphere by the same quadrature."""
     wo = np.asarray(wo, dtype=np.float64)
+    model = model if isinstance(model, jitted) else jitted(model)
     return float(
         integrate_pdf_cells(
             lambda wi: np.asarray(model.pdf(wi, wo)), res_theta, res_phi, order=order
@@ -76,3 +78,9 @@ class jitted:
 
     def __repr__(self) -> str:
         return repr(self.model)
+
+
+#: Histogram for sharp half-vector lobes at grazing ``wo``: reflecting about a half vector near
+#: the normal compresses the lobe sideways by ``2 cos(theta_o)`` (0.17 at 85 deg), to a fraction
+#: of a default 2-degree azimuth cell, where the cell quadrature would lose accuracy.
+SHARP_CHI2 = {"res_theta": 180, "res_phi": 2880, "order": 4}
