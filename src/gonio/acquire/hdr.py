@@ -15,6 +15,7 @@ from the metadata, and the white reference calibrates that scale away anyway.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -36,7 +37,7 @@ class NoiseModel:
     read_noise: float
 
     def variance(self, signal_dn: np.ndarray) -> np.ndarray:
-        """Predicted variance (DN^2) of a raw value whose mean signal above black is ``signal_dn``."""
+        """Predicted variance (DN^2) of a raw value with mean signal ``signal_dn`` above black."""
         return self.gain * np.maximum(signal_dn, 0.0) + (self.gain * self.read_noise) ** 2 + 1 / 12
 
 
@@ -126,7 +127,7 @@ def estimate_exposure_ratios(
     rel = np.ones(len(nominal))
     source = ["metadata"] * len(nominal)
     source[order[0]] = "data"
-    for a, b in zip(order[:-1], order[1:], strict=True):
+    for a, b in itertools.pairwise(order):
         sa, sb = signals[a], signals[b]
         snr_b = sb / np.sqrt(noise.variance(sb))
         sel = (snr_b > min_snr) & (sa * (nominal[b] / nominal[a]) < max_fill * saturation_signal[b])
@@ -194,13 +195,9 @@ def merge_brackets(
     # Pass 1: weights from the observed signal; pass 2: from the model at the pass-1 rate.
     rate = _weighted(signals, usable, times, [noise.variance(s) for s in signals])[0]
     rate0 = np.where(np.isfinite(rate), rate, 0.0)
-    dark_var = 0.0
-    variances = []
-    for k, t in enumerate(times):
-        v = noise.variance(rate0 * t)
-        if dark is not None:  # the dark frame's own noise adds to the difference
-            dark_var = (noise.gain * noise.read_noise) ** 2 + 1 / 12
-        variances.append(v + dark_var)
+    # A subtracted dark frame adds its own read and quantization noise.
+    dark_var = (noise.gain * noise.read_noise) ** 2 + 1 / 12 if dark is not None else 0.0
+    variances = [noise.variance(rate0 * t) + dark_var for t in times]
     rate, var, n_used = _weighted(signals, usable, times, variances)
     return HDRResult(rate, var, n_used, times, source)
 

@@ -93,7 +93,9 @@ def write_dng(
 
     data = np.asarray(data)
     if data.ndim != 2 or data.dtype != np.uint16:
-        raise FormatError(f"{path}: DNG data must be a 2-D uint16 mosaic, got {data.dtype} {data.shape}")
+        raise FormatError(
+            f"{path}: DNG data must be a 2-D uint16 mosaic, got {data.dtype} {data.shape}"
+        )
     if data.shape[0] % 2 or data.shape[1] % 2:
         raise FormatError(f"{path}: DNG mosaic dimensions must be even, got {data.shape}")
     if len(cfa) != 4 or any(c not in _CFA_CODES for c in cfa):
@@ -175,7 +177,7 @@ def _read_tiff_metadata(path: Path) -> tuple[float, dict[str, Any]]:
         with tifffile.TiffFile(path) as tif:
             tags = tif.pages[0].tags
             exp = tags.get(33434)
-            exposure = float(exp.value[0]) / float(exp.value[1]) if exp is not None else float("nan")
+            exposure = float("nan") if exp is None else float(exp.value[0]) / float(exp.value[1])
             desc = tags.get(270)
             text = desc.value if desc is not None else ""
     except (tifffile.TiffFileError, OSError, ValueError, ZeroDivisionError) as exc:
