@@ -1,0 +1,75 @@
+"""Sample-holder pose from a ChArUco board (OpenCV 5's ``CharucoDetector`` and ``solvePnP``).
+
+Frames: OpenCV's camera frame (x right, y down, z forward) and gonio's sample frame (z = holder
+normal). The board's own object frame (origin top-left, y down, z into the board) is mapped to
+the sample frame by :meth:`gonio.rigs.sim.camera.HolderLayout.board_to_holder`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gonio.errors import DeviceError
+
+
+@dataclass(frozen=True)
+class BoardPose:
+    """Pose of the sample frame seen by the camera.
+
+    Attributes
+    ----------
+    rotation : (3, 3) world(sample)-to-camera rotation ``R``.
+    translation : (3,) ``t`` with ``x_cam = R x_sample + t`` (metres).
+    n_corners : ChArUco corners used.
+    reprojection_px : RMS reprojection error in pixels.
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    n_corners: int
+    reprojection_px: float
+
+    @property
+    def camera_position(self) -> np.ndarray:
+        """Camera centre in the sample frame (metres)."""
+        return -self.rotation.T @ self.translation
+
+
+def to_8bit(image: np.ndarray, percentile: float = 99.5) -> np.ndarray:
+    """Linear image -> 8-bit for detection, scaled so ``percentile`` maps to 255, gamma 1/2.2."""
+    img = np.asarray(image, dtype=np.float64)
+    hi = np.percentile(img[np.isfinite(img)], percentile) if np.isfinite(img).any() else 1.0
+    x = np.clip(np.nan_to_num(img) / max(hi, 1e-30), 0.0, 1.0) ** (1 / 2.2)
+    return (x * 255 + 0.5).astype(np.uint8)
+
+
+def estimate_pose(
+    gray8: np.ndarray, layout: Any, camera_matrix: np.ndarray, min_corners: int = 6
+) -> BoardPose:
+    """Detect the board in an 8-bit grey image and solve for the holder pose.
+
+    Raises DeviceError when fewer than ``min_corners`` corners are found (a camera problem
+    that retrying the frame may fix, not bad user input).
+    """
+    import cv2
+
+    detector = cv2.aruco.CharucoDetector(layout.board)
+    corners, ids, _, _ = detector.detectBoard(gray8)
+    n = 0 if ids is None else len(ids)
+    if n < min_corners:
+        raise DeviceError(f"ChArUco board not found: {n} corners detected, need {min_corners}")
+    obj, img = layout.board.matchImagePoints(corners, ids)
+    obj = layout.board_to_holder(obj)
+    img = np.asarray(img, dtype=np.float64).reshape(-1, 2)
+    dist = np.zeros(5)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, camera_matrix, dist, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        raise DeviceError("solvePnP failed on the detected ChArUco corners")
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, camera_matrix, dist, rvec, tvec)
+    R, _ = cv2.Rodrigues(rvec)
+    proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
+    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, -1))))
+    return BoardPose(R, tvec.ravel(), n, rms)
