@@ -62,6 +62,10 @@ class HDRResult:
     n_used : (H, W) number of frames that contributed.
     exposures_s : effective exposure times used (ratios from the data, scale from metadata).
     ratio_source : per frame, "data" or "metadata" (when too few pixels overlapped).
+    log_time_cov : (K, K) covariance of the errors of ``log(exposures_s)``; an error common to
+        all frames is left out (it scales every pixel alike and the white reference removes it).
+    frame_fraction : (K, H, W) float32 share of each frame in each pixel's estimate (weights
+        normalized per pixel), so a region's sensitivity to each exposure error can be computed.
     """
 
     rate: np.ndarray
@@ -69,6 +73,8 @@ class HDRResult:
     n_used: np.ndarray
     exposures_s: np.ndarray
     ratio_source: list[str] = field(default_factory=list)
+    log_time_cov: np.ndarray | None = None
+    frame_fraction: np.ndarray | None = None
 
     @property
     def sigma(self) -> np.ndarray:
@@ -94,7 +100,7 @@ def estimate_exposure_ratios(
     min_snr: float = 50.0,
     max_fill: float = 0.8,
     shutter_precision: float = 0.01,
-) -> tuple[np.ndarray, list[str]]:
+) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Effective exposure times from the data.
 
     For each pair of frames adjacent in nominal time (``a`` shorter, ``b`` longer), the ratio of
@@ -119,14 +125,18 @@ def estimate_exposure_ratios(
     nominal_s : nominal exposure times, seconds.
     shutter_precision : relative standard deviation of a real exposure around its nominal time.
 
-    Returns ``(times_s, source)``: ``source[k]`` is "data", or "metadata" when fewer than
-    ``min_pixels`` pixels qualified between frame ``k`` and its shorter neighbour.
+    Returns ``(times_s, source, log_cov)``: ``source[k]`` is "data", or "metadata" when fewer
+    than ``min_pixels`` pixels qualified between frame ``k`` and its shorter neighbour;
+    ``log_cov`` (K, K) is the covariance of the errors of ``log(times_s)`` relative to the
+    shortest frame (errors accumulate along the chain of pairs).
     """
     nominal = np.asarray(nominal_s, dtype=np.float64)
     order = np.argsort(nominal)
     rel = np.ones(len(nominal))
     source = ["metadata"] * len(nominal)
     source[order[0]] = "data"
+    var_prior = 2.0 * shutter_precision**2
+    chain_var = np.zeros(len(nominal))  # variance of log t_k relative to the shortest frame
     for a, b in itertools.pairwise(order):
         sa, sb = signals[a], signals[b]
         snr_b = sb / np.sqrt(noise.variance(sb))
@@ -138,15 +148,23 @@ def estimate_exposure_ratios(
                 float(noise.variance(sa[sel]).sum()) / sum_a**2
                 + float(noise.variance(sb[sel]).sum()) / sum_b**2
             )
-            var_prior = 2.0 * shutter_precision**2
             w = var_prior / (var_prior + var_log) if var_prior > 0 else 0.0
             log_ratio = w * np.log(sum_b / sum_a) + (1 - w) * np.log(nominal[b] / nominal[a])
             rel[b] = rel[a] * float(np.exp(log_ratio))
             source[b] = "data"
+            pair_var = w * var_log  # posterior variance of the fused log ratio
         else:
             rel[b] = rel[a] * nominal[b] / nominal[a]
+            pair_var = var_prior
+        chain_var[b] = chain_var[a] + pair_var
     scale = np.exp(np.mean(np.log(nominal)) - np.mean(np.log(rel)))
-    return rel * scale, source
+    # Frames share the chain up to the shorter of the two: cov = var at the earlier position.
+    rank = np.empty(len(nominal), dtype=np.int64)
+    rank[order] = np.arange(len(nominal))
+    earlier = np.where(rank[:, None] <= rank[None, :], np.arange(len(nominal))[:, None],
+                       np.arange(len(nominal))[None, :])  # fmt: skip
+    log_cov = chain_var[earlier]
+    return rel * scale, source, log_cov
 
 
 def merge_brackets(
@@ -186,11 +204,12 @@ def merge_brackets(
         sat_signal.append(threshold - float(np.median(base)))
     nominal = np.array([b.exposure_s for b in brackets], dtype=np.float64)
     if estimate_ratios and len(brackets) > 1:
-        times, source = estimate_exposure_ratios(
+        times, source, log_cov = estimate_exposure_ratios(
             signals, sat_signal, nominal, noise, shutter_precision=shutter_precision
         )
     else:
         times, source = nominal, ["metadata"] * len(brackets)
+        log_cov = 2.0 * shutter_precision**2 * np.eye(len(brackets))
 
     # Pass 1: weights from the observed signal; pass 2: from the model at the pass-1 rate.
     rate = _weighted(signals, usable, times, [noise.variance(s) for s in signals])[0]
@@ -199,7 +218,12 @@ def merge_brackets(
     dark_var = (noise.gain * noise.read_noise) ** 2 + 1 / 12 if dark is not None else 0.0
     variances = [noise.variance(rate0 * t) + dark_var for t in times]
     rate, var, n_used = _weighted(signals, usable, times, variances)
-    return HDRResult(rate, var, n_used, times, source)
+    weights = np.stack(
+        [np.where(ok, t * t / v, 0.0) for ok, t, v in zip(usable, times, variances, strict=True)]
+    )
+    total = weights.sum(0)
+    fraction = np.where(total > 0, weights / np.where(total > 0, total, 1.0), 0.0)
+    return HDRResult(rate, var, n_used, times, source, log_cov, fraction.astype(np.float32))
 
 
 def _weighted(signals, usable, times, variances):

@@ -38,12 +38,33 @@ class BoardPose:
         return -self.rotation.T @ self.translation
 
 
-def to_8bit(image: np.ndarray, percentile: float = 99.5) -> np.ndarray:
-    """Linear image -> 8-bit for detection, scaled so ``percentile`` maps to 255, gamma 1/2.2."""
-    img = np.asarray(image, dtype=np.float64)
-    hi = np.percentile(img[np.isfinite(img)], percentile) if np.isfinite(img).any() else 1.0
-    x = np.clip(np.nan_to_num(img) / max(hi, 1e-30), 0.0, 1.0) ** (1 / 2.2)
-    return (x * 255 + 0.5).astype(np.uint8)
+def to_8bit(image: np.ndarray, lo_pct: float = 1.0, hi_pct: float = 99.5) -> np.ndarray:
+    """Linear HDR image -> 8-bit for detection, logarithmically.
+
+    Light falls off across the holder (inverse square, cosine), so a linear mapping leaves the
+    far side of the board too dark to decode. In log space the board's black/white step is the
+    same everywhere; percentiles of the positive values set the range.
+    """
+    img = np.nan_to_num(np.asarray(image, dtype=np.float64))
+    pos = img[img > 0]
+    if pos.size == 0:
+        return np.zeros(img.shape, dtype=np.uint8)
+    lo, hi = np.log(np.percentile(pos, [lo_pct, hi_pct]))
+    x = (np.log(np.maximum(img, np.exp(lo))) - lo) / max(hi - lo, 1e-12)
+    return (np.clip(x, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+
+
+def mosaic_to_gray(rate: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
+    """Bayer mosaic (H, W) -> grey (H, W) by OpenCV's bilinear demosaicking (float32)."""
+    import cv2
+
+    codes = {"RGGB": cv2.COLOR_BayerRG2GRAY, "BGGR": cv2.COLOR_BayerBG2GRAY,
+             "GRBG": cv2.COLOR_BayerGR2GRAY, "GBRG": cv2.COLOR_BayerGB2GRAY}  # fmt: skip
+    img = np.nan_to_num(np.asarray(rate, dtype=np.float64))
+    scale = max(float(img.max()), 1e-30)
+    # OpenCV demosaics 8- and 16-bit images; 16 bits keep 1/65535 of the range.
+    img16 = np.clip(img / scale * 65535, 0, 65535).astype(np.uint16)
+    return cv2.cvtColor(img16, codes[cfa]).astype(np.float32) * (scale / 65535)
 
 
 def estimate_pose(

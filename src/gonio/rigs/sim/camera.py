@@ -38,12 +38,12 @@ class HolderLayout:
     """
 
     squares: tuple[int, int] = (9, 7)
-    square_m: float = 0.012
-    marker_m: float = 0.009
-    dictionary: str = "DICT_5X5_100"
+    square_m: float = 0.016
+    marker_m: float = 0.012
+    dictionary: str = "DICT_4X4_50"
     sample_center: tuple[float, float] = (0.0, 0.0)
     sample_radius: float = 0.008
-    reference_center: tuple[float, float] = (0.036, 0.0)
+    reference_center: tuple[float, float] = (0.048, 0.0)
     reference_radius: float = 0.008
     reference_albedo: float = 0.99
     board_black: float = 0.04
