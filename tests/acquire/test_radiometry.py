@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gonio.acquire.hdr import Bracket, NoiseModel, merge_brackets, plan_exposures
-from gonio.acquire.pose import estimate_pose, mosaic_to_gray, to_8bit
+from gonio.acquire.pose import estimate_pose, mosaic_to_gray, pose_samples, to_8bit
 from gonio.acquire.radiometry import measure_brdf
 from gonio.brdf import frames, models
 from gonio.io.dng import read_dng
@@ -48,7 +48,8 @@ def _measure(cam, cam_pos, light_pos, tmp_path, key):
     m = measure_brdf(hdr.rate, hdr.variance, s.plane_index(rate.shape[:2]), cam.camera.matrix,
                      bp.rotation, bp.translation, light_pos, lay.sample_center, lay.sample_radius,
                      lay.reference_center, lay.reference_radius, lay.reference_albedo,
-                     frame_fraction=hdr.frame_fraction, log_time_cov=hdr.log_time_cov)  # fmt: skip
+                     frame_fraction=hdr.frame_fraction, log_time_cov=hdr.log_time_cov,
+                     pose_sigma_points=pose_samples(bp))  # fmt: skip
     return m, bp, len(plan.exposures_s)
 
 
@@ -61,8 +62,9 @@ def test_white_reference_material_recovers_rho_over_pi(tmp_path):
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="open work: ChArUco pose error reaches ~0.11 deg at theta_o = 60 deg (target 0.05) "
-    "and sharp lobes then leave |z| tails above 2.5",
+    reason="open work: median |z| 0.91 and geometry error 0.013 deg meet the targets, but "
+    "systematic ChArUco corner bias (~0.1 mm at the spot, not captured by the PnP covariance) "
+    "moves f by up to 0.8 % on a steep lobe: p95 |z| = 3.9 against the target 2.5",
 )
 def test_measured_values_match_truth_within_the_noise_model(tmp_path):
     truth = Glossy()
@@ -72,7 +74,7 @@ def test_measured_values_match_truth_within_the_noise_model(tmp_path):
                for po, pi_ in ((0, 180), (30, 150), (0, 90))]  # fmt: skip
     for n, (to, po, ti, pi_) in enumerate(configs):
         cam_pos, light_pos = _position(to, po, 0.5), _position(ti, pi_, 0.6)
-        m, bp, _ = _measure(cam, cam_pos, light_pos, tmp_path, f"g{n}")
+        m, _, _ = _measure(cam, cam_pos, light_pos, tmp_path, f"g{n}")
         f_true = truth.f(m.wi, m.wo)
         zs.append((m.f - f_true) / m.sigma)
         wo_true = cam_pos / np.linalg.norm(cam_pos)

@@ -23,14 +23,17 @@ class BoardPose:
     ----------
     rotation : (3, 3) world(sample)-to-camera rotation ``R``.
     translation : (3,) ``t`` with ``x_cam = R x_sample + t`` (metres).
-    n_corners : ChArUco corners used.
-    reprojection_px : RMS reprojection error in pixels.
+    n_corners : ChArUco corners used (after outlier rejection).
+    reprojection_px : RMS reprojection error of the corners used, pixels.
+    covariance : (6, 6) covariance of (rvec, tvec) (radians, metres) from the Gauss-Newton
+        approximation ``s^2 (J^T J)^-1`` at the solution, ``s`` the reprojection RMS.
     """
 
     rotation: np.ndarray
     translation: np.ndarray
     n_corners: int
     reprojection_px: float
+    covariance: np.ndarray | None = None
 
     @property
     def camera_position(self) -> np.ndarray:
@@ -89,8 +92,43 @@ def estimate_pose(
     ok, rvec, tvec = cv2.solvePnP(obj, img, camera_matrix, dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         raise DeviceError("solvePnP failed on the detected ChArUco corners")
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, camera_matrix, dist, rvec, tvec)
+    # Corners seen at grazing angles or next to the bright sample are sometimes refined to the
+    # wrong sub-pixel position; drop those far off the first solution and solve again.
+    keep = np.ones(len(obj), dtype=bool)
+    for _ in range(3):
+        rvec, tvec = cv2.solvePnPRefineLM(obj[keep], img[keep], camera_matrix, dist, rvec, tvec)
+        proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
+        err = np.linalg.norm(proj.reshape(-1, 2) - img, axis=-1)
+        new_keep = err <= max(3.0 * float(np.median(err[keep])), 0.25)
+        if new_keep.sum() < min_corners or np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
     R, _ = cv2.Rodrigues(rvec)
-    proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist)
-    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, -1))))
-    return BoardPose(R, tvec.ravel(), n, rms)
+    rms = float(np.sqrt(np.mean(err[keep] ** 2)))
+    _, jac = cv2.projectPoints(obj[keep], rvec, tvec, camera_matrix, dist)
+    J = jac[:, :6]
+    dof = max(2 * int(keep.sum()) - 6, 1)
+    s2 = float(np.sum(err[keep] ** 2)) / dof
+    cov = s2 * np.linalg.pinv(J.T @ J)
+    return BoardPose(R, tvec.ravel(), int(keep.sum()), rms, cov)
+
+
+def pose_samples(pose: BoardPose) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Sigma points of the pose distribution: 12 (R, t) pairs at +-1 sigma along each
+    principal axis of ``pose.covariance`` (unscented transform), for propagating the pose
+    uncertainty through non-linear geometry."""
+    import cv2
+
+    if pose.covariance is None:
+        return []
+    rvec, _ = cv2.Rodrigues(pose.rotation)
+    x0 = np.concatenate([rvec.ravel(), pose.translation])
+    vals, vecs = np.linalg.eigh(pose.covariance)
+    out = []
+    for k in range(6):
+        step = np.sqrt(max(vals[k], 0.0)) * vecs[:, k] * np.sqrt(6.0)
+        for sgn in (1.0, -1.0):
+            x = x0 + sgn * step
+            R, _ = cv2.Rodrigues(x[:3])
+            out.append((R, x[3:]))
+    return out

@@ -80,6 +80,7 @@ def measure_brdf(
     spot_radius: float = 0.001,
     frame_fraction: np.ndarray | None = None,
     log_time_cov: np.ndarray | None = None,
+    pose_sigma_points: list[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> RegionMeasurement:
     """Measure the sample's BRDF in one merged frame.
 
@@ -103,6 +104,12 @@ def measure_brdf(
         ``-sum_k a_k dlog(t_k)`` with ``a_k`` its mean share of frame ``k``, so ``log f`` has the
         extra variance ``(a_R - a_S)^T C (a_R - a_S)``. It vanishes when the sample and the
         reference come from the same exposures.
+    pose_sigma_points : from :func:`gonio.acquire.pose.pose_samples`. When given, the pose
+        uncertainty is propagated: the pixel at the spot centre is traced through each sigma
+        point to find how far the measured spot may really lie from where the pose says
+        (covariance ``C_xy`` on the holder), and the spot's own spatial gradient of the signal
+        ``g`` (from the plane fit) turns that into ``var(S) += g^T C_xy g``. On a steep specular
+        lobe this dominates the sensor noise; on a diffuse sample it vanishes.
     """
     h, w = rate.shape
     pts, hit = pixel_rays_to_plane((h, w), camera_matrix, rotation, translation)
@@ -129,6 +136,11 @@ def measure_brdf(
         return good & (r2 <= radius**2)
 
     in_s = region(sample_center, min(spot_radius, 0.8 * sample_radius))
+    spot_cov = None
+    if pose_sigma_points:
+        spot_cov = _spot_covariance(
+            camera_matrix, rotation, translation, pose_sigma_points, sample_center
+        )
     in_r = region(reference_center, 0.8 * reference_radius)
     f = np.zeros(3)
     sig = np.zeros(3)
@@ -140,8 +152,10 @@ def measure_brdf(
             raise DeviceError(
                 f"sample or reference not visible in the frame (plane {c}: {ns} / {nr} pixels)"
             )
-        S, R = norm_rate[ms].mean(), norm_rate[mr].mean()
-        vS, vR = norm_var[ms].sum() / ns**2, norm_var[mr].sum() / nr**2
+        S, vS, grad = _value_at_centre(norm_rate[ms], norm_var[ms], pts[ms], sample_center)
+        if spot_cov is not None:
+            vS += float(grad @ spot_cov @ grad)
+        R, vR = norm_rate[mr].mean(), norm_var[mr].sum() / nr**2
         if not R > 0:
             raise DeviceError("white reference gives no signal: is the light on?")
         f[c] = S / R * reference_albedo / np.pi
@@ -155,3 +169,45 @@ def measure_brdf(
     wi = light_pos - p_s
     wo = cam_pos - p_s
     return RegionMeasurement(wi / np.linalg.norm(wi), wo / np.linalg.norm(wo), f, sig, n_px)
+
+
+def _value_at_centre(
+    values: np.ndarray, variances: np.ndarray, points: np.ndarray, centre: tuple[float, float]
+) -> tuple[float, float, np.ndarray]:
+    """Weighted least-squares plane ``a + b dx + c dy`` through pixel values.
+
+    Returns ``(a, var(a), (b, c))``; falls back to the weighted mean with a zero gradient when
+    the pixels cannot support a plane (fewer than 6).
+    """
+    w = 1.0 / np.maximum(variances, 1e-300)
+    if values.size < 6:
+        return float(np.sum(w * values) / np.sum(w)), float(1.0 / np.sum(w)), np.zeros(2)
+    X = np.stack([np.ones_like(values), points[:, 0] - centre[0], points[:, 1] - centre[1]], -1)
+    A = X.T @ (w[:, None] * X)
+    coef = np.linalg.solve(A, X.T @ (w * values))
+    cov = np.linalg.inv(A)
+    return float(coef[0]), float(cov[0, 0]), coef[1:]
+
+
+def _spot_covariance(
+    camera_matrix: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    sigma_points: list[tuple[np.ndarray, np.ndarray]],
+    centre: tuple[float, float],
+) -> np.ndarray:
+    """(2, 2) covariance on the holder of the point the spot-centre pixel really images."""
+    p = np.array([centre[0], centre[1], 0.0])
+    x = camera_matrix @ (rotation @ p + translation)
+    pixel = x[:2] / x[2]
+    kinv = np.linalg.inv(camera_matrix)
+    ray = kinv @ np.array([pixel[0], pixel[1], 1.0])
+    hits = []
+    for R, t in sigma_points:
+        d = R.T @ ray
+        o = -R.T @ t
+        s = -o[2] / d[2]
+        hits.append((o + s * d)[:2])
+    diff = np.asarray(hits) - p[:2]
+    # Unscented transform with weights 1/(2n) and the mean at the nominal point.
+    return diff.T @ diff / len(hits)
