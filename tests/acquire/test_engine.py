@@ -295,3 +295,49 @@ def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file):
     assert t.wi.shape == (s.done, 3)
     got, _ = samples_of(run)
     np.testing.assert_allclose(np.asarray(t.values), np.array([got[i].value for i in sorted(got)]))
+
+
+def test_adaptive_plan_refines_around_the_measured_specular_peak(tmp_path):
+    import math
+
+    from gonio.acquire.plans import load_plan
+    from gonio.rigs.kinematics import spherical
+
+    plan = tmp_path / "adaptive.toml"
+    plan.write_text(
+        'kind = "adaptive"\ntheta_i_deg = [25, 45]\n'
+        "theta_o_deg = { start = 5, stop = 65, step = 10 }\ndphi_deg = [0, 90, 180]\n"
+        "[refine]\nwindow_deg = 4.0\nstep_deg = 2.0\n"
+    )
+    run = tmp_path / "run"
+    s = acquire(run, "sim", plan, progress=False)
+    assert s.complete
+    j = Journal(run)
+    coarse = j.samples(stage=0)
+    fine = [c for c in j.configs(stage=1) if c.status == "planned"]
+    j.close()
+    from gonio.acquire.plans import Result
+
+    adaptive, _ = load_plan(plan)
+    peaks = adaptive.peaks(
+        [Result(tuple(c.wi), tuple(c.wo), float(np.mean(c.value))) for c in coarse]
+    )
+    # the sim sample is glossy (Phong n=80): the coarse data peak at the mirror direction, which
+    # the coarse grid (theta_o = 5, 15, ... 65) only approximates to the nearest 10 deg
+    for ti, (to, dp) in peaks.items():
+        assert abs(math.degrees(to) - math.degrees(ti)) <= 5.0 + 1e-9
+        assert dp == pytest.approx(math.pi)
+    assert len(fine) > 0
+    # every refined target lies in a 4-deg patch around one of those peaks
+    for c in fine:
+        a = spherical(np.array(c.wi))[0]
+        b = spherical(np.array(c.wo))[0]
+        dphi = abs(
+            math.remainder(math.atan2(c.wo[1], c.wo[0]) - math.atan2(c.wi[1], c.wi[0]), 2 * math.pi)
+        )
+        assert math.degrees(abs(dphi - math.pi)) <= 4 + 1e-6
+        assert any(
+            (abs(a - ti) < 1e-6 and abs(b - to) <= math.radians(4) + 1e-9)
+            or (abs(b - ti) < 1e-6 and abs(a - to) <= math.radians(4) + 1e-9)
+            for ti, (to, _) in peaks.items()
+        )

@@ -106,6 +106,6 @@ def test_missing_required_key_and_bad_toml():
 
 
 def test_bad_sim_sample_model():
-    text = sim_text().replace('type = "Lambert"', 'type = "NoSuchModel"')
+    text = sim_text().replace('type = "Phong"', 'type = "NoSuchModel"')
     with pytest.raises(RigConfigError, match=r"sim\.sample"):
         parse_rig(text, "x.toml")

@@ -441,7 +441,15 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
     t1 = time.monotonic()
     pose = kin.joints_deg_to_pose(res.reached_deg)
     wi, wo = kin.forward(pose)
-    geom = Geometry(cfg.idx, dict(res.reached_deg), wi, wo)
+    lay = kin.rig.layout
+    geom = Geometry(
+        cfg.idx,
+        dict(res.reached_deg),
+        wi,
+        wo,
+        light_pos_m=wi * lay.light_distance_m,
+        camera_pos_m=wo * lay.camera_distance_m,
+    )
     cap = camera.capture(geom)
     t2 = time.monotonic()
     timings = {"motion": res.motion_s, "settle": res.settle_s, "capture": t2 - t1}

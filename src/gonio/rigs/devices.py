@@ -25,12 +25,17 @@ class Geometry:
         Joint angles read back from the servos (degrees, by joint name).
     wi, wo : (3,) arrays
         Directions toward light and camera in the sample frame, from those angles.
+    light_pos_m, camera_pos_m : (3,) arrays or None
+        Nominal light and camera positions in the sample frame (m): the directions times the
+        rig file's layout distances (finite-distance geometry for the imaging side).
     """
 
     index: int
     joints_deg: dict[str, float]
     wi: np.ndarray
     wo: np.ndarray
+    light_pos_m: np.ndarray | None = None
+    camera_pos_m: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
