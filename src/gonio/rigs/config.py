@@ -96,6 +96,11 @@ SPEC: dict = {
             "Retries of a transaction after a timeout or CRC error.", minimum=0, maximum=50
         ),
         "backoff_ms": _num("First retry delay (ms); doubles at every retry.", minimum=0),
+        "timeout_margin_ms": _num(
+            "Added to dynamixel-sdk's reply timeout (2 x 16 ms USB latency + 2 ms + transfer),"
+            " for slow links or a loaded host (ms).",
+            minimum=0,
+        ),
         "motion_timeout_s": _num(
             "Margin (s) added to the predicted move time before a move is declared stuck.",
             exclusiveMinimum=0,
@@ -228,6 +233,7 @@ class BusConfig:
     protocol: float = 2.0
     retries: int = 5
     backoff_ms: float = 2.0
+    timeout_margin_ms: float = 0.0
     motion_timeout_s: float = 5.0
     poll_interval_ms: float = 2.0
     max_recoveries: int = 2

@@ -42,7 +42,24 @@ class HardwareFault(DeviceError):
         super().__init__(f"servo hardware error ({text})")
 
 
-class _URLPortHandler(sdk.PortHandler):
+class _PortHandler(sdk.PortHandler):
+    """The SDK's PortHandler with an extra reply-timeout margin (``bus.timeout_margin_ms``).
+
+    The SDK waits ``2 x 16 ms + 2 ms`` (USB latency timer) plus the transfer time for a reply;
+    slow links (serial servers, a loaded host running the emulator) need more.
+    """
+
+    extra_timeout_ms: float = 0.0
+
+    def setPacketTimeout(self, packet_length):
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout += self.extra_timeout_ms
+
+    def setPacketTimeoutMillis(self, msec):
+        super().setPacketTimeoutMillis(msec + self.extra_timeout_ms)
+
+
+class _URLPortHandler(_PortHandler):
     """PortHandler that opens pyserial URLs (``socket://``, ``rfc2217://``, ``loop://``)."""
 
     def setupPort(self, cflag_baud):
@@ -83,15 +100,23 @@ class DynamixelBus:
         Extra attempts after a timeout / corrupt reply / servo-reported CRC error.
     backoff_s : float
         Delay before the first retry; doubles each retry (capped at 0.2 s).
+    timeout_margin_s : float
+        Added to the SDK's reply timeout (about 34 ms plus transfer time).
     """
 
     def __init__(
-        self, port: str, baudrate: int = 1_000_000, retries: int = 5, backoff_s: float = 0.002
+        self,
+        port: str,
+        baudrate: int = 1_000_000,
+        retries: int = 5,
+        backoff_s: float = 0.002,
+        timeout_margin_s: float = 0.0,
     ):
         self.port_name = port
         self.baudrate = baudrate
         self.retries = retries
         self.backoff_s = backoff_s
+        self.timeout_margin_s = timeout_margin_s
         self.stats = BusStats()
         self._port: sdk.PortHandler | None = None
         self._ph = sdk.PacketHandler(2.0)
@@ -100,12 +125,19 @@ class DynamixelBus:
 
     @classmethod
     def from_config(cls, cfg: BusConfig, port: str | None = None) -> DynamixelBus:
-        return cls(port or cfg.port, cfg.baudrate, cfg.retries, cfg.backoff_ms / 1000.0)
+        return cls(
+            port or cfg.port,
+            cfg.baudrate,
+            cfg.retries,
+            cfg.backoff_ms / 1000.0,
+            cfg.timeout_margin_ms / 1000.0,
+        )
 
     # --- port ---------------------------------------------------------------------------------
     def open(self) -> None:
         url = "://" in self.port_name
-        port = (_URLPortHandler if url else sdk.PortHandler)(self.port_name)
+        port = (_URLPortHandler if url else _PortHandler)(self.port_name)
+        port.extra_timeout_ms = self.timeout_margin_s * 1000.0
         try:
             ok = port.openPort() and port.setBaudRate(self.baudrate)
         except (serial.SerialException, OSError, ValueError) as exc:
