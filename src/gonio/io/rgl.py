@@ -118,7 +118,7 @@ def parse_tensor_file(data: bytes, path: PathLike = "<bytes>") -> dict[str, np.n
 
 
 def _find_interval(values: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Largest ``i`` in ``[0, n-2]`` with ``values[i] < x`` (clamped), as Mitsuba's find_interval."""
+    """Largest ``i`` in ``[0, n-2]`` with ``values[i] < x`` (clamped), like find_interval."""
     idx = np.searchsorted(values, x, side="left") - 1
     return np.clip(idx, 0, max(len(values) - 2, 0))
 

@@ -210,5 +210,5 @@ def xyz_to_linear_srgb(xyz: np.ndarray) -> np.ndarray:
 def spectrum_to_linear_srgb(
     values: np.ndarray, wavelengths_nm: np.ndarray, illuminant: str = "D65"
 ) -> np.ndarray:
-    """Spectra ``(..., n)`` -> linear sRGB ``(..., 3)`` through CIE 1931 XYZ under ``illuminant``."""
+    """Spectra ``(..., n)`` -> linear sRGB ``(..., 3)`` via CIE 1931 XYZ under ``illuminant``."""
     return xyz_to_linear_srgb(spectrum_to_xyz(values, wavelengths_nm, illuminant))
