@@ -4,7 +4,8 @@ A table slice file is a multi-part EXR with one part per ``phi_d`` node, named
 ``phi_d=<degrees>``; each part is a ``theta_h`` (rows, top = 0) x ``theta_d`` (columns, left = 0)
 image with one FLOAT channel per table channel (R, G, B for RGB tables) plus ``A`` = 1 at valid
 cells, 0 at invalid ones (whose colour is 0). Part attributes ``gonio_phi_d_rad``,
-``gonio_units`` = "1/sr" and ``gonio_axes`` record the mapping.
+``gonio_units`` = "1/sr", ``gonio_axes`` and ``gonio_channels`` (JSON, channel order) record the
+mapping.
 """
 
 from __future__ import annotations
@@ -181,7 +182,7 @@ def read_table_slices(path: PathLike) -> dict[str, Any]:
                 phis.append(float(hdr["gonio_phi_d_rad"]))
                 axes = json.loads(hdr["gonio_axes"])
                 chans = part.channels
-                names = [n for n in _standard_order(list(chans)) if n != "A"]
+                names = json.loads(hdr["gonio_channels"])
                 vals.append(np.stack([np.asarray(chans[n].pixels, np.float32) for n in names], -1))
                 masks.append(np.asarray(chans["A"].pixels) > 0.5)
     except (RuntimeError, OSError, ValueError, KeyError) as exc:
