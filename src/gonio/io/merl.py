@@ -148,9 +148,9 @@ def write_merl(table: Any, path: PathLike) -> None:
     """
     from gonio.brdf import frames
 
-    channels = getattr(table, "channels", None)
-    n_channels = len(channels.names) if channels is not None else None
-    if n_channels is not None and n_channels != 3:
+    channels = getattr(table, "channels", None)  # Channels for tables, an int for models
+    n_channels = channels if isinstance(channels, int) else len(channels or ())
+    if n_channels not in (0, 1, 3):
         raise fail(path, f"MERL stores RGB only; this table has {n_channels} channels")
     if hasattr(table, "axes") and _on_merl_grid(table):
         values = np.asarray(table.values, dtype=np.float64)
@@ -161,9 +161,9 @@ def write_merl(table: Any, path: PathLike) -> None:
         wi, wo = frames.half_diff_to_directions(grid[0], np.zeros_like(grid[0]), grid[1], grid[2])
         wi, wo = np.asarray(wi), np.asarray(wo)
         values = np.asarray(table.f(wi, wo), dtype=np.float64)
-        if values.shape[-1] == 1:
-            values = np.repeat(values, 3, axis=-1)
         mask = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    if values.shape[-1] == 1:
+        values = np.repeat(values, 3, axis=-1)
     data = merl_bytes(values, mask)
     with atomic_output(path) as tmp:
         tmp.write_bytes(data)
