@@ -55,6 +55,8 @@ PROVENANCE_FIELDS: dict[str, tuple[list[str], str]] = {
 #: Target uncompressed bytes per chunk (a few rows of the first axis, one channel).
 CHUNK_BYTES = 1 << 18
 DEFAULT_GZIP_LEVEL = 4
+#: Datasets up to this size are stored contiguous and uncompressed.
+SMALL_BYTES = 1 << 14
 #: In lossy mode, values below ``LOSSY_FLOOR_RATIO * max`` are stored as 0.
 LOSSY_FLOOR_RATIO = 1e-7
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -177,7 +179,8 @@ def _chunks(shape: tuple[int, ...], itemsize: int, channel_last: bool) -> tuple[
 
 def _dataset(h5: Any, name: str, data: np.ndarray, channel_last: bool, level: int) -> Any:
     data = np.ascontiguousarray(data)
-    if data.size == 0:
+    if data.nbytes <= SMALL_BYTES:
+        # chunk indexing and filters cost more than they save on small arrays
         return h5.create_dataset(name, data=data)
     return h5.create_dataset(
         name,
@@ -259,7 +262,10 @@ def write_native(
     if lossy is not None and not gridded:
         raise ParameterError("lossy encoding applies to gridded tables only")
     report: dict = {}
-    with atomic_output(path, suffix=".h5.tmp") as tmp, h5py.File(tmp, "w", libver="earliest") as h5:
+    with (
+        atomic_output(path, suffix=".h5.tmp") as tmp,
+        h5py.File(tmp, "w", libver=("v108", "v108")) as h5,
+    ):
         meta = dict(getattr(obj, "meta", None) or {})
         _common_attrs(h5, "gridded" if gridded else "scattered", meta)
         _write_channels(h5, obj.channels)
@@ -372,7 +378,33 @@ def _attr_num(obj: Any, name: str, path: PathLike, kind: type = float) -> Any:
     return out
 
 
+class _Guard:
+    """Turn any exception raised while parsing an untrusted HDF5 file into a FormatError.
+
+    h5py reports corrupt structures through many exception types (OSError, KeyError,
+    RuntimeError, ValueError, ...); all of them mean the same thing to the caller.
+    """
+
+    def __init__(self, path: PathLike) -> None:
+        self.path = path
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, etype: Any, exc: BaseException | None, tb: Any) -> bool:
+        from gonio.errors import GonioError
+
+        if exc is None or isinstance(exc, GonioError) or not isinstance(exc, Exception):
+            return False
+        raise fail(self.path, f"corrupt {FORMAT_NAME} file ({etype.__name__}: {exc})") from None
+
+
 def _open(path: PathLike) -> Any:
+    with _Guard(path):
+        return _open_unguarded(path)
+
+
+def _open_unguarded(path: PathLike) -> Any:
     import h5py
 
     p = check_input_file(path)
@@ -478,13 +510,10 @@ def _encoding(ds: Any, path: PathLike) -> tuple[str, LossyEncoding | None]:
 
 def read_header(path: PathLike) -> dict:
     """The file's header as a JSON-compatible dict (validates against table-metadata schema)."""
-    import h5py
-
     h5 = _open(path)
     try:
-        return _header(h5, path)
-    except (KeyError, ValueError, TypeError, OSError, h5py.h5e.HDF5ExtH5Error) as exc:
-        raise fail(path, f"corrupt {FORMAT_NAME} file ({type(exc).__name__}: {exc})") from None
+        with _Guard(path):
+            return _header(h5, path)
     finally:
         h5.close()
 
@@ -577,40 +606,30 @@ def read_values(
     Only the chunks holding the selection are read and decompressed (chunks span a few rows of
     the first axis and one channel). Returns float32 of shape ``(rows, n2, ..., nk, C')``.
     """
-    import h5py
-
     h5 = _open(path)
     try:
-        header = _header(h5, path)
-        if header["kind"] != "gridded":
-            raise fail(path, "partial reads by rows apply to gridded files")
-        ds = h5["values"]
-        _, lossy = _encoding(ds, path)
-        sel = (rows if rows is not None else slice(None),) + (slice(None),) * (ds.ndim - 2)
-        sel += (slice(None) if channel is None else slice(channel, channel + 1),)
-        return _values(ds, lossy, sel)
-    except (KeyError, ValueError, TypeError, OSError, h5py.h5e.HDF5ExtH5Error) as exc:
-        if isinstance(exc, __import__("gonio").errors.FormatError):
-            raise
-        raise fail(path, f"corrupt {FORMAT_NAME} file ({type(exc).__name__}: {exc})") from None
+        with _Guard(path):
+            header = _header(h5, path)
+            if header["kind"] != "gridded":
+                raise fail(path, "partial reads by rows apply to gridded files")
+            ds = h5["values"]
+            _, lossy = _encoding(ds, path)
+            sel = (rows if rows is not None else slice(None),) + (slice(None),) * (ds.ndim - 2)
+            sel += (slice(None) if channel is None else slice(channel, channel + 1),)
+            return _values(ds, lossy, sel)
     finally:
         h5.close()
 
 
 def read_native(path: PathLike) -> Any:
     """Read a ``*.brdf.h5`` file as :class:`TabulatedBRDF` (gridded) or :class:`MeasuredSamples`."""
-    import h5py
-
-    from gonio.errors import FormatError, GonioError
+    from gonio.errors import GonioError
 
     h5 = _open(path)
     try:
-        header = _header(h5, path)
-        arrays = _read_arrays(h5, header, path)
-    except FormatError:
-        raise
-    except (KeyError, ValueError, TypeError, OSError, h5py.h5e.HDF5ExtH5Error) as exc:
-        raise fail(path, f"corrupt {FORMAT_NAME} file ({type(exc).__name__}: {exc})") from None
+        with _Guard(path):
+            header = _header(h5, path)
+            arrays = _read_arrays(h5, header, path)
     finally:
         h5.close()
     try:

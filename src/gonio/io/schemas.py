@@ -114,4 +114,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # run the package's instance of this module: registrations land in *its* registry,
+    # not in the copy that ``python -m`` executes as __main__
+    from gonio.io.schemas import main as _main
+
+    sys.exit(_main())
