@@ -150,6 +150,7 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
                 "gonio_phi_d_rad": f"{phi[k]:.9g}",
                 "gonio_units": "1/sr",
                 "gonio_axes": axes_json,
+                "gonio_channels": json.dumps(names),
             }
         )
         parts.append(ox.Part(header, channels, f"phi_d={math.degrees(phi[k]):.3f}"))
