@@ -117,6 +117,33 @@ def parse_tensor_file(data: bytes, path: PathLike = "<bytes>") -> dict[str, np.n
     return fields
 
 
+def tensor_file_bytes(fields: dict[str, np.ndarray]) -> bytes:
+    """Encode ``{name: array}`` as a ``tensor_file`` 1.0 container (inverse of the parser).
+
+    Used to build test fixtures and to re-export edited RGL data; dtypes must be among the
+    container's eleven codes.
+    """
+    codes = {np.dtype(v): k for k, v in _DTYPES.items()}
+    header = bytearray(MAGIC + bytes([1, 0]) + struct.pack("<I", len(fields)))
+    arrays = []
+    for name, arr in fields.items():
+        a = np.ascontiguousarray(arr)
+        dt = a.dtype.newbyteorder("<") if a.dtype.itemsize > 1 else a.dtype
+        if dt not in codes:
+            raise ValueError(f"field {name!r}: dtype {a.dtype} has no tensor_file code")
+        arrays.append((name.encode("ascii"), a.astype(dt), codes[dt]))
+    size = len(header) + sum(2 + len(n) + 2 + 1 + 8 + 8 * a.ndim for n, a, _ in arrays)
+    offset = size
+    blobs = []
+    for name, a, code in arrays:
+        header += struct.pack("<H", len(name)) + name
+        header += struct.pack("<HBQ", a.ndim, code, offset)
+        header += struct.pack(f"<{a.ndim}Q", *a.shape)
+        blobs.append(a.tobytes())
+        offset += a.nbytes
+    return bytes(header) + b"".join(blobs)
+
+
 def _find_interval(values: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Largest ``i`` in ``[0, n-2]`` with ``values[i] < x`` (clamped), like find_interval."""
     idx = np.searchsorted(values, x, side="left") - 1
