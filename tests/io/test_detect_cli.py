@@ -58,6 +58,8 @@ def test_convert_cornell_to_native_rgb_and_lossy(tmp_path, capsys):
     bad = tmp_path / "l.brdf.h5"
     assert main(["convert", str(src), str(bad), "--lossy", "0.5%", "--quiet"]) == 2
     assert not bad.exists()
+    assert main(["convert", str(src), str(tmp_path / "g.binary"), "--quiet"]) == 2
+    assert not (tmp_path / "g.binary").exists()
     tab = tmp_path / "t.brdf.h5"
     assert main(["convert", str(GRIDDED), str(tab), "--lossy", "0.5%", "--quiet"]) == 0
     assert load(tab).values.shape == load(GRIDDED).values.shape

@@ -14,6 +14,7 @@ Cell ``i`` of each axis starts at the node of :meth:`TabulatedBRDF.merl_axes` (n
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -152,6 +153,12 @@ def write_merl(table: Any, path: PathLike) -> None:
     n_channels = channels if isinstance(channels, int) else len(channels or ())
     if n_channels not in (0, 1, 3):
         raise fail(path, f"MERL stores RGB only; this table has {n_channels} channels")
+    if not hasattr(table, "f"):
+        from gonio.errors import ParameterError
+
+        raise ParameterError(
+            f"{os.fspath(path)}: scattered samples cannot be written as MERL (grid them first)"
+        )
     if hasattr(table, "axes") and _on_merl_grid(table):
         values = np.asarray(table.values, dtype=np.float64)
         mask = None if table.mask is None else np.asarray(table.mask, dtype=bool)
