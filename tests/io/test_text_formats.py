@@ -151,3 +151,14 @@ def test_corrupted_text_files_fail_cleanly_or_stay_sane(tmp_path, folder, name):
         outcomes.append(assert_clean(load, p, what, sane))
         p.unlink()
     assert "error" in outcomes
+
+
+def test_numpy_half_diff_matches_frames():
+    from gonio.brdf import frames
+    from gonio.io._text import half_diff_to_directions
+
+    a = np.random.default_rng(0).uniform(0, 3, (4, 64))
+    for ours, ref in zip(
+        half_diff_to_directions(*a), frames.half_diff_to_directions(*a), strict=True
+    ):
+        np.testing.assert_allclose(ours, np.asarray(ref), atol=1e-12)

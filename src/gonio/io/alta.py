@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
-from gonio.io._text import parse_row, rows_to_array, spherical
+from gonio.io._text import half_diff_to_directions, parse_row, rows_to_array, spherical
 
 PARAM_IN_DIMS = {
     "COS_TH": 1,
@@ -99,11 +99,9 @@ def parse_alta_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
 
 def _directions(param_in: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(wi, wo)`` = (ALTA light L, ALTA view V) for inputs ``x`` (N, n_in)."""
-    from gonio.brdf import frames
 
     def half(th, ph, td, pd):
-        wi, wo = frames.half_diff_to_directions(th, ph, td, pd)
-        return np.asarray(wi), np.asarray(wo)
+        return half_diff_to_directions(th, ph, td, pd)
 
     z = np.zeros(len(x))
     if param_in == "COS_TH":
