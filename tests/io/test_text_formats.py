@@ -155,7 +155,7 @@ def test_corrupted_text_files_fail_cleanly_or_stay_sane(tmp_path, folder, name):
 
 def test_numpy_half_diff_matches_frames():
     from gonio.brdf import frames
-    from gonio.io._text import half_diff_to_directions
+    from gonio.io._geometry import half_diff_to_directions
 
     a = np.random.default_rng(0).uniform(0, 3, (4, 64))
     for ours, ref in zip(

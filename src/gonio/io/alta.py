@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
-from gonio.io._text import half_diff_to_directions, parse_row, rows_to_array, spherical
+from gonio.io._geometry import half_diff_to_directions, spherical
+from gonio.io._text import parse_row, rows_to_array
 
 PARAM_IN_DIMS = {
     "COS_TH": 1,

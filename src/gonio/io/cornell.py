@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
-from gonio.io._text import spherical
+from gonio.io._geometry import spherical
 
 _MAX_WAVELENGTHS = 100_000
 

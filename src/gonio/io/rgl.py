@@ -453,8 +453,8 @@ class RGLBSDF:
         progress : callable(done, total), optional
             Called after each batch (for progress bars).
         """
-        from gonio.brdf import frames
         from gonio.brdf.tabulated import Axis, TabulatedBRDF
+        from gonio.io._geometry import half_diff_to_directions
         from gonio.io.merl import merl_axes
 
         if axes is None:
@@ -486,8 +486,7 @@ class RGLBSDF:
         valid = np.zeros(total, dtype=bool)
         for start in range(0, total, chunk):
             sl = slice(start, min(start + chunk, total))
-            wi, wo = frames.half_diff_to_directions(*(a[sl] for a in flat))
-            wi, wo = np.asarray(wi), np.asarray(wo)
+            wi, wo = half_diff_to_directions(*(a[sl] for a in flat))
             ok = (wi[..., 2] > 1e-6) & (wo[..., 2] > 1e-6)
             values[sl] = np.where(ok[:, None], self.f(wi, wo), 0.0)
             valid[sl] = ok
