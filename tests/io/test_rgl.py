@@ -275,3 +275,19 @@ def test_spectral_files_interpolate_over_wavelength(tmp_path):
         return b._colour.eval(pos, [np.zeros(30), np.full(30, 0.3), np.full(30, lam)])
 
     np.testing.assert_allclose(at(500.0), 0.5 * (at(450.0) + at(550.0)), rtol=1e-12)
+
+
+def test_to_table_cuts_the_last_degree_before_the_horizon():
+    from gonio.brdf.tabulated import Axis
+
+    b = rgl.read_rgl(shared_file("rgl", "acrylic_felt_green_rgb.bsdf"))
+    axes = (
+        Axis("theta_h", 30, 0, math.pi / 2, "sqrt"),
+        Axis("theta_d", 90, 0, math.pi / 2),
+        Axis("phi_d", 12, 0, math.pi, periodic=True),
+    )
+    t = b.to_table(axes)
+    wi, wo = (w.reshape(*t.mask.shape, 3) for w in t.node_directions())
+    cut = (wi[..., 2] < rgl.HORIZON_MIN_COS) | (wo[..., 2] < rgl.HORIZON_MIN_COS)
+    assert not np.any(t.mask & cut) and np.all(t.mask | cut | (wi[..., 2] <= 0) | (wo[..., 2] <= 0))
+    assert t.meta["source"]["horizon_min_cos"] == rgl.HORIZON_MIN_COS

@@ -53,6 +53,8 @@ _DTYPES = {
     11: "<f8",
 }
 _MAX_FIELDS = 4096
+#: Default horizon cut of :meth:`RGLBSDF.to_table`: cos(89 degrees).
+HORIZON_MIN_COS = math.cos(math.radians(89.0))
 _MAX_NDIM = 16
 
 
@@ -429,7 +431,11 @@ class RGLBSDF:
         return np.where(active[..., None], out, 0.0)
 
     def f(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """BRDF ``f_r(wi, wo)`` in 1/sr, shape ``(..., C)`` (``f_cos / cos(theta_o)``)."""
+        """BRDF ``f_r(wi, wo)`` in 1/sr, shape ``(..., C)`` (``f_cos / cos(theta_o)``).
+
+        Within about a degree of the horizon this grows like ``1 / cos(theta_o)`` because the
+        tabulated ``f_cos`` does not vanish there (see :meth:`to_table`'s ``min_cos``).
+        """
         wo = np.asarray(wo, dtype=np.float64)
         cos_o = wo[..., 2]
         val = self.f_cos(wi, wo)
@@ -440,6 +446,7 @@ class RGLBSDF:
         axes: tuple[Any, ...] | None = None,
         chunk: int = 1 << 16,
         progress: Callable[[int, int], None] | None = None,
+        min_cos: float = HORIZON_MIN_COS,
     ) -> TabulatedBRDF:
         """Tabulate ``f_r`` on a half/diff grid as a gonio :class:`TabulatedBRDF`.
 
@@ -452,6 +459,11 @@ class RGLBSDF:
             Cells evaluated per batch.
         progress : callable(done, total), optional
             Called after each batch (for progress bars).
+        min_cos : float
+            Cells whose ``wi`` or ``wo`` has ``cos(theta) < min_cos`` are marked invalid. The
+            tabulated ``f_r cos(theta_o)`` does not vanish at the horizon (it is a bilinear
+            interpolant), so ``f_r`` diverges like ``1 / cos(theta_o)`` in the last degree;
+            the default ``cos(89 deg)`` keeps that artifact out of the table.
         """
         from gonio.brdf.tabulated import Axis, TabulatedBRDF
         from gonio.io._geometry import half_diff_to_directions
@@ -487,7 +499,7 @@ class RGLBSDF:
         for start in range(0, total, chunk):
             sl = slice(start, min(start + chunk, total))
             wi, wo = half_diff_to_directions(*(a[sl] for a in flat))
-            ok = (wi[..., 2] > 1e-6) & (wo[..., 2] > 1e-6)
+            ok = (wi[..., 2] >= min_cos) & (wo[..., 2] >= min_cos)
             values[sl] = np.where(ok[:, None], self.f(wi, wo), 0.0)
             valid[sl] = ok
             if progress is not None:
@@ -502,6 +514,7 @@ class RGLBSDF:
             channels=self.channels,
             meta={
                 "source": {
+                    "horizon_min_cos": float(min_cos),
                     "format": "rgl-tensor",
                     "file": self.path,
                     "description": self.description,
