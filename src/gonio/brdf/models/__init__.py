@@ -6,14 +6,22 @@
 
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
+from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.torrance_sparrow import TorranceSparrow
 
 __all__ = [
     "BRDFModel",
     "BRDFSample",
+    "Conductor",
+    "Dielectric",
+    "Fresnel",
     "Lambert",
+    "NoFresnel",
     "Node",
     "Param",
+    "Schlick",
     "Sum",
+    "TorranceSparrow",
     "registry",
 ]
