@@ -8,6 +8,7 @@ from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.specular import SpecularReflection, SpecularTransmission
 from gonio.brdf.models.torrance_sparrow import TorranceSparrow
 
 __all__ = [
@@ -21,6 +22,8 @@ __all__ = [
     "Node",
     "Param",
     "Schlick",
+    "SpecularReflection",
+    "SpecularTransmission",
     "Sum",
     "TorranceSparrow",
     "registry",
