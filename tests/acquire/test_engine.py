@@ -285,16 +285,27 @@ def test_dead_servo_stops_run_cleanly_and_resume_finishes(reference, tmp_path, p
 
 
 def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file):
-    gio = pytest.importorskip("gonio.io")
-    if not hasattr(gio, "save"):
-        pytest.skip("gonio.io.save not merged yet")
+    from gonio import io as gio
+
     run = tmp_path / "run"
     s = acquire(run, "sim", plan_file, progress=False)
     assert s.table == str(run / "table.brdf.h5")
     t = gio.load(run / "table.brdf.h5")
     assert t.wi.shape == (s.done, 3)
     got, _ = samples_of(run)
-    np.testing.assert_allclose(np.asarray(t.values), np.array([got[i].value for i in sorted(got)]))
+    want = np.array([got[i].value for i in sorted(got)])
+    np.testing.assert_allclose(np.asarray(t.values), want, rtol=1e-6)  # stored as float32
+    np.testing.assert_allclose(np.asarray(t.sigma), [got[i].sigma for i in sorted(got)], rtol=1e-6)
+    # and `gonio info RUN/table.brdf.h5 --json` reports the sample count
+    out = subprocess.run(
+        [sys.executable, "-m", "gonio", "info", str(run / "table.brdf.h5"), "--json"],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["samples"] == s.done
 
 
 def test_adaptive_plan_refines_around_the_measured_specular_peak(tmp_path):
