@@ -284,7 +284,7 @@ def test_dead_servo_stops_run_cleanly_and_resume_finishes(reference, tmp_path, p
         np.testing.assert_array_equal(got[i].value, r.value)
 
 
-def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file):
+def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file, capsys):
     from gonio import io as gio
 
     run = tmp_path / "run"
@@ -297,15 +297,11 @@ def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file):
     np.testing.assert_allclose(np.asarray(t.values), want, rtol=1e-6)  # stored as float32
     np.testing.assert_allclose(np.asarray(t.sigma), [got[i].sigma for i in sorted(got)], rtol=1e-6)
     # and `gonio info RUN/table.brdf.h5 --json` reports the sample count
-    out = subprocess.run(
-        [sys.executable, "-m", "gonio", "info", str(run / "table.brdf.h5"), "--json"],
-        env=_env(),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert out.returncode == 0, out.stderr
-    assert json.loads(out.stdout)["samples"] == s.done
+    from gonio.cli import main
+
+    capsys.readouterr()
+    assert main(["info", str(run / "table.brdf.h5"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["samples"] == s.done
 
 
 def test_adaptive_plan_refines_around_the_measured_specular_peak(tmp_path):
