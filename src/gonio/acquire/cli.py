@@ -163,28 +163,9 @@ def _plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def parse_faults(spec: str):
-    """'drop=0.02,crc=0.01,seed=3' -> FaultConfig; ParameterError on bad input."""
-    from gonio.rigs.sim.bus import FaultConfig
-
-    kw: dict = {}
-    for part in filter(None, (s.strip() for s in spec.split(","))):
-        key, sep, val = part.partition("=")
-        if not sep or key not in ("drop", "garble", "crc", "overload", "seed"):
-            raise ParameterError(
-                f"--sim-faults: bad item {part!r} (keys: drop, garble, crc, overload, seed)"
-            )
-        try:
-            kw[key] = int(val) if key == "seed" else float(val)
-        except ValueError:
-            raise ParameterError(f"--sim-faults: {key} needs a number, got {val!r}") from None
-        if key != "seed" and not 0.0 <= kw[key] <= 1.0:
-            raise ParameterError(f"--sim-faults: {key} must be a probability in [0, 1]")
-    return FaultConfig(**kw)
-
-
 def _acquire(args: argparse.Namespace) -> int:
     from gonio.acquire.engine import acquire
+    from gonio.rigs.sim.bus import parse_faults
 
     faults = parse_faults(args.sim_faults) if args.sim_faults else None
     if args.time_scale is not None and not args.time_scale > 0:

@@ -12,7 +12,7 @@ from gonio.errors import DeviceError
 def register(sub) -> None:
     p = sub.add_parser(
         "rig",
-        help="inspect a rig: check its servos, print the rig-file schema",
+        help="inspect a rig: check its servos, print the rig-file schema, run its bus emulator",
         description="Inspect a rig described by a rig file (TOML; data-schema/rig.schema.json).",
     )
     rs = p.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
@@ -130,10 +130,10 @@ def _emulate(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from gonio.acquire.cli import parse_faults
     from gonio.errors import ParameterError
     from gonio.rigs.config import load_rig
     from gonio.rigs.session import make_emulator
+    from gonio.rigs.sim.bus import parse_faults
 
     rig = load_rig(args.rig)
     if args.time_scale is not None and not args.time_scale > 0:

@@ -25,6 +25,7 @@ import tty
 from dataclasses import dataclass
 from pathlib import Path
 
+from gonio.errors import ParameterError
 from gonio.rigs import control_table as ct
 from gonio.rigs import protocol as p
 
@@ -64,6 +65,24 @@ class FaultConfig:
     crc: float = 0.0
     overload: float = 0.0
     seed: int = 0
+
+
+def parse_faults(spec: str):
+    """'drop=0.02,crc=0.01,seed=3' -> FaultConfig; ParameterError on bad input."""
+    kw: dict = {}
+    for part in filter(None, (s.strip() for s in spec.split(","))):
+        key, sep, val = part.partition("=")
+        if not sep or key not in ("drop", "garble", "crc", "overload", "seed"):
+            raise ParameterError(
+                f"--sim-faults: bad item {part!r} (keys: drop, garble, crc, overload, seed)"
+            )
+        try:
+            kw[key] = int(val) if key == "seed" else float(val)
+        except ValueError:
+            raise ParameterError(f"--sim-faults: {key} needs a number, got {val!r}") from None
+        if key != "seed" and not 0.0 <= kw[key] <= 1.0:
+            raise ParameterError(f"--sim-faults: {key} must be a probability in [0, 1]")
+    return FaultConfig(**kw)
 
 
 @dataclass(frozen=True)
