@@ -285,6 +285,7 @@ def acquire(
     on_sample: Callable[[int, object], None] | None = None,
     write_table: bool = True,
     strict: bool = False,
+    exposure_planning: bool | None = None,
 ) -> RunSummary:
     """Run (or resume) an acquisition; see the module docstring.
 
@@ -301,8 +302,10 @@ def acquire(
     on_sample : called as ``on_sample(n, session)`` after each sample, with the number measured
         so far in this process and the open :class:`gonio.rigs.session.RigSession` (tests use
         it to inject faults into the emulator mid-run).
+    exposure_planning : RAW cameras only: plan each configuration's exposures from the previous
+        frame (default: the rig file's ``camera.planning``, true) or use fixed brackets.
     """
-    from gonio.rigs.devices import open_camera
+    from gonio.acquire.imaging import open_run_camera
     from gonio.rigs.session import open_rig
 
     t_start = time.monotonic()
@@ -330,7 +333,7 @@ def acquire(
     try:
         with open_rig(rig_cfg, faults=faults, goal_log_path=goal_log, time_scale=time_scale) as ses:
             chain = ses.chain
-            camera = open_camera(rig_cfg)
+            camera = open_run_camera(rig_cfg, run_dir, exposure_planning)
             bar = _Progress(progress)
             with bar:
                 start_deg = dict(rig_cfg.park_deg)
@@ -381,6 +384,8 @@ def acquire(
                 chain.park()
                 log("parked", pose=rig_cfg.park_deg)
             bus = dict(vars(chain.bus.stats))
+            if hasattr(camera, "close"):
+                camera.close()
     except BaseException as exc:
         if isinstance(exc, DeviceError):
             log("device_error", message=str(exc))
@@ -430,8 +435,11 @@ def _refuse_if_any(sp: StagePlan) -> None:
 
 
 def camera_channels(rig: RigConfig) -> tuple[str, ...]:
+    from gonio.acquire.imaging import RAW_KINDS
     from gonio.rigs.devices import open_camera
 
+    if rig.camera.get("kind", "sim") in RAW_KINDS:
+        return ("R", "G", "B")
     return tuple(open_camera(rig).channels)
 
 
@@ -452,6 +460,10 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
     )
     cap = camera.capture(geom)
     t2 = time.monotonic()
+    # imaging cameras measure the directions from the holder pose and the light position
+    wi = np.asarray(cap.meta.get("wi", wi), dtype=float)
+    wo = np.asarray(cap.meta.get("wo", wo), dtype=float)
+    extra = {k: cap.meta[k] for k in ("t_exposure", "t_camera", "t_processing") if k in cap.meta}
     timings = {"motion": res.motion_s, "settle": res.settle_s, "capture": t2 - t1}
     tb = time.monotonic()
     timings["book"] = tb - t2
@@ -466,6 +478,7 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
         polls=res.polls,
         move_wall_s=t1 - t0,
         **{f"t_{k}": v for k, v in timings.items()},
+        **extra,
     )
 
 
