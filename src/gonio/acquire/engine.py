@@ -483,34 +483,15 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
 
 
 def write_run_table(journal: Journal, rig: RigConfig, channels) -> tuple[str | None, str]:
-    """Write ``RUN/table.brdf.h5`` through gonio.io; returns (path or None, note)."""
-    try:
-        from gonio import io as gio
-        from gonio.brdf.tabulated import Channels, MeasuredSamples
-    except ImportError as exc:
-        return None, f"table not written: gonio.io / MeasuredSamples not available ({exc})"
-    if not hasattr(gio, "save"):
-        return None, "table not written: gonio.io.save not available"
-    rows = journal.samples()
-    if not rows:
-        return None, "table not written: no samples"
-    wi = np.array([r.wi for r in rows])
-    wo = np.array([r.wo for r in rows])
-    val = np.array([r.value for r in rows])
-    sig = np.array([r.sigma for r in rows])
-    ch = Channels.rgb() if tuple(channels) == ("R", "G", "B") else Channels.mono()
-    samples = MeasuredSamples(
-        wi=wi,
-        wo=wo,
-        values=val,
-        sigma=sig,
-        channels=ch,
-        weights=None,
-        meta={"source": "gonio acquire", "rig": rig.name, "run": str(journal.run_dir)},
-    )
-    path = journal.run_dir / "table.brdf.h5"
-    gio.save(samples, path)
-    return str(path), f"{len(rows)} samples"
+    """Write ``RUN/table.brdf.h5`` through gonio.io; returns (path or None, note).
+
+    The scattered samples sit at the root, the gridded half/diff table resampled from them in
+    ``/gridded``; reciprocal pairs of the plan are compared (see :mod:`gonio.acquire.table`).
+    """
+    from gonio.acquire.table import write_run_tables
+
+    path, note, _ = write_run_tables(journal, rig, channels)
+    return path, note
 
 
 class _Progress:
