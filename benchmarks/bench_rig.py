@@ -148,7 +148,7 @@ def bench_time_split(plan):
     with tempfile.TemporaryDirectory() as d:
         run = Path(d) / "run"
         t0 = time.perf_counter()
-        s = acquire(run, "sim", plan, progress=False, write_table=False)
+        s = acquire(run, "sim_sample", plan, progress=False, write_table=False)
         wall = time.perf_counter() - t0
         rows = [
             json.loads(x)

@@ -58,6 +58,8 @@ class ImagingSettings:
     fixed_brackets : exposures (relative to ``exposure_s``) used when ``planning`` is off.
     spot_radius_m : radius of the measured spot at the sample centre, metres.
     max_rounds : capture rounds per configuration (each may add brackets).
+    fit_order : surface fitted through the spot's pixels (1 plane, 2 quadratic: removes the
+        lobe-curvature bias of a larger spot).
     """
 
     exposure_s: float = 0.01
@@ -69,6 +71,7 @@ class ImagingSettings:
     fixed_brackets: tuple[float, ...] = (1 / 64, 1 / 16, 1 / 4, 1.0, 4.0)
     spot_radius_m: float = 0.002
     max_rounds: int = 5
+    fit_order: int = 2
 
 
 @dataclass
@@ -272,11 +275,12 @@ class ImagingCamera:
         pos = gray[gray > 0]
         hi = float(np.percentile(pos, 97)) if pos.size else 1.0
         linear = (np.clip(gray / hi, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+        k_cv = opencv_camera_matrix(self.camera_matrix)
         try:
-            return estimate_pose(linear, self.layout, self.camera_matrix)
+            return estimate_pose(linear, self.layout, k_cv)
         except DeviceError:
             pass
-        return estimate_pose(to_8bit(gray), self.layout, self.camera_matrix)
+        return estimate_pose(to_8bit(gray), self.layout, k_cv)
 
     def _regions(self, shape, pose: BoardPose) -> tuple[np.ndarray, np.ndarray]:
         pts, hit = pixel_rays_to_plane(shape, self.camera_matrix, pose.rotation, pose.translation)
@@ -338,6 +342,7 @@ class ImagingCamera:
             frame_fraction=hdr.frame_fraction,
             log_time_cov=hdr.log_time_cov,
             pose_sigma_points=pose_samples(pose),
+            fit_order=self.settings.fit_order,
         )
 
     def _write_exr(self, tag, hdr, pose, geometry, exposures, m, hint) -> None:
@@ -387,6 +392,20 @@ class ImagingCamera:
         except Exception:  # an unreadable frame only costs a probe exposure
             return None
         return _Hint(*h) if h else None
+
+
+def opencv_camera_matrix(camera_matrix: np.ndarray) -> np.ndarray:
+    """K in OpenCV's pixel convention from K in gonio's.
+
+    gonio's intrinsics (:class:`gonio.rigs.sim.camera.PinholeCamera`, and the pixel rays of
+    :mod:`gonio.acquire.radiometry`) put pixel ``i`` on ``[i, i + 1)``, its centre at ``i + 0.5``;
+    OpenCV's detectors report coordinates with pixel centres at integers. Feeding PnP the
+    unshifted K biases every corner by half a pixel, which tilts and shifts the recovered pose.
+    """
+    k = np.array(camera_matrix, dtype=np.float64, copy=True)
+    k[0, 2] -= 0.5
+    k[1, 2] -= 0.5
+    return k
 
 
 def _plane_index(shape: tuple[int, int], cfa: str) -> np.ndarray:

@@ -81,6 +81,7 @@ def measure_brdf(
     frame_fraction: np.ndarray | None = None,
     log_time_cov: np.ndarray | None = None,
     pose_sigma_points: list[tuple[np.ndarray, np.ndarray]] | None = None,
+    fit_order: int = 1,
 ) -> RegionMeasurement:
     """Measure the sample's BRDF in one merged frame.
 
@@ -110,6 +111,9 @@ def measure_brdf(
         (covariance ``C_xy`` on the holder), and the spot's own spatial gradient of the signal
         ``g`` (from the plane fit) turns that into ``var(S) += g^T C_xy g``. On a steep specular
         lobe this dominates the sensor noise; on a diffuse sample it vanishes.
+    fit_order : 1 fits a plane through the spot's pixels, 2 a quadratic surface, whose
+        intercept is free of the lobe's curvature averaged over the spot (a bias growing with
+        the spot's area on sharp lobes); it needs more pixels per colour plane (>= 12).
     """
     h, w = rate.shape
     pts, hit = pixel_rays_to_plane((h, w), camera_matrix, rotation, translation)
@@ -152,7 +156,9 @@ def measure_brdf(
             raise DeviceError(
                 f"sample or reference not visible in the frame (plane {c}: {ns} / {nr} pixels)"
             )
-        S, vS, grad = _value_at_centre(norm_rate[ms], norm_var[ms], pts[ms], sample_center)
+        S, vS, grad = _value_at_centre(
+            norm_rate[ms], norm_var[ms], pts[ms], sample_center, fit_order
+        )
         if spot_cov is not None:
             vS += float(grad @ spot_cov @ grad)
         R, vR = norm_rate[mr].mean(), norm_var[mr].sum() / nr**2
@@ -172,21 +178,30 @@ def measure_brdf(
 
 
 def _value_at_centre(
-    values: np.ndarray, variances: np.ndarray, points: np.ndarray, centre: tuple[float, float]
+    values: np.ndarray,
+    variances: np.ndarray,
+    points: np.ndarray,
+    centre: tuple[float, float],
+    order: int = 1,
 ) -> tuple[float, float, np.ndarray]:
-    """Weighted least-squares plane ``a + b dx + c dy`` through pixel values.
+    """Weighted least-squares plane ``a + b dx + c dy`` (``order`` 2: plus ``dx^2, dx dy,
+    dy^2``) through pixel values.
 
-    Returns ``(a, var(a), (b, c))``; falls back to the weighted mean with a zero gradient when
-    the pixels cannot support a plane (fewer than 6).
+    Returns ``(a, var(a), (b, c))``; falls back to a plane below 12 pixels and to the weighted
+    mean with a zero gradient below 6.
     """
     w = 1.0 / np.maximum(variances, 1e-300)
     if values.size < 6:
         return float(np.sum(w * values) / np.sum(w)), float(1.0 / np.sum(w)), np.zeros(2)
-    X = np.stack([np.ones_like(values), points[:, 0] - centre[0], points[:, 1] - centre[1]], -1)
+    dx, dy = points[:, 0] - centre[0], points[:, 1] - centre[1]
+    cols = [np.ones_like(values), dx, dy]
+    if order >= 2 and values.size >= 12:
+        cols += [dx * dx, dx * dy, dy * dy]
+    X = np.stack(cols, -1)
     A = X.T @ (w[:, None] * X)
     coef = np.linalg.solve(A, X.T @ (w * values))
     cov = np.linalg.inv(A)
-    return float(coef[0]), float(cov[0, 0]), coef[1:]
+    return float(coef[0]), float(cov[0, 0]), coef[1:3]
 
 
 def _spot_covariance(
