@@ -1,4 +1,4 @@
-"""Camera and light backends: gphoto2 command line (fake program), folder watch, LED line protocol."""
+"""Camera and light backends: gphoto2 (a fake program on PATH), folder watch, LED protocol."""
 
 import os
 import shutil

@@ -141,7 +141,7 @@ class ImagingCamera:
                 if t not in frames:
                     frames[t] = self._shoot(t, f"{tag}_t{t:.6g}", times, geometry)
             t0 = time.monotonic()
-            hdr, brackets = self._merge(frames, times)
+            hdr = self._merge(frames, times)
             pose = self._pose(hdr)
             more, hint = self._check(hdr, pose, sorted(frames))
             times.processing += time.monotonic() - t0
@@ -256,7 +256,7 @@ class ImagingCamera:
             darks.append(self._darks[t])
         hdr = merge_brackets(brackets, self.noise, dark=darks)
         self._cfa = "".join("".join(r) for r in fr.cfa)
-        return hdr, brackets
+        return hdr
 
     def _pose(self, hdr) -> BoardPose:
         rate = np.where(np.isfinite(hdr.rate), hdr.rate, 0.0)
@@ -313,7 +313,9 @@ class ImagingCamera:
             # SNR of the darkest pixel of interest in the longest frame that holds it unsaturated
             t_long = max(exposures)
             sig = lo * t_long
-            snr = sig / math.sqrt(sig + self.sensor.dark_current * t_long + self.sensor.read_noise**2)
+            snr = sig / math.sqrt(
+                sig + self.sensor.dark_current * t_long + self.sensor.read_noise**2
+            )
             if snr < self.settings.snr_target and t_long < self.settings.t_max_s:
                 more.extend(t for t in self._plan(hi or lo, lo) if t > t_long)
         more = [t for t in more if t not in exposures]

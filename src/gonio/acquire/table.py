@@ -192,9 +192,7 @@ def write_run_tables(journal, rig, channels) -> tuple[str | None, str, dict]:
         return None, "table not written: no samples", {}
     ch = Channels.rgb() if tuple(channels) == ("R", "G", "B") else Channels.mono()
     configs = {c.idx: c for c in journal.configs()}
-    targets = {
-        r.idx: (np.asarray(configs[r.idx].wi), np.asarray(configs[r.idx].wo)) for r in rows
-    }
+    targets = {r.idx: (np.asarray(configs[r.idx].wi), np.asarray(configs[r.idx].wo)) for r in rows}
     iso = all(configs[r.idx].isotropic for r in rows)
     pairs = reciprocal_pairs(targets, {r.idx: (r.value, r.sigma) for r in rows}, isotropic=iso)
     recip = reciprocity_summary(pairs)

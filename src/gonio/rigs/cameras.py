@@ -98,7 +98,7 @@ class SimulatedRawCamera:
         out = self.light.output
         rate = self.rate() * out if out > 0 else np.zeros_like(self.rate())
         k = key if key is not None else Path(path).stem
-        p, actual = self.virtual.capture(Path(path), rate, float(exposure_s), key=k, meta=meta)
+        p, _ = self.virtual.capture(Path(path), rate, float(exposure_s), key=k, meta=meta)
         return p
 
 
