@@ -96,6 +96,15 @@ def register(sub) -> None:
             " refused poses, journal and log them with the reason)"
         ),
     )
+    a.add_argument(
+        "--no-exposure-planning",
+        action="store_true",
+        help=(
+            "RAW cameras: use the rig file's fixed brackets (camera.fixed_brackets x"
+            " camera.exposure_s) for every configuration instead of planning each one's"
+            " exposures from the previous frame"
+        ),
+    )
     a.add_argument("--no-progress", action="store_true", help="no progress bar")
     a.add_argument("--json", action="store_true", help="print the run summary as JSON")
     a.set_defaults(func=_acquire)
@@ -191,6 +200,7 @@ def _acquire(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             time_scale=args.time_scale,
             strict=args.strict,
+            exposure_planning=False if args.no_exposure_planning else None,
         )
     out = {
         "run": summary.run_dir,

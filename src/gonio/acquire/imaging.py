@@ -275,12 +275,11 @@ class ImagingCamera:
         pos = gray[gray > 0]
         hi = float(np.percentile(pos, 97)) if pos.size else 1.0
         linear = (np.clip(gray / hi, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
-        k_cv = opencv_camera_matrix(self.camera_matrix)
         try:
-            return estimate_pose(linear, self.layout, k_cv)
+            return estimate_pose(linear, self.layout, self.camera_matrix)
         except DeviceError:
             pass
-        return estimate_pose(to_8bit(gray), self.layout, k_cv)
+        return estimate_pose(to_8bit(gray), self.layout, self.camera_matrix)
 
     def _regions(self, shape, pose: BoardPose) -> tuple[np.ndarray, np.ndarray]:
         pts, hit = pixel_rays_to_plane(shape, self.camera_matrix, pose.rotation, pose.translation)
@@ -394,20 +393,6 @@ class ImagingCamera:
         except Exception:  # an unreadable frame only costs a probe exposure
             return None
         return _Hint(*h) if h else None
-
-
-def opencv_camera_matrix(camera_matrix: np.ndarray) -> np.ndarray:
-    """K in OpenCV's pixel convention from K in gonio's.
-
-    gonio's intrinsics (:class:`gonio.rigs.sim.camera.PinholeCamera`, and the pixel rays of
-    :mod:`gonio.acquire.radiometry`) put pixel ``i`` on ``[i, i + 1)``, its centre at ``i + 0.5``;
-    OpenCV's detectors report coordinates with pixel centres at integers. Feeding PnP the
-    unshifted K biases every corner by half a pixel, which tilts and shifts the recovered pose.
-    """
-    k = np.array(camera_matrix, dtype=np.float64, copy=True)
-    k[0, 2] -= 0.5
-    k[1, 2] -= 0.5
-    return k
 
 
 def _plane_index(shape: tuple[int, int], cfa: str) -> np.ndarray:
