@@ -463,7 +463,8 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
     # imaging cameras measure the directions from the holder pose and the light position
     wi = np.asarray(cap.meta.get("wi", wi), dtype=float)
     wo = np.asarray(cap.meta.get("wo", wo), dtype=float)
-    extra = {k: cap.meta[k] for k in ("t_exposure", "t_camera", "t_processing") if k in cap.meta}
+    keys = ("t_exposure", "t_camera", "t_processing", "t_camera_cpu", "t_processing_cpu")
+    extra = {k: cap.meta[k] for k in keys if k in cap.meta}
     timings = {"motion": res.motion_s, "settle": res.settle_s, "capture": t2 - t1}
     tb = time.monotonic()
     timings["book"] = tb - t2

@@ -81,6 +81,8 @@ class FrameTimes:
     exposure: float = 0.0  # shutter open (sum of exposure times, darks included)
     capture: float = 0.0  # wall time in the camera backend (rendering/IO for the simulator)
     processing: float = 0.0  # decode, merge, pose, radiometry, EXR
+    capture_cpu: float = 0.0  # the same two as CPU time of this process (robust to a busy host)
+    processing_cpu: float = 0.0
 
 
 @dataclass
@@ -140,11 +142,12 @@ class ImagingCamera:
             for t in exposures:
                 if t not in frames:
                     frames[t] = self._shoot(t, f"{tag}_t{t:.6g}", times, geometry)
-            t0 = time.monotonic()
+            t0, c0 = time.monotonic(), time.process_time()
             hdr = self._merge(frames, times)
             pose = self._pose(hdr)
             more, hint = self._check(hdr, pose, sorted(frames))
             times.processing += time.monotonic() - t0
+            times.processing_cpu += time.process_time() - c0
             if not more:
                 break
             exposures = sorted(set(frames) | set(more))
@@ -153,12 +156,13 @@ class ImagingCamera:
                 f"configuration {geometry.index}: exposures still inadequate after"
                 f" {self.settings.max_rounds} rounds ({sorted(frames)})"
             )
-        t0 = time.monotonic()
+        t0, c0 = time.monotonic(), time.process_time()
         assert hdr is not None and pose is not None
         m = self._radiometry(hdr, pose, geometry)
         self._hint = hint
         self._write_exr(tag, hdr, pose, geometry, sorted(frames), m, hint)
         times.processing += time.monotonic() - t0
+        times.processing_cpu += time.process_time() - c0
         self.last_times = times
         return Capture(
             value=m.f,
@@ -171,6 +175,8 @@ class ImagingCamera:
                 "t_exposure": times.exposure,
                 "t_camera": times.capture,
                 "t_processing": times.processing,
+                "t_camera_cpu": times.capture_cpu,
+                "t_processing_cpu": times.processing_cpu,
                 "pose_corners": pose.n_corners,
                 "reprojection_px": pose.reprojection_px,
             },
@@ -222,14 +228,15 @@ class ImagingCamera:
             if not dark_path.is_file():
                 self.light.off()
                 try:
-                    t0 = time.monotonic()
+                    t0, c0 = time.monotonic(), time.process_time()
                     dark_path = self._raw_capture(t, dark_path, f"dark_t{t!r}", {"dark": True})
                     times.capture += time.monotonic() - t0
+                    times.capture_cpu += time.process_time() - c0
                     times.exposure += t
                 finally:
                     self.light.on()
             self._darks[t] = read_dng(dark_path).data
-        t0 = time.monotonic()
+        t0, c0 = time.monotonic(), time.process_time()
         meta = {
             "index": geometry.index,
             "joints_deg": geometry.joints_deg,
@@ -238,6 +245,7 @@ class ImagingCamera:
         }
         path = self._raw_capture(t, self.raw_dir / f"{name}.dng", name, meta)
         times.capture += time.monotonic() - t0
+        times.capture_cpu += time.process_time() - c0
         times.exposure += t
         return path
 
