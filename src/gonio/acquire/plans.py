@@ -288,6 +288,14 @@ BUILTIN: dict[str, dict] = {
         "theta_o_deg": [20, 50],
         "dphi_deg": [90, 180],
     },
+    "iso-reciprocal": {
+        # small, and with every theta_i != theta_o pair also measured swapped (reciprocity check)
+        "kind": "isotropic",
+        "theta_i_deg": [20, 45],
+        "theta_o_deg": [20, 45, 60],
+        "dphi_deg": [90, 180],
+        "reciprocal": True,
+    },
     "iso-small": {
         "kind": "isotropic",
         "theta_i_deg": {"start": 10, "stop": 70, "step": 20},
