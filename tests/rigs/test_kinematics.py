@@ -100,11 +100,17 @@ def test_refusals_name_the_reason():
 
 
 def test_inverse_prefers_pose_near_reference():
+    from gonio.rigs.config import parse_rig
+
+    # arms that may pass each other: both mirror solutions are allowed
+    kin = Kinematics(
+        parse_rig(RIG.text.replace("[safety]\n", "[safety]\narms_can_pass = true\n"), "x")
+    )
     wi, wo = direction(0.6, 0.3), direction(0.9, 2.5)
-    cands = [c for c in KIN.candidates(wi, wo) if KIN.refusal(c) is None]
+    cands = [c for c in kin.candidates(wi, wo) if kin.refusal(c) is None]
     assert len(cands) >= 2
     for c in cands:
-        pose, _ = KIN.inverse(wi, wo, near=c)
+        pose, _ = kin.inverse(wi, wo, near=c)
         assert pose == c
 
 
@@ -117,3 +123,17 @@ def test_keepout_sector_may_be_neither_entered_nor_crossed():
     # on the park side the sector does not apply (that pose fails only for being behind the
     # sample)
     assert "keep-out" not in hw.refusal(Pose(math.radians(20), math.radians(149), 0.0, 0.0))
+
+
+def test_arms_keep_their_park_order():
+    # park: light 60 > camera -60 on the sim rig; swapping sides is refused
+    p = Pose(math.radians(-30), math.radians(20), 0.0, 0.0)
+    assert "pass each other" in KIN.refusal(p)
+    # for an isotropic sample the mirrored solution keeps the order and the geometry
+    wi, wo = forward(*p.as_tuple())
+    pose, why = KIN.inverse(wi, wo, isotropic=True)
+    assert why is None and pose.light > pose.camera
+    a, b = KIN.forward(pose)
+    assert spherical(a)[0] == pytest.approx(spherical(wi)[0])
+    assert spherical(b)[0] == pytest.approx(spherical(wo)[0])
+    assert float(np.dot(a, b)) == pytest.approx(float(np.dot(wi, wo)))
