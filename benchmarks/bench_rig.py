@@ -124,24 +124,32 @@ def bench_latency(rig, n):
         ph = sdk.PacketHandler(2.0)
         ids = [j.id for j in rig.joints]
         out = {"ping_1": [], "sync_read_4x20": []}
+        failed = {"ping_1": 0, "sync_read_4x20": 0}
         a, m = ct.POLL_BLOCK
         for _ in range(n):
             t0 = time.perf_counter()
             _, res, _ = ph.ping(port, ids[0])
             t1 = time.perf_counter()
-            assert res == sdk.COMM_SUCCESS
-            out["ping_1"].append((t1 - t0) * 1e3)
+            if res == sdk.COMM_SUCCESS:
+                out["ping_1"].append((t1 - t0) * 1e3)
+            else:  # a reply missed the SDK's timeout (a loaded host): counted, not timed
+                failed["ping_1"] += 1
             t0 = time.perf_counter()
             res = ph.syncReadTx(port, a, m, ids, len(ids), False)
             for sid in ids:
+                if res != sdk.COMM_SUCCESS:
+                    break
                 _, res, _ = ph.readRx(port, sid, m)
             t1 = time.perf_counter()
-            assert res == sdk.COMM_SUCCESS
-            out["sync_read_4x20"].append((t1 - t0) * 1e3)
+            if res == sdk.COMM_SUCCESS:
+                out["sync_read_4x20"].append((t1 - t0) * 1e3)
+            else:
+                failed["sync_read_4x20"] += 1
+                port.is_using = False
         port.closePort()
     finally:
         emu.stop()
-    return out
+    return out, failed
 
 
 def bench_time_split(plan):
@@ -200,7 +208,7 @@ def main() -> None:
     print("\n### Plan ordering (predicted motion time, rig seconds)\n")
     print(markdown(rows))
 
-    lat = bench_latency(rig, 300 if args.quick else 2000)
+    lat, failed = bench_latency(rig, 300 if args.quick else 2000)
     lat_rows = []
     for k, v in lat.items():
         v = np.array(v)
@@ -209,6 +217,7 @@ def main() -> None:
             {
                 "transaction": k,
                 "n": len(v),
+                "timeouts": failed[k],
                 "p50_ms": p50,
                 "p90_ms": p90,
                 "p99_ms": p99,
