@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from gonio.errors import PlanError
@@ -42,11 +42,14 @@ def test_turntable_rotates_azimuth_only():
         assert math.remainder(spherical(u)[1] - spherical(v)[1], 2 * math.pi) == pytest.approx(0.4)
 
 
+# generation is filtered (poses the rig refuses) and the host may be loaded: neither is a failure
+SLOW_OK = [HealthCheck.too_slow, HealthCheck.filter_too_much]
+
 angle = st.floats(0.02, math.radians(78))
 azim = st.floats(0.0, 2 * math.pi)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, suppress_health_check=SLOW_OK)
 @given(angle, azim, angle, azim)
 def test_inverse_then_forward_roundtrip(ti, pi, to, po):
     wi, wo = direction(ti, pi), direction(to, po)
@@ -58,7 +61,7 @@ def test_inverse_then_forward_roundtrip(ti, pi, to, po):
     assert KIN.refusal(pose) is None
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100, deadline=None, suppress_health_check=SLOW_OK)
 @given(angle, angle, st.floats(0.2, math.pi))
 def test_isotropic_inverse_keeps_relative_geometry(ti, to, dphi):
     wi, wo = direction(ti, 0.0), direction(to, dphi)
@@ -71,7 +74,7 @@ def test_isotropic_inverse_keeps_relative_geometry(ti, to, dphi):
     assert float(np.dot(a, b)) == pytest.approx(float(np.dot(wi, wo)), abs=1e-9)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100, deadline=None, suppress_health_check=SLOW_OK)
 @given(st.floats(-2.9, 2.9), st.floats(-2.9, 2.9), st.floats(-1.4, 1.4), st.floats(-3.1, 3.1))
 def test_forward_then_inverse_reaches_same_directions(al, ac, tilt, rot):
     wi, wo = forward(al, ac, tilt, rot)
