@@ -59,10 +59,12 @@ class Ward(BRDFModel):
 
     * ``"original"`` loses energy towards grazing for smooth lobes (the albedo tends to
       ``cos(theta_o)`` as ``alpha -> 0``) and stays <= 1 up to ``theta_o = 89`` deg for every
-      ``alpha`` in the bounds, but its ``1/sqrt(cos_o)`` factor makes the albedo grow without
-      bound within the last degree: ``alpha = 0.5`` gives 0.50 at 89 deg and 1.48 at 89.9 deg.
+      ``alpha`` tested (1e-3 to 1), but for rough lobes its ``1/sqrt(cos_o)`` factor makes the
+      albedo grow within the last degree: ``alpha = 0.5`` gives 0.50 at 89 deg, 1.48 at
+      89.9 deg and about 4.7 at 89.99 deg.
     * ``"duer"`` keeps the albedo near ``1 - O(alpha^2)`` up to about 85 deg for
-      ``alpha <= 0.1``, then exceeds 1 at grazing for every ``alpha``: ``alpha = 0.3`` gives
+      ``alpha <= 0.1``, then exceeds 1 at grazing for every ``alpha`` tested (0.01 to 1):
+      ``alpha = 0.3`` gives
       1.25 at 85 deg, ``alpha = 0.1`` gives 1.12 at 87 deg and 2.1 at 89 deg,
       ``alpha = 0.01`` gives 2.2 at 89.9 deg.
     * ``"balanced"`` stays <= 1 at every ``theta_o`` (checked up to 89.99 deg) for ``alpha``
