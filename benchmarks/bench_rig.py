@@ -124,38 +124,44 @@ def bench_latency(rig, n):
         ph = sdk.PacketHandler(2.0)
         ids = [j.id for j in rig.joints]
         out = {"ping_1": [], "sync_read_4x20": []}
+        failed = {"ping_1": 0, "sync_read_4x20": 0}
         a, m = ct.POLL_BLOCK
         for _ in range(n):
             t0 = time.perf_counter()
             _, res, _ = ph.ping(port, ids[0])
             t1 = time.perf_counter()
-            assert res == sdk.COMM_SUCCESS
-            out["ping_1"].append((t1 - t0) * 1e3)
+            if res == sdk.COMM_SUCCESS:
+                out["ping_1"].append((t1 - t0) * 1e3)
+            else:  # a reply missed the SDK's timeout (a loaded host): counted, not timed
+                failed["ping_1"] += 1
             t0 = time.perf_counter()
             res = ph.syncReadTx(port, a, m, ids, len(ids), False)
             for sid in ids:
+                if res != sdk.COMM_SUCCESS:
+                    break
                 _, res, _ = ph.readRx(port, sid, m)
             t1 = time.perf_counter()
-            assert res == sdk.COMM_SUCCESS
-            out["sync_read_4x20"].append((t1 - t0) * 1e3)
+            if res == sdk.COMM_SUCCESS:
+                out["sync_read_4x20"].append((t1 - t0) * 1e3)
+            else:
+                failed["sync_read_4x20"] += 1
+                port.is_using = False
         port.closePort()
     finally:
         emu.stop()
-    return out
+    return out, failed
 
 
 def bench_time_split(plan):
     with tempfile.TemporaryDirectory() as d:
         run = Path(d) / "run"
         t0 = time.perf_counter()
-        s = acquire(run, "sim_sample", plan, progress=False, write_table=False)
+        acquire(run, "sim_sample", plan, progress=False, write_table=False)
         wall = time.perf_counter() - t0
-        rows = [
-            json.loads(x)
-            for x in (run / "log.jsonl").read_text().splitlines()
-            if json.loads(x)["event"] == "sample"
-        ]
-    return rows, wall, s
+        events = [json.loads(x) for x in (run / "log.jsonl").read_text().splitlines()]
+    rows = [e for e in events if e["event"] == "sample"]
+    predicted = sum(e["predicted_motion_s"] for e in events if e["event"] == "stage_planned")
+    return rows, wall, predicted
 
 
 def markdown(rows: list[dict]) -> str:
@@ -202,7 +208,7 @@ def main() -> None:
     print("\n### Plan ordering (predicted motion time, rig seconds)\n")
     print(markdown(rows))
 
-    lat = bench_latency(rig, 300 if args.quick else 2000)
+    lat, failed = bench_latency(rig, 300 if args.quick else 2000)
     lat_rows = []
     for k, v in lat.items():
         v = np.array(v)
@@ -211,6 +217,7 @@ def main() -> None:
             {
                 "transaction": k,
                 "n": len(v),
+                "timeouts": failed[k],
                 "p50_ms": p50,
                 "p90_ms": p90,
                 "p99_ms": p99,
@@ -234,7 +241,7 @@ def main() -> None:
     plt.close(fig)
 
     split_plan = "iso-small" if args.quick else "adaptive-small"
-    rows, wall, _ = bench_time_split(split_plan)
+    rows, wall, predicted = bench_time_split(split_plan)
     keys = ["t_motion", "t_settle", "t_capture", "t_book"]
     mean = {k: float(np.mean([r[k] for r in rows])) for k in keys}
     split = {
@@ -243,10 +250,12 @@ def main() -> None:
         "time_scale": rig.sim.time_scale,
         "wall_s": round(wall, 3),
         **{f"{k[2:]}_ms": round(mean[k] * 1e3, 3) for k in keys},
-        # motion and settle run time_scale times faster than on hardware; capture and
-        # bookkeeping are real wall time
-        "motion_rig_ms": round(mean["t_motion"] * 1e3 * rig.sim.time_scale, 1),
-        "settle_rig_ms": round(mean["t_settle"] * 1e3 * rig.sim.time_scale, 1),
+        # motion and settle run time_scale times faster than on hardware (polling overhead is
+        # scaled up too); capture and bookkeeping are real wall time. The profile prediction is
+        # what the same moves take on hardware.
+        "motion_x_scale_ms": round(mean["t_motion"] * 1e3 * rig.sim.time_scale, 1),
+        "settle_x_scale_ms": round(mean["t_settle"] * 1e3 * rig.sim.time_scale, 1),
+        "predicted_motion_rig_ms": round(predicted / len(rows) * 1e3, 1),
     }
     with open(OUT / "rig_time_split.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(split))

@@ -86,3 +86,12 @@ def test_acquire_tiny_run_text_output(tmp_path, capsys):
         main(["acquire", "--rig", "sim_sample", "--plan", "iso-tiny", "--out", str(tmp_path / "r")])
         == 2
     )
+
+
+def test_resume_of_a_corrupt_journal_is_one_line(tmp_path, capsys):
+    run = tmp_path / "r"
+    run.mkdir()
+    (run / "journal.sqlite").write_bytes(b"this is not sqlite" * 100)
+    assert main(["acquire", "--resume", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gonio: ") and err.count("\n") == 1 and "journal" in err

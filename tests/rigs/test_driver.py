@@ -137,3 +137,40 @@ def test_pyserial_url_ports_open_through_the_sdk():
         assert bus.stats.timeouts + bus.stats.corrupt == 2
     with pytest.raises(DeviceError, match="cannot open servo bus"):
         DynamixelBus("socket://127.0.0.1:1").open()
+
+
+def test_arms_that_would_cross_on_the_way_move_in_two_phases():
+    from gonio.rigs.config import parse_rig
+
+    # a slow light arm and a fast camera arm: moving both at once, the camera would overtake
+    # the light mid-move although both end poses keep them 15 deg apart
+    text = RIG.text.replace(
+        "profile_velocity_deg_s = 90.0\nprofile_acceleration_deg_s2 = 180.0",
+        "profile_velocity_deg_s = 30.0\nprofile_acceleration_deg_s2 = 60.0",
+        1,
+    ).replace(
+        "profile_velocity_deg_s = 90.0\nprofile_acceleration_deg_s2 = 180.0",
+        "profile_velocity_deg_s = 180.0\nprofile_acceleration_deg_s2 = 720.0",
+        1,
+    )
+    rig = parse_rig(text, "slow-light.toml")
+    assert rig.joint("light_arm").profile_velocity_deg_s == 30.0
+    assert rig.joint("camera_arm").profile_velocity_deg_s == 180.0
+    start = {"light_arm": 30.0, "camera_arm": -40.0, "tilt": 0.0, "turntable": 0.0}
+    goal = {"light_arm": 60.0, "camera_arm": 45.0, "tilt": 0.0, "turntable": 0.0}
+    with open_rig(rig) as s:
+        s.chain.move(start)
+        assert s.chain.arm_transit_hold(start, goal) == "camera_arm"
+        n0 = len(s.emulator.goal_log)
+        res = s.chain.move(goal)
+        assert s.chain.two_phase_moves == 1
+        within_tol(res, goal)
+        cam = [g for g in s.emulator.goal_log[n0:] if g.id == 2]
+        light = [g for g in s.emulator.goal_log[n0:] if g.id == 1]
+        # phase 1: camera held where it was while the light moves; phase 2: camera goes
+        assert abs(cam[0].ticks - rig.joint("camera_arm").to_ticks(-40.0)) <= 3
+        assert cam[-1].ticks == rig.joint("camera_arm").to_ticks(45.0)
+        assert light[0].time <= cam[-1].time
+    # the same move with equal profiles is safe together
+    with open_rig(RIG) as s:
+        assert s.chain.arm_transit_hold(start, goal) is None

@@ -191,15 +191,15 @@ def test_moving_status_profile_then_ringing_then_in_position():
         port = sdk.PortHandler(emu.port)
         port.openPort()
         ph = sdk.PacketHandler(2.0)
-        ph.write4ByteTxRx(port, 1, 108, 100)
-        ph.write4ByteTxRx(port, 1, 112, 200)
-        ph.write1ByteTxRx(port, 1, 64, 1)
-        ph.write4ByteTxRx(port, 1, 116, 2148)
+        _ask(ph.write4ByteTxRx, port, 1, 108, 100)
+        _ask(ph.write4ByteTxRx, port, 1, 112, 200)
+        _ask(ph.write1ByteTxRx, port, 1, 64, 1)
+        _ask(ph.write4ByteTxRx, port, 1, 116, 2148)
         seen = []
         t0 = time.monotonic()
         while time.monotonic() - t0 < 2.0:
-            status = ph.read1ByteTxRx(port, 1, 123)[0]
-            moving = ph.read1ByteTxRx(port, 1, 122)[0]
+            status = _ask(ph.read1ByteTxRx, port, 1, 123)[0]
+            moving = _ask(ph.read1ByteTxRx, port, 1, 122)[0]
             seen.append((bool(status & 2), bool(moving), bool(status & 1)))
             if not moving and seen[-1][2]:
                 break
@@ -265,13 +265,13 @@ def test_settle_error_is_deterministic_per_goal_and_bounded():
         port = sdk.PortHandler(emu.port)
         port.openPort()
         ph = sdk.PacketHandler(2.0)
-        ph.write1ByteTxRx(port, 1, 64, 1)
+        _ask(ph.write1ByteTxRx, port, 1, 64, 1)
         ends = {}
         for goal in (1500, 2500, 1500, 2500):
-            ph.write4ByteTxRx(port, 1, 116, goal)
-            while ph.read1ByteTxRx(port, 1, 122)[0]:
+            _ask(ph.write4ByteTxRx, port, 1, 116, goal)
+            while _ask(ph.read1ByteTxRx, port, 1, 122)[0]:
                 pass
-            end = ph.read4ByteTxRx(port, 1, 132)[0]
+            end = _ask(ph.read4ByteTxRx, port, 1, 132)[0]
             assert abs(end - goal) <= 3
             assert ends.setdefault(goal, end) == end
         port.closePort()

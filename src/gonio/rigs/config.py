@@ -197,6 +197,10 @@ SPEC: dict = {
             minimum=0,
             maximum=180,
         ),
+        "arms_can_pass": _bool(
+            "Whether the light and camera arms can pass each other (different heights/radii);"
+            " if not (default), they keep the order they have in the park pose."
+        ),
         "max_theta_deg": _num(
             "Largest incident or outgoing polar angle allowed (deg).",
             exclusiveMinimum=0,
@@ -354,6 +358,7 @@ class LayoutConfig:
 class SafetyConfig:
     min_light_camera_deg: float
     max_theta_deg: float = 85.0
+    arms_can_pass: bool = False
     keepout: tuple[Keepout, ...] = ()
 
 

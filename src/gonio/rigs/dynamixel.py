@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import dynamixel_sdk as sdk
+import numpy as np
 import serial
 
 from gonio.errors import DeviceError, PlanError
@@ -352,6 +353,8 @@ class ServoChain:
         self.ids = [j.id for j in self.joints]
         self._by_id = {j.id: j for j in self.joints}
         self.last_goal_ticks: dict[int, int] = {}
+        #: moves split in two because the arms would have come too close on the way
+        self.two_phase_moves = 0
 
     # --- setup --------------------------------------------------------------------------------
     def open(self) -> None:
@@ -540,7 +543,48 @@ class ServoChain:
     def torque_off(self) -> None:
         self.bus.sync_write(ct.TORQUE_ENABLE, dict.fromkeys(self.ids, 0))
 
-    def _move_once(self, goals: dict[int, int], timeout_s, poll_s):
+    def arm_transit_hold(
+        self, start_deg: Mapping[str, float], goal_deg: Mapping[str, float]
+    ) -> str | None:
+        """If moving the light and camera arms together would bring them closer than the safety
+        margin on the way (or across each other), the arm to hold still while the other moves
+        first; None when the simultaneous move is safe.
+
+        Both arms follow their trapezoidal profiles from the same start time; the predicted
+        separation is sampled along the move. Holding one arm makes the separation change
+        monotonically, so a two-phase move is safe whenever both end poses are.
+        """
+        lay = self.rig.layout
+        jl, jc = self.rig.joint(lay.light), self.rig.joint(lay.camera)
+        l0, l1 = start_deg[jl.name], goal_deg[jl.name]
+        c0, c1 = start_deg[jc.name], goal_deg[jc.name]
+        if l0 == l1 or c0 == c1:
+            return None
+        t_end = max(float(jl.move_time(l1 - l0)), float(jc.move_time(c1 - c0)))
+        ts = np.linspace(0.0, t_end, 65)
+
+        def path(j, a0, a1):
+            return np.array(
+                [
+                    a0
+                    + ct.trapezoid_position(
+                        a1 - a0, j.profile_velocity_deg_s, j.profile_acceleration_deg_s2, t
+                    )
+                    for t in ts
+                ]
+            )
+
+        order = 1.0 if l0 - c0 >= 0 else -1.0
+        d = order * (path(jl, l0, l1) - path(jc, c0, c1))
+        floor = min(self.rig.safety.min_light_camera_deg, order * (l0 - c0), order * (l1 - c1))
+        if float(np.min(d)) >= floor - 1e-6:
+            return None
+        # move first the arm whose move alone keeps the arms apart
+        if order * (l1 - c0) >= floor:
+            return jc.name
+        return jl.name
+
+    def _move_once(self, goals: dict[int, int], timeout_s, poll_s, split: bool = True):
         a, n = ct.POLL_BLOCK
         t0 = time.monotonic()
         start = self.bus.sync_read(a, n, self.ids)
@@ -549,6 +593,17 @@ class ServoChain:
             for i, d in start.items()
         }
         goal_deg = {self._by_id[i].name: self._by_id[i].from_ticks(t) for i, t in goals.items()}
+        hold = self.arm_transit_hold(start_deg, goal_deg) if split else None
+        if hold is not None:
+            j = self.rig.joint(hold)
+            first = dict(goals)
+            first[j.id] = _field(start[j.id], ct.PRESENT_POSITION)
+            log.info("two-phase move: %s waits for the other arm", hold)
+            self.two_phase_moves += 1
+            self._move_once(first, None, poll_s, split=False)
+            reached, _, settle, polls = self._move_once(goals, timeout_s, poll_s, split=False)
+            t_end = time.monotonic()
+            return reached, t_end - t0 - settle, settle, polls
         if timeout_s is None:
             timeout_s = self.predicted_time(start_deg, goal_deg) + self.rig.bus.motion_timeout_s
         if poll_s is None:

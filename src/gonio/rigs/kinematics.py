@@ -116,6 +116,10 @@ class Kinematics:
             j = rig.joint(name)
             self._limits[role] = (math.radians(j.min_deg), math.radians(j.max_deg))
         self.min_sep = math.radians(rig.safety.min_light_camera_deg)
+        self.arms_can_pass = rig.safety.arms_can_pass
+        park_l = rig.park_deg.get(lay.light, 0.0)
+        park_c = rig.park_deg.get(lay.camera, 0.0)
+        self._arm_order = 1.0 if park_l >= park_c else -1.0
         self.max_theta = math.radians(rig.safety.max_theta_deg)
         self._keepout = [
             (
@@ -171,6 +175,11 @@ class Kinematics:
                     f" [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] from its park angle"
                     f" ({reason})"
                 )
+        if not self.arms_can_pass and (pose.light - pose.camera) * self._arm_order < 0:
+            return (
+                "light and camera arms would have to pass each other (they keep their park"
+                " order; safety.arms_can_pass = false)"
+            )
         sep = abs(math.remainder(pose.light - pose.camera, 2 * math.pi))
         if sep < self.min_sep - 1e-12:
             return (
@@ -252,9 +261,14 @@ class Kinematics:
             else:
                 reasons.append(why)
         if not ok:
-            # the most informative reason: prefer one that is not a plain limit violation
-            pref = [r for r in reasons if "outside its limits" not in r]
-            return None, (pref or reasons)[0]
+            # the most fundamental reason first: geometry the rig can never realize, then
+            # safety margins, then the side rules, then plain joint limits
+            rank = ("horizon", "grazing", "min_light_camera_deg", "keep-out", "pass each other")
+
+            def key(r: str) -> int:
+                return next((i for i, k in enumerate(rank) if k in r), len(rank))
+
+            return None, min(reasons, key=key)
         if near is None:
             near = Pose(0.0, 0.0, 0.0, 0.0)
         ref = np.array(near.as_tuple())
