@@ -14,7 +14,9 @@ _PLAN_HELP = (
     "built-in plan name ({names}) or path to a plan TOML file. Plan files: kind = 'grid4d' |"
     " 'isotropic' | 'halfdiff' | 'adaptive'; angle keys in degrees as a list or"
     " {{start, stop, step}} (inclusive): grid4d needs theta_i_deg, phi_i_deg, theta_o_deg,"
-    " phi_o_deg; isotropic and adaptive need theta_i_deg, theta_o_deg, dphi_deg (adaptive adds"
+    " phi_o_deg; isotropic and adaptive need theta_i_deg, theta_o_deg, dphi_deg (isotropic may"
+    " add reciprocal = true to also measure every pair swapped, a reciprocity check; adaptive"
+    " adds"
     " [refine] window_deg, step_deg, peak_ratio); halfdiff needs theta_h_deg, theta_d_deg,"
     " phi_d_deg"
 )
