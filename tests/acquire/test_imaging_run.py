@@ -134,3 +134,19 @@ def test_interrupted_imaging_run_resumes_to_the_same_samples(run, tmp_path):
     for a, b in zip(want, got, strict=True):
         np.testing.assert_array_equal(a.value, b.value)
         np.testing.assert_array_equal(a.sigma, b.sigma)
+
+
+def test_a_saturating_probe_is_rescued_by_shorter_brackets(tmp_path):
+    from gonio.acquire.imaging import open_imaging_camera
+    from gonio.rigs.devices import Geometry
+
+    rig = small_rig()
+    cam = open_imaging_camera(rig, tmp_path)
+    cam.settings.exposure_s = 0.5  # ~100x too long: the whole holder saturates
+    kin = Kinematics(rig)
+    joints = {"light_arm": 30.0, "camera_arm": -40.0, "tilt": 0.0, "turntable": 0.0}
+    wi, wo = kin.forward(kin.joints_deg_to_pose(joints))
+    cap = cam.capture(Geometry(0, joints, wi, wo, wi * 0.6, wo * 0.8))
+    assert min(cap.meta["exposures_s"]) < 0.05 < max(cap.meta["exposures_s"])
+    truth = np.asarray(models.Node.from_dict(rig.sim.sample).f(cap.meta["wi"], cap.meta["wo"]))
+    assert np.all(np.abs(cap.value - truth) < 4 * cap.sigma)

@@ -144,8 +144,17 @@ class ImagingCamera:
                     frames[t] = self._shoot(t, f"{tag}_t{t:.6g}", times, geometry)
             t0, c0 = time.monotonic(), time.process_time()
             hdr = self._merge(frames, times)
-            pose = self._pose(hdr)
-            more, hint = self._check(hdr, pose, sorted(frames))
+            try:
+                pose = self._pose(hdr)
+            except DeviceError:
+                # no board in the frame: a probe far off the right exposure leaves it saturated
+                # or buried in noise; bracket towards the side that is wrong, then give up
+                pose = None
+                more = self._rescue(hdr, sorted(frames))
+                if not more:
+                    raise
+            else:
+                more, hint = self._check(hdr, pose, sorted(frames))
             times.processing += time.monotonic() - t0
             times.processing_cpu += time.process_time() - c0
             if not more:
@@ -288,6 +297,16 @@ class ImagingCamera:
         except DeviceError:
             pass
         return estimate_pose(to_8bit(gray), self.layout, self.camera_matrix)
+
+    def _rescue(self, hdr, exposures: list[float]) -> list[float]:
+        """Exposures to add when the board was not found: 8x shorter when more than 1 % of the
+        frame is saturated in every bracket, else 8x longer (within the camera's limits)."""
+        saturated = float(np.mean(~np.isfinite(hdr.rate)))
+        if saturated > 0.01:
+            t = self._clip(min(exposures) / 8.0)
+        else:
+            t = self._clip(max(exposures) * 8.0)
+        return [t] if t not in exposures else []
 
     def _regions(self, shape, pose: BoardPose) -> tuple[np.ndarray, np.ndarray]:
         pts, hit = pixel_rays_to_plane(shape, self.camera_matrix, pose.rotation, pose.translation)
