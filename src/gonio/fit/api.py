@@ -82,7 +82,8 @@ def fit(
     loss : ``"wls"``, ``"ngan"``, ``"low-e1"``, ``"low-e2"`` or ``"cube-root"`` (see
         :mod:`gonio.fit.losses`).
     uncertainty : None, ``"laplace"`` or ``"mcmc"`` (see :mod:`gonio.fit.uncertainty`).
-    theta_max_deg : polar-angle cutoff for both directions, degrees.
+    theta_max_deg : polar-angle cutoff for both directions, degrees (applied also to data that
+        was already prepared with another cutoff).
     fixed : parameter keys held at given values (``{"ward.rho_d": 0.0}``).
     channels : ``"shared"`` (lobe shapes shared, per-channel albedos) or ``"separate"`` (each
         channel fitted on its own; returns one result per channel).
@@ -202,7 +203,10 @@ def _fit_one(
                    init=init)  # fmt: skip
     if unc is not None:
         warnings_ += unc.warnings
-    params = {k: np.asarray(v).tolist() for k, v in fitted.params().items()}
+    params = {
+        k: float(np.asarray(v).reshape(-1)[0]) if np.size(v) == 1 else np.asarray(v).tolist()
+        for k, v in fitted.params().items()
+    }
     return FitResult(
         name=name,
         model=fitted,

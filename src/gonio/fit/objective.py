@@ -47,6 +47,8 @@ class Problem:
         n = self.data.n
         k = max(1, -(-n // self.chunk))
         size = -(-n // k)  # equal chunks, at most `chunk` rows
+        # round up so that data sets of similar size share compiled code
+        size = min(-(-size // 256) * 256, max(self.chunk, 256))
         pad = k * size - n
         consts = self.loss.constants(self.data)
         up = np.array([0.0, 0.0, 1.0])

@@ -88,16 +88,25 @@ def run_lm(
     ftol: float = 1e-10,
     xtol: float = 1e-9,
 ) -> tuple[np.ndarray, float, int, int]:
-    """Levenberg–Marquardt from ``u0`` (P,) or from several starts (S, P).
+    """Levenberg–Marquardt from ``u0`` (P,) or from several starts (S, P), one after the other.
 
-    Returns ``(u, cost, n_iter, status)``; with several starts, arrays over starts.
+    Returns ``(u, cost, n_iter, status)``; with several starts, arrays over starts. (Starts run
+    sequentially with the single compiled solver: a ``vmap``-ed while loop would compile a
+    second program and evaluate both branches of the accept test at every step.)
     """
-    single, multi = _lm_functions(problem)
+    single, _ = _lm_functions(problem)
     lo, hi = (jnp.asarray(b) for b in problem.layout.box())
-    u0 = jnp.asarray(u0, jnp.float64)
-    fn = multi if u0.ndim == 2 else single
-    out = fn(u0, problem.arrays, problem.layout.template, lo, hi, max_iter, ftol, xtol)
-    return np.asarray(out.u), np.asarray(out.cost), np.asarray(out.it), np.asarray(out.status)
+    u0 = np.asarray(u0, np.float64)
+    starts = u0[None] if u0.ndim == 1 else u0
+    outs = []
+    for s in starts:
+        out = single(
+            jnp.asarray(s), problem.arrays, problem.layout.template, lo, hi, max_iter, ftol, xtol
+        )
+        outs.append((np.asarray(out.u), float(out.cost), int(out.it), int(out.status)))
+    if u0.ndim == 1:
+        return outs[0]
+    return tuple(np.array([o[i] for o in outs]) for i in range(4))  # type: ignore[return-value]
 
 
 # -- nlopt ---------------------------------------------------------------------------------------

@@ -144,10 +144,10 @@ class Layout:
         return [e.key for e in self.entries]
 
     def flat_names(self, channel_names: tuple[str, ...] | None = None) -> list[str]:
-        """One name per entry of ``u``: ``"albedo[R]"`` for per-channel values."""
+        """One name per entry of ``u``: ``"albedo[R]"`` for per-channel values (C > 1)."""
         out = []
         for e in self.entries:
-            if e.size == 1 and not e.spec.per_channel:
+            if e.size == 1:
                 out.append(e.key)
             else:
                 labels = channel_names or tuple(str(i) for i in range(e.size))
