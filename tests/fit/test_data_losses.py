@@ -89,10 +89,11 @@ def _manual(name, f, d):
 @pytest.mark.parametrize("name", sorted(LOSSES))
 def test_loss_formulas(name):
     truth = models.Lambert(albedo=[0.5, 0.4, 0.3])
-    d, f = synthetic(truth, n=300, seed=3)
+    d, _f = synthetic(truth, n=300, seed=3)
     rng = np.random.default_rng(0)
-    d = d.__class__(d.wi, d.wo, np.abs(d.values), d.sigma, rng.uniform(0.5, 2, d.n),
-                    d.channel_names, d.source)  # fmt: skip
+    d = d.__class__(
+        d.wi, d.wo, np.abs(d.values), d.sigma, rng.uniform(0.5, 2, d.n), d.channel_names, d.source
+    )
     f_model = np.asarray(truth.f(d.wi, d.wo)) * 1.1
     assert evaluate(name, f_model, d) == pytest.approx(_manual(name, f_model, d), rel=1e-10)
     assert evaluate(name, d.values, d) == pytest.approx(0.0, abs=1e-12)

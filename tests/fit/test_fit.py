@@ -58,9 +58,12 @@ def test_laplace_matches_analytic_linear_gaussian_albedo():
     data = from_arrays(wi, wo, y, sigma=np.full(n, s), theta_max_deg=90)
     for method in ("gauss-newton", "hessian"):
         res = gf.fit(
-            data, model=models.Lambert(), uncertainty="laplace", laplace_method=method,
+            data,
+            model=models.Lambert(),
+            uncertainty="laplace",
+            laplace_method=method,
             theta_max_deg=90,
-        )  # fmt: skip
+        )
         unc = res.uncertainty
         a_hat = np.pi * np.mean(y)
         sd = np.pi * s / np.sqrt(n)
@@ -102,8 +105,13 @@ def test_mcmc_agrees_with_laplace_on_linear_case():
 def test_mcmc_discrepancy_widens_intervals_when_model_is_wrong():
     # data from Lambert + lobe, fitted with Lambert alone, sigma tiny: Laplace with s^2 = chi2
     # reduced and MCMC with the discrepancy term both give intervals wider than the noise alone.
-    data, _ = synthetic(models.Lambert(albedo=0.5) + TestLobe(rho_s=0.3, n=20.0), n=400,
-                        seed=2, rel_noise=0.001, abs_noise=1e-4)  # fmt: skip
+    data, _ = synthetic(
+        models.Lambert(albedo=0.5) + TestLobe(rho_s=0.3, n=20.0),
+        n=400,
+        seed=2,
+        rel_noise=0.001,
+        abs_noise=1e-4,
+    )
     res = gf.fit(data, model=models.Lambert(), uncertainty="mcmc", mcmc_steps=600)
     assert res.uncertainty.diagnostics["discrepancy_s"][1] > 0.05
     naive = np.pi * np.sqrt(1 / np.sum(1 / data.sigma[:, 0] ** 2))
@@ -215,8 +223,12 @@ def test_no_nan_gradients_at_extreme_parameters():
 
 def test_unknown_names_give_one_line_errors():
     data, _ = synthetic(models.Lambert(albedo=0.4), n=50, seed=2)
-    for kw, pat in [({"model": "wardd"}, "valid: lambert"), ({"loss": "l1"}, "valid: wls"),
-                    ({"uncertainty": "bootstrap"}, "laplace"), ({"optimizer": "nm"}, "lm")]:  # fmt: skip
+    for kw, pat in [
+        ({"model": "wardd"}, "valid: lambert"),
+        ({"loss": "l1"}, "valid: wls"),
+        ({"uncertainty": "bootstrap"}, "laplace"),
+        ({"optimizer": "nm"}, "lm"),
+    ]:
         with pytest.raises(FitError, match=pat) as exc:
             gf.fit(data, **{"model": "lambert", **kw})
         assert "\n" not in str(exc.value)

@@ -70,7 +70,7 @@ def test_lm_matches_scipy_least_squares():
     lay = Layout(models.Lambert() + TestLobe(), 3)
     prob = Problem(lay, get_loss("wls"), data)
     u0 = lay.initial()
-    u, cost, _, status = run_lm(prob, u0)
+    u, cost, _, _status = run_lm(prob, u0)
     ref = least_squares(lambda x: prob.residuals(x).ravel(), u0, method="lm", xtol=1e-12)
     assert cost == pytest.approx(2 * ref.cost, rel=1e-7)
     np.testing.assert_allclose(u, ref.x, rtol=1e-5, atol=1e-6)
@@ -96,7 +96,7 @@ def test_nlopt_methods_reach_the_lm_optimum(method):
     if method == "lbfgs":
         res = optimize(prob, method="lbfgs", n_starts=2)
     else:
-        u, cost, n, msg = run_nlopt(prob, lay.initial(), "crs2", maxeval=3000, seed=1)
+        u, _cost, n, _msg = run_nlopt(prob, lay.initial(), "crs2", maxeval=3000, seed=1)
         res = optimize(prob, method="lm", start=u, n_starts=1)
         assert n > 10
     assert res.cost == pytest.approx(best.cost, rel=1e-6)

@@ -114,11 +114,20 @@ def fit(
     if not np.any(fd.values > 0):
         raise FitError(f"all {fd.values.size} measured values are <= 0: nothing to fit")
     kwargs = dict(
-        loss=loss, uncertainty=uncertainty, fixed=fixed, optimizer=optimizer,
-        global_method=global_method, n_starts=n_starts, seed=seed, subsample=subsample,
-        max_iter=max_iter, laplace_method=laplace_method, mcmc_steps=mcmc_steps,
-        mcmc_samples=mcmc_samples, progress=progress,
-    )  # fmt: skip
+        loss=loss,
+        uncertainty=uncertainty,
+        fixed=fixed,
+        optimizer=optimizer,
+        global_method=global_method,
+        n_starts=n_starts,
+        seed=seed,
+        subsample=subsample,
+        max_iter=max_iter,
+        laplace_method=laplace_method,
+        mcmc_steps=mcmc_steps,
+        mcmc_samples=mcmc_samples,
+        progress=progress,
+    )
     many = not isinstance(model, (str, BRDFModel))
     model_list = list(model) if many else [model]  # type: ignore[arg-type]
     if not model_list:
@@ -170,9 +179,14 @@ def _fit_one(
     problem = Problem(layout, lo, fd)
     say(f"{name}: optimizing {layout.size} parameters on {fd.n} samples")
     opt = optimize(
-        problem, method=optimizer, global_method=global_method, n_starts=n_starts, seed=seed,
-        subsample=subsample, max_iter=max_iter,
-    )  # fmt: skip
+        problem,
+        method=optimizer,
+        global_method=global_method,
+        n_starts=n_starts,
+        seed=seed,
+        subsample=subsample,
+        max_iter=max_iter,
+    )
     fitted = layout.model(opt.u)
     f = problem.predict(opt.u)
     if not np.all(np.isfinite(f)):
@@ -199,8 +213,9 @@ def _fit_one(
         say(f"{name}: Laplace approximation")
         init = laplace(problem, opt.u, method=laplace_method)
         say(f"{name}: MCMC ({mcmc_steps} steps)")
-        unc = mcmc(problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed,
-                   init=init)  # fmt: skip
+        unc = mcmc(
+            problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed, init=init
+        )
     if unc is not None:
         warnings_ += unc.warnings
     params = {

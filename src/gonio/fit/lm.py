@@ -58,9 +58,16 @@ def make_lm(cost_fn: Any, normal_fn: Any) -> Any:
         c0, g0, a0 = normal_fn(u0, arrays, tmpl)
         dt = u0.dtype
         state = LMState(
-            u0, c0, g0, a0, jnp.asarray(1e-3, dt), jnp.asarray(2.0, dt),
-            jnp.asarray(0, jnp.int32), jnp.asarray(1, jnp.int32), jnp.asarray(RUNNING, jnp.int32),
-        )  # fmt: skip
+            u0,
+            c0,
+            g0,
+            a0,
+            jnp.asarray(1e-3, dt),
+            jnp.asarray(2.0, dt),
+            jnp.asarray(0, jnp.int32),
+            jnp.asarray(1, jnp.int32),
+            jnp.asarray(RUNNING, jnp.int32),
+        )
 
         def cond(s: LMState) -> Array:
             return (s.status == RUNNING) & (s.it < max_iter)
@@ -95,9 +102,16 @@ def make_lm(cost_fn: Any, normal_fn: Any) -> Any:
             it = s.it + accept.astype(jnp.int32)
             status = jnp.where((status == RUNNING) & (it >= max_iter), MAX_ITER, status)
             return LMState(
-                jnp.where(accept, u_new, s.u), c2, g2, a2, jnp.minimum(lam, 1e16),
-                jnp.minimum(nu, 1e8), it, s.n_eval + 1, status.astype(jnp.int32),
-            )  # fmt: skip
+                jnp.where(accept, u_new, s.u),
+                c2,
+                g2,
+                a2,
+                jnp.minimum(lam, 1e16),
+                jnp.minimum(nu, 1e8),
+                it,
+                s.n_eval + 1,
+                status.astype(jnp.int32),
+            )
 
         out = jax.lax.while_loop(cond, body, state)
         final = jnp.where(out.status == RUNNING, MAX_ITER, out.status).astype(jnp.int32)

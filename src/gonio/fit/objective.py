@@ -192,10 +192,12 @@ def compiled(layout: Layout, loss: Loss) -> Compiled:
     """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
     key = (
         jax.tree_util.tree_structure(layout.template),
-        tuple((e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.spec.per_channel)
-              for e in layout.entries),
+        tuple(
+            (e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.spec.per_channel)
+            for e in layout.entries
+        ),
         loss.name,
-    )  # fmt: skip
+    )
     fns = _CACHE.get(key)
     if fns is None:
         if len(_CACHE) > 64:

@@ -253,8 +253,11 @@ class Layout:
         lo, hi = self.box()
         tol = rtol * (hi - lo)
         names = self.flat_names()
-        return [n for n, x, a, b, t in zip(names, u, lo, hi, tol, strict=True)
-                if x <= a + t or x >= b - t]  # fmt: skip
+        return [
+            n
+            for n, x, a, b, t in zip(names, u, lo, hi, tol, strict=True)
+            if x <= a + t or x >= b - t
+        ]
 
     def model(self, u: np.ndarray) -> BRDFModel:
         """Concrete model (validated) for ``u``, with values clipped into the physical bounds."""
