@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -50,75 +51,95 @@ class Loss:
     statistical : True when the residuals are standardized by the data's sigma, so that
         L is a chi-square and a Gaussian likelihood follows directly.
     doc : the formula in one line.
+    needs : names of the per-sample constants the residual uses.
     """
 
     name: str
     value_kind: str
     statistical: bool
     doc: str
-    _residual: Callable[[Array, dict[str, Array]], Array]
+    _residual: Callable[[Any, dict[str, Any], Any], Any]
+    needs: tuple[str, ...]
 
     def constants(self, data: FitData) -> dict[str, np.ndarray]:
         """Per-sample constants the residual needs, as float64 NumPy arrays."""
-        n, c = data.values.shape
         y = data.values
-        w = data.weights
-        scale = np.sqrt(w / (c * w.sum()))[:, None]
+        out: dict[str, np.ndarray] = {"y": y}
         cos_i = data.wi[:, 2:3]
-        inv_sigma = np.ones_like(y) if data.sigma is None else 1.0 / data.sigma
-        return {
-            "y": y,
-            "inv_sigma": inv_sigma,
-            "scale": np.broadcast_to(scale, (n, 1)).copy(),
-            "cos_i": cos_i.copy(),
-            "log_y_cos": np.log(np.maximum(1.0 + y * cos_i, _LOG_FLOOR)),
-            "log_y": np.log(np.maximum(1.0 + y, _LOG_FLOOR)),
-            "cbrt_y": np.cbrt(y + _EPS_CBRT),
-        }
+        for key in self.needs:
+            if key == "inv_sigma":
+                out[key] = np.ones_like(y) if data.sigma is None else 1.0 / data.sigma
+            elif key == "scale":
+                w = data.weights
+                out[key] = np.sqrt(w / (y.shape[1] * w.sum()))[:, None]
+            elif key == "cos_i":
+                out[key] = np.ascontiguousarray(cos_i)
+            elif key == "log_y_cos":
+                out[key] = np.log(np.maximum(1.0 + y * cos_i, _LOG_FLOOR))
+            elif key == "log_y":
+                out[key] = np.log(np.maximum(1.0 + y, _LOG_FLOOR))
+            elif key == "cbrt_y":
+                out[key] = np.cbrt(y + _EPS_CBRT)
+        return out
 
     def residual(self, f: Array, k: dict[str, Array]) -> Array:
-        """Residuals ``(N, C)`` for model values ``f`` ``(N, C or 1)`` and constants ``k``."""
+        """Residuals ``(N, C)`` for model values ``f`` ``(N, C or 1)`` and constants ``k`` (JAX)."""
         f = jnp.broadcast_to(f, k["y"].shape)
-        return self._residual(f, k)
+        return self._residual(f, k, jnp)
+
+    def residual_np(self, f: np.ndarray, k: dict[str, np.ndarray]) -> np.ndarray:
+        """The same in NumPy (for reporting without tracing or device transfers)."""
+        f = np.broadcast_to(f, k["y"].shape)
+        return self._residual(f, k, np)
 
     def value(self, sum_sq: float) -> float:
         """The reported number for ``L = sum r^2``."""
         return float(sum_sq) if self.value_kind == "chi2" else float(np.sqrt(max(sum_sq, 0.0)))
 
 
-def _wls(f: Array, k: dict[str, Array]) -> Array:
+def _wls(f: Any, k: dict[str, Any], xp: Any) -> Any:
     return (f - k["y"]) * k["inv_sigma"]
 
 
-def _ngan(f: Array, k: dict[str, Array]) -> Array:
+def _ngan(f: Any, k: dict[str, Any], xp: Any) -> Any:
     return k["scale"] * (f - k["y"]) * k["cos_i"]
 
 
-def _low_e1(f: Array, k: dict[str, Array]) -> Array:
-    lf = jnp.log(jnp.maximum(1.0 + f * k["cos_i"], _LOG_FLOOR))
+def _low_e1(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    lf = xp.log(xp.maximum(1.0 + f * k["cos_i"], _LOG_FLOOR))
     return k["scale"] * (lf - k["log_y_cos"])
 
 
-def _low_e2(f: Array, k: dict[str, Array]) -> Array:
-    lf = jnp.log(jnp.maximum(1.0 + f, _LOG_FLOOR))
+def _low_e2(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    lf = xp.log(xp.maximum(1.0 + f, _LOG_FLOOR))
     return k["scale"] * (lf - k["log_y"])
 
 
-def _cube_root(f: Array, k: dict[str, Array]) -> Array:
-    return k["scale"] * (jnp.cbrt(jnp.maximum(f, 0.0) + _EPS_CBRT) - k["cbrt_y"])
+def _cube_root(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    return k["scale"] * (xp.cbrt(xp.maximum(f, 0.0) + _EPS_CBRT) - k["cbrt_y"])
 
 
 LOSSES: dict[str, Loss] = {
-    "wls": Loss("wls", "chi2", True, "sum ((f - y) / sigma)^2; sigma = 1 when absent", _wls),
-    "ngan": Loss("ngan", "rms", False, "sqrt(sum w ((f - y) cos_i)^2 / (C W))", _ngan),
+    "wls": Loss(
+        "wls", "chi2", True, "sum ((f - y) / sigma)^2; sigma = 1 when absent", _wls,
+        ("inv_sigma",),
+    ),
+    "ngan": Loss(
+        "ngan", "rms", False, "sqrt(sum w ((f - y) cos_i)^2 / (C W))", _ngan, ("scale", "cos_i")
+    ),
     "low-e1": Loss(
-        "low-e1", "rms", False, "sqrt(sum w (ln(1+f cos_i) - ln(1+y cos_i))^2 / (C W))", _low_e1
+        "low-e1", "rms", False, "sqrt(sum w (ln(1+f cos_i) - ln(1+y cos_i))^2 / (C W))", _low_e1,
+        ("scale", "cos_i", "log_y_cos"),
     ),
-    "low-e2": Loss("low-e2", "rms", False, "sqrt(sum w (ln(1+f) - ln(1+y))^2 / (C W))", _low_e2),
+    "low-e2": Loss(
+        "low-e2", "rms", False, "sqrt(sum w (ln(1+f) - ln(1+y))^2 / (C W))", _low_e2,
+        ("scale", "log_y"),
+    ),
     "cube-root": Loss(
-        "cube-root", "rms", False, "sqrt(sum w (cbrt(f+eps) - cbrt(y+eps))^2 / (C W))", _cube_root
+        "cube-root", "rms", False, "sqrt(sum w (cbrt(f+eps) - cbrt(y+eps))^2 / (C W))",
+        _cube_root, ("scale", "cbrt_y"),
     ),
-}
+}  # fmt: skip
 
 
 def get_loss(name: str | Loss) -> Loss:
@@ -134,6 +155,5 @@ def get_loss(name: str | Loss) -> Loss:
 def evaluate(loss: str | Loss, f: np.ndarray, data: FitData) -> float:
     """The reported value of ``loss`` for model values ``f`` (N, C) on ``data``."""
     lo = get_loss(loss)
-    k = {key: jnp.asarray(v) for key, v in lo.constants(data).items()}
-    r = np.asarray(lo.residual(jnp.asarray(f), k))
+    r = lo.residual_np(np.asarray(f, dtype=np.float64), lo.constants(data))
     return lo.value(float(np.sum(r * r)))

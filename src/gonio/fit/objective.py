@@ -63,7 +63,7 @@ class Problem:
             "wi": padded(self.data.wi, up),
             "wo": padded(self.data.wo, up),
             "mask": padded(np.ones((n, 1)), 0.0),
-            "k": {key: padded(v, 0.0 if key != "inv_sigma" else 1.0) for key, v in consts.items()},
+            "k": {key: padded(v, 1.0 if key == "inv_sigma" else 0.0) for key, v in consts.items()},
         }
         self.arrays = jax.tree_util.tree_map(jnp.asarray, arrays)
         self.n_chunks, self.chunk_rows = k, size
@@ -182,7 +182,6 @@ class Compiled:
         self.residuals = jax.jit(residuals)
         self.predict = jax.jit(predict)
         self.hessian = jax.jit(jax.hessian(cost))
-        self.lm: dict[str, Any] = {}
 
 
 _CACHE: dict[Any, Compiled] = {}

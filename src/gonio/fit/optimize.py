@@ -22,15 +22,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
 
-import jax
-import jax.numpy as jnp
 import nlopt
 import numpy as np
 
 from gonio.errors import FitError
-from gonio.fit.lm import CONVERGED_F, CONVERGED_X, STALLED, STATUS_TEXT, make_lm
+from gonio.fit.lm import CONVERGED_F, CONVERGED_X, STALLED, STATUS_TEXT, levenberg_marquardt
 from gonio.fit.objective import Problem
 
 LOCAL_METHODS = ("lm", "lbfgs", "slsqp")
@@ -70,40 +67,24 @@ class OptimResult:
 
 
 # -- LM ------------------------------------------------------------------------------------------
-def _lm_functions(problem: Problem) -> tuple[Any, Any]:
-    fns = problem.fns
-    if "single" not in fns.lm:
-        lm = make_lm(fns.cost_raw, fns.normal_raw)
-        fns.lm["single"] = jax.jit(lm)
-        fns.lm["multi"] = jax.jit(
-            jax.vmap(lm, in_axes=(0, None, None, None, None, None, None, None))
-        )
-    return fns.lm["single"], fns.lm["multi"]
-
-
 def run_lm(
     problem: Problem,
     u0: np.ndarray,
-    max_iter: int = 100,
+    max_iter: int = 200,
     ftol: float = 1e-10,
     xtol: float = 1e-9,
 ) -> tuple[np.ndarray, float, int, int]:
     """Levenberg–Marquardt from ``u0`` (P,) or from several starts (S, P), one after the other.
 
-    Returns ``(u, cost, n_iter, status)``; with several starts, arrays over starts. (Starts run
-    sequentially with the single compiled solver: a ``vmap``-ed while loop would compile a
-    second program and evaluate both branches of the accept test at every step.)
+    Returns ``(u, cost, n_iter, status)``; with several starts, arrays over starts.
     """
-    single, _ = _lm_functions(problem)
-    lo, hi = (jnp.asarray(b) for b in problem.layout.box())
+    lo, hi = problem.layout.box()
     u0 = np.asarray(u0, np.float64)
     starts = u0[None] if u0.ndim == 1 else u0
     outs = []
     for s in starts:
-        out = single(
-            jnp.asarray(s), problem.arrays, problem.layout.template, lo, hi, max_iter, ftol, xtol
-        )
-        outs.append((np.asarray(out.u), float(out.cost), int(out.it), int(out.status)))
+        r = levenberg_marquardt(problem.normal, s, lo, hi, max_iter, ftol, xtol)
+        outs.append((r.u, r.cost, r.it, r.status))
     if u0.ndim == 1:
         return outs[0]
     return tuple(np.array([o[i] for o in outs]) for i in range(4))  # type: ignore[return-value]
@@ -245,7 +226,12 @@ def optimize(
     t0 = time.perf_counter()
     if len(starts) > 1 or sub is not problem:
         if method == "lm":
-            us, costs, _, _ = run_lm(sub, starts, max_iter=max_iter)
+            # a few iterations from every start, then the two best to convergence
+            us, costs, _, _ = run_lm(sub, starts, max_iter=min(12, max_iter))
+            costs = np.where(np.isfinite(costs), costs, np.inf)
+            top = np.argsort(costs)[:2]
+            us2, costs2, _, _ = run_lm(sub, us[top], max_iter=max_iter)
+            us[top], costs[top] = us2, costs2
         else:
             runs = [run_nlopt(sub, s, method, maxeval=50 * max_iter) for s in starts]
             us = np.stack([r[0] for r in runs])
