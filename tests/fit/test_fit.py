@@ -107,12 +107,12 @@ def test_mcmc_discrepancy_widens_intervals_when_model_is_wrong():
     # reduced and MCMC with the discrepancy term both give intervals wider than the noise alone.
     data, _ = synthetic(
         models.Lambert(albedo=0.5) + TestLobe(rho_s=0.3, n=20.0),
-        n=400,
+        n=300,
         seed=2,
         rel_noise=0.001,
         abs_noise=1e-4,
     )
-    res = gf.fit(data, model=models.Lambert(), uncertainty="mcmc", mcmc_steps=600)
+    res = gf.fit(data, model=models.Lambert(), uncertainty="mcmc", mcmc_steps=400)
     assert res.uncertainty.diagnostics["discrepancy_s"][1] > 0.05
     naive = np.pi * np.sqrt(1 / np.sum(1 / data.sigma[:, 0] ** 2))
     assert res.uncertainty.std[0] > 10 * naive
@@ -212,13 +212,14 @@ def test_no_nan_gradients_at_extreme_parameters():
     lo, hi = lay.box()
     rng = np.random.default_rng(0)
     corners = [lo, hi] + [np.where(rng.uniform(size=lo.size) < 0.5, lo, hi) for _ in range(6)]
-    for name in ("wls", "ngan", "low-e1", "low-e2", "cube-root"):
+    for name in ("wls", "low-e1", "cube-root"):  # (ngan, low-e2: same operations)
         prob = Problem(lay, get_loss(name), data)
         for u in corners:
             v, g = prob.value_and_grad(u)
             assert np.isfinite(v) and np.all(np.isfinite(g)), (name, u)
-            _, gg, a = prob.normal(u)
-            assert np.all(np.isfinite(gg)) and np.all(np.isfinite(a))
+            if name == "wls":
+                _, gg, a = prob.normal(u)
+                assert np.all(np.isfinite(gg)) and np.all(np.isfinite(a))
 
 
 def test_unknown_names_give_one_line_errors():

@@ -112,3 +112,16 @@ def test_multistart_escapes_bad_template():
     vals = lay.values(res.u)
     assert vals["testlobe.n"] == pytest.approx(400.0, rel=0.1)
     assert res.converged
+
+
+def test_tied_parameters_follow_their_source():
+    tmpl = TestLobe(rho_s=0.2, n=10.0) + TestLobe(rho_s=0.1, n=99.0)
+    lay = Layout(tmpl, 1, tied={"testlobe2.n": "testlobe.n"})
+    assert lay.keys == ["testlobe.rho_s", "testlobe.n", "testlobe2.rho_s"]
+    assert float(lay.template.params()["testlobe2.n"]) == 10.0
+    u = lay.inverse({"testlobe.n": 42.0})
+    m = lay.model(u)
+    assert float(m.params()["testlobe2.n"]) == pytest.approx(42.0)
+    assert float(lay.to_model(jnp.asarray(u)).params()["testlobe2.n"]) == pytest.approx(42.0)
+    with pytest.raises(FitError, match="cannot tie"):
+        Layout(tmpl, 1, tied={"testlobe2.n": "testlobe2.n"})

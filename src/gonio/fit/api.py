@@ -41,12 +41,13 @@ def information_criteria(
     return base + 2 * n_par, base + n_par * math.log(m)
 
 
-def _resolve_model(model: str | BRDFModel) -> tuple[str, BRDFModel, dict[str, Any]]:
+def _resolve_model(
+    model: str | BRDFModel,
+) -> tuple[str, BRDFModel, dict[str, Any], dict[str, str]]:
     if isinstance(model, BRDFModel):
-        return type(model).__name__.lower(), model, {}
+        return type(model).__name__.lower(), model, {}, {}
     if isinstance(model, str):
-        tmpl, fixed = presets.build(model)
-        return model, tmpl, fixed
+        return (model, *presets.build(model))
     raise FitError(f"model must be a name or a gonio model, got {type(model).__name__}")
 
 
@@ -58,6 +59,7 @@ def fit(
     *,
     theta_max_deg: float = DEFAULT_THETA_MAX_DEG,
     fixed: Mapping[str, Any] | None = None,
+    tie: bool = True,
     channels: str = "shared",
     optimizer: str = "lm",
     global_method: str | None = None,
@@ -85,6 +87,8 @@ def fit(
     theta_max_deg : polar-angle cutoff for both directions, degrees (applied also to data that
         was already prepared with another cutoff).
     fixed : parameter keys held at given values (``{"ward.rho_d": 0.0}``).
+    tie : apply the named model's ties (isotropic Ward: ``alpha_y = alpha_x``); False fits
+        every parameter of the preset separately.
     channels : ``"shared"`` (lobe shapes shared, per-channel albedos) or ``"separate"`` (each
         channel fitted on its own; returns one result per channel).
     optimizer : local method ``"lm"``, ``"lbfgs"`` or ``"slsqp"``.
@@ -114,6 +118,7 @@ def fit(
     if not np.any(fd.values > 0):
         raise FitError(f"all {fd.values.size} measured values are <= 0: nothing to fit")
     kwargs = dict(
+        tie=tie,
         loss=loss,
         uncertainty=uncertainty,
         fixed=fixed,
@@ -149,6 +154,7 @@ def _fit_one(
     loss: str,
     uncertainty: str | None,
     fixed: Mapping[str, Any] | None,
+    tie: bool,
     optimizer: str,
     global_method: str | None,
     n_starts: int,
@@ -163,10 +169,11 @@ def _fit_one(
 ) -> FitResult:
     t0 = time.perf_counter()
     say = progress or (lambda s: None)
-    name, tmpl, preset_fixed = _resolve_model(model)
+    name, tmpl, preset_fixed, preset_tied = _resolve_model(model)
     all_fixed = {**preset_fixed, **dict(fixed or {})}
+    tied = {t: s for t, s in (preset_tied if tie else {}).items() if t not in all_fixed}
     try:
-        layout = Layout(tmpl, fd.channels, fixed=all_fixed)
+        layout = Layout(tmpl, fd.channels, fixed=all_fixed, tied=tied)
     except ParameterError as exc:
         raise FitError(f"{name}: {exc}") from None
     n_res = fd.n * fd.channels
@@ -227,6 +234,7 @@ def _fit_one(
         model=fitted,
         params=params,
         fixed=sorted(all_fixed),
+        tied=dict(layout.tied),
         flat_names=layout.flat_names(fd.channel_names),
         uncertainty=unc,
         metric=lo.name,

@@ -129,11 +129,15 @@ class Compiled:
     def __init__(self, layout: Layout, loss: Loss) -> None:
         entries = layout.entries
 
+        tied = dict(layout.tied)
+
         def to_model(u: Array, tmpl: Any) -> Any:
             parts = {}
             for e in entries:
                 v = layout._forward(e, u[e.offset : e.offset + e.size])
                 parts[e.key] = v if e.spec.per_channel else v[0]
+            for target, source in tied.items():
+                parts[target] = parts[source]
             return tmpl.replace(**parts)
 
         def chunk_res(u: Array, c: dict[str, Any], tmpl: Any) -> Array:
@@ -195,6 +199,7 @@ def compiled(layout: Layout, loss: Loss) -> Compiled:
             (e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.spec.per_channel)
             for e in layout.entries
         ),
+        tuple(layout.tied.items()),
         loss.name,
     )
     fns = _CACHE.get(key)

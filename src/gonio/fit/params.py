@@ -89,12 +89,31 @@ class Layout:
     model : template; its current values are the starting point and the values of fixed
         parameters.
     channels : number of data channels C; per-channel parameters get C values.
-    fixed : keys (as in ``model.params()``) held at the template's value.
+    fixed : keys (as in ``model.params()``) held at the given value (None: the template's).
+    tied : ``{target: source}``: the target parameter always equals the source (e.g. an
+        isotropic Ward fit ties ``alpha_y`` to ``alpha_x``); the target is not fitted.
     """
 
-    def __init__(self, model: BRDFModel, channels: int, fixed: Mapping[str, Any] | None = None):
+    def __init__(
+        self,
+        model: BRDFModel,
+        channels: int,
+        fixed: Mapping[str, Any] | None = None,
+        tied: Mapping[str, str] | None = None,
+    ):
         specs = model.param_specs()
         fixed = dict(fixed or {})
+        tied = dict(tied or {})
+        for target, source in tied.items():
+            if target not in specs or source not in specs or target == source:
+                raise FitError(f"cannot tie {target!r} to {source!r}")
+            if source in tied:
+                raise FitError(f"cannot tie {target!r} to {source!r}, which is itself tied")
+            if specs[target].per_channel != specs[source].per_channel:
+                raise FitError(f"cannot tie {target!r} to {source!r}: different shapes")
+            if source in fixed:
+                fixed[target] = fixed[source]
+        tied = {t: s for t, s in tied.items() if t not in fixed}
         unknown = sorted(set(fixed) - set(specs))
         if unknown:
             raise FitError(
@@ -108,7 +127,7 @@ class Layout:
         entries: list[Entry] = []
         offset = 0
         for key, spec in specs.items():
-            if key in fixed:
+            if key in fixed or key in tied:
                 continue
             size = self.channels if spec.per_channel else 1
             entries.append(_entry(key, spec, size, offset))
@@ -132,10 +151,13 @@ class Layout:
                     raise FitError(
                         f"{key} has {v.size} values but the data has {self.channels} channels"
                     )
+        for target, source in tied.items():
+            template_kw[target] = template_kw.get(source, current[source])
         self.template = model.replace(**template_kw) if template_kw else model
         self.entries = tuple(entries)
         self.size = offset
         self.fixed = tuple(sorted(fixed))
+        self.tied = dict(sorted(tied.items()))
 
     # -- names ----------------------------------------------------------------------------------
     @property
@@ -183,12 +205,18 @@ class Layout:
 
     def to_model(self, u: Array) -> BRDFModel:
         """The template with the fitted parameters replaced (works under jit/grad/vmap)."""
+        return self.template.replace(**self.kwargs(u))
+
+    def kwargs(self, u: Array) -> dict[str, Array]:
+        """``replace`` keyword arguments for ``u`` (fitted and tied keys; traceable)."""
         th = self.theta(u)
         kw = {}
         for e in self.entries:
             v = th[e.offset : e.offset + e.size]
             kw[e.key] = v if e.spec.per_channel else v[0]
-        return self.template.replace(**kw)
+        for target, source in self.tied.items():
+            kw[target] = kw[source]
+        return kw
 
     # -- NumPy side -----------------------------------------------------------------------------
     def inverse(self, values: Mapping[str, Any]) -> np.ndarray:
@@ -264,4 +292,6 @@ class Layout:
         vals = self.values(u)
         specs = {e.key: e.spec for e in self.entries}
         kw = {k: np.clip(v, specs[k].lower, specs[k].upper) for k, v in vals.items()}
+        for target, source in self.tied.items():
+            kw[target] = kw[source]
         return self.template.replace(**kw)

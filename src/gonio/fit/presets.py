@@ -69,8 +69,12 @@ def available() -> list[str]:
     return names
 
 
-def build(name: str) -> tuple[BRDFModel, dict[str, Any]]:
-    """Template model and fixed parameters for a model name.
+def build(name: str) -> tuple[BRDFModel, dict[str, Any], dict[str, str]]:
+    """Template model, fixed parameters and tied parameters for a model name.
+
+    Ward lobes are fitted isotropic (``alpha_y`` tied to ``alpha_x``): measurements of
+    isotropic materials (every table in the half-diff-iso parameterization) cannot tell the
+    two apart.
 
     Raises
     ------
@@ -82,15 +86,17 @@ def build(name: str) -> tuple[BRDFModel, dict[str, Any]]:
     if not parts or any(p not in lobes for p in parts):
         raise FitError(f"unknown model {name!r}; valid: {', '.join(available())}")
     built = [lobes[p]() for p in parts]
-    if len(built) == 1:
-        return built[0], {}
     model = built[0]
     for b in built[1:]:
         model = model + b
     fixed: dict[str, Any] = {}
-    if "lambert" in parts:
-        for key in model.param_specs():
-            lobe, _, pname = key.partition(".")
-            if pname == "rho_d" and not lobe.startswith("lambert"):
+    tied: dict[str, str] = {}
+    for key in model.param_specs():
+        head, _, pname = key.rpartition(".")
+        prefix = f"{head}." if head else ""
+        if pname == "alpha_y" and f"{prefix}alpha_x" in model.param_specs():
+            tied[key] = f"{prefix}alpha_x"
+        if len(built) > 1 and "lambert" in parts and pname == "rho_d":
+            if not head.startswith("lambert"):
                 fixed[key] = 0.0
-    return model, fixed
+    return model, fixed, tied

@@ -68,6 +68,7 @@ SCHEMA: dict[str, Any] = {
             "description": "fitted value per parameter key (lists for per-channel values)",
         },
         "fixed": {"type": "array", "items": {"type": "string"}},
+        "tied": {"type": "object", "additionalProperties": {"type": "string"}},
         "intervals": {
             "type": "object",
             "additionalProperties": _pair,
@@ -138,6 +139,7 @@ class FitResult:
     model : the fitted model.
     params : value per parameter key, fixed ones included.
     fixed : keys held fixed.
+    tied : ``{target: source}`` keys that equal another (their intervals are the source's).
     flat_names : names of the fitted scalar parameters (``"lambert.albedo[R]"``).
     uncertainty : Laplace or MCMC result, or None.
     metric, loss : the loss fitted and its reported value.
@@ -154,6 +156,7 @@ class FitResult:
     model: BRDFModel
     params: dict[str, Any]
     fixed: list[str]
+    tied: dict[str, str]
     flat_names: list[str]
     uncertainty: Uncertainty | None
     metric: str
@@ -198,6 +201,9 @@ class FitResult:
         arr = self.uncertainty.interval95 if level == 95 else self.uncertainty.interval68
         for key, v in self._by_key(arr).items():
             out[key] = [v[..., 0], v[..., 1]]
+        for target, source in self.tied.items():
+            if source in out:
+                out[target] = out[source]
         return out
 
     def to_json(self) -> dict[str, Any]:
@@ -213,6 +219,7 @@ class FitResult:
             "model_spec": self.model.to_dict(),
             "params": self.params,
             "fixed": self.fixed,
+            "tied": self.tied,
             "intervals": self.intervals(95),
             "intervals68": self.intervals(68),
             "std": self._by_key(None if unc is None else unc.std),
