@@ -112,3 +112,56 @@ def test_batch_resumes_after_interrupt(tmp_path, monkeypatch):
     res = json.loads((out / "m2" / "lambert.json").read_text())
     assert res["params"]["albedo"] == pytest.approx(0.4, abs=0.01)
     assert run_batch(paths, out, opts, jobs=1) == []  # all done: nothing to do
+
+
+def _native_files(folder, n=2):
+    """Small native tables written with gonio.io (skips when io cannot save yet)."""
+    gio = pytest.importorskip("gonio.io")
+    if not hasattr(gio, "save"):
+        pytest.skip("gonio.io.save not available")
+    from gonio.brdf.tabulated import Axis, TabulatedBRDF
+
+    axes = (
+        Axis("theta_h", 12, 0, np.pi / 2, warp="sqrt"),
+        Axis("theta_d", 12, 0, np.pi / 2),
+        Axis("phi_d", 12, 0, np.pi, periodic=True),
+    )
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in range(n):
+        model = models.Phong(rho_d=[0.1 + 0.1 * i] * 3, rho_s=0.3, n=40.0 + 20 * i)
+        p = folder / f"mat{i}.brdf.h5"
+        gio.save(TabulatedBRDF.from_model(model, axes=axes), p)
+        paths.append(p)
+    return paths
+
+
+def test_cli_single_file_writes_results_and_plots(tmp_path, capsys):
+    (path,) = _native_files(tmp_path / "in", n=1)
+    out = tmp_path / "out"
+    rc = main(["fit", str(path), "-m", "phong", "-m", "lambert", "--uncertainty", "laplace",
+               "--out", str(out), "--json"])  # fmt: skip
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["recommended"] == "phong"
+    from gonio.fit import load_model
+
+    m = load_model(out / "phong.json")
+    assert float(m.params()["n"]) == pytest.approx(40.0, rel=1e-3)
+    for name in ("phong-residuals.png", "phong-slices.png", "phong-corner.png", "summary.json"):
+        assert (out / name).stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_batch_process_pool_and_dask_local_cluster(tmp_path):
+    paths = _native_files(tmp_path / "in", n=2)
+    opts = {"models": ["phong"], "fit": {"n_starts": 2}, "plots": False}
+    res = run_batch(paths, tmp_path / "pool", opts, jobs=2)
+    assert sorted(s["material"] for s in res) == ["mat0", "mat1"]
+    assert all(s["status"] == "ok" for s in res)
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True) as cluster:
+        res = run_batch(paths, tmp_path / "dask", opts, scheduler=cluster.scheduler_address)
+    assert sorted(s["material"] for s in res) == ["mat0", "mat1"]
+    assert all(s["status"] == "ok" for s in res)
+    assert (tmp_path / "dask" / "mat1" / "phong.json").exists()
