@@ -68,7 +68,7 @@ def fit(
     subsample: int = 4000,
     max_iter: int = 200,
     laplace_method: str = "gauss-newton",
-    mcmc_steps: int = 1500,
+    mcmc_steps: int = 2000,
     mcmc_samples: int = 3000,
     name: str | None = None,
     progress: Callable[[str], None] | None = None,

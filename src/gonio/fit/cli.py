@@ -101,9 +101,9 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--mcmc-steps",
         type=int,
-        default=1500,
+        default=2000,
         metavar="N",
-        help="MCMC steps per walker (default 1500)",
+        help="MCMC steps per walker (default 2000)",
     )
     p.add_argument(
         "--out",

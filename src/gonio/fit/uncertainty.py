@@ -12,8 +12,8 @@ Laplace
     Standard deviations and correlations in physical units use the delta method.
 
 MCMC
-    emcee's affine-invariant ensemble sampler on ``u`` plus nuisance parameters of the noise
-    model, with a vectorized (``jit`` + ``vmap``) log-probability. Likelihood, per value::
+    emcee's ensemble sampler (differential-evolution moves) on ``u`` plus nuisance parameters
+    of the noise model, with a vectorized (``jit`` + ``vmap``) log-probability. Likelihood, per value::
 
         y_nc ~ Normal(f_nc, sigma_nc^2 + (s f_nc)^2 + tau^2)
 
@@ -207,7 +207,7 @@ def mcmc(
     problem: Problem,
     u: np.ndarray,
     n_walkers: int | None = None,
-    n_steps: int = 1500,
+    n_steps: int = 2000,
     burn: int | None = None,
     max_samples: int = 3000,
     seed: int = 0,
@@ -270,7 +270,10 @@ def mcmc(
     walkers = x0 + spread * rng.standard_normal((n_walkers, ndim))
     walkers = np.clip(walkers, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
-    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True)
+    # differential-evolution proposals: about half the autocorrelation time of the default
+    # stretch move on these posteriors (measured: tau 33 vs 72 steps, Lambert + Phong)
+    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, moves=moves)
     rstate = np.random.RandomState(int(seed) % (2**31)).get_state()
     # burn-in from the Laplace ball; walkers stranded far below the best (a bad start in a
     # multimodal or box-edge region) are moved onto copies of good ones before the main run
