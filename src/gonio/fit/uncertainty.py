@@ -13,7 +13,8 @@ Laplace
 
 MCMC
     emcee's ensemble sampler (differential-evolution moves) on ``u`` plus nuisance parameters
-    of the noise model, with a vectorized (``jit`` + ``vmap``) log-probability. Likelihood, per value::
+    of the noise model, with a vectorized (``jit`` + ``vmap``) log-probability. Likelihood,
+    per value::
 
         y_nc ~ Normal(f_nc, sigma_nc^2 + (s f_nc)^2 + tau^2)
 
