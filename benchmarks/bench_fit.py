@@ -69,7 +69,22 @@ def _write_csv(name: str, rows: list[dict[str, Any]]) -> Path:
         w.writeheader()
         w.writerows(rows)
     print(f"wrote {path}")
+    _print_markdown(rows, keys)
     return path
+
+
+def _print_markdown(rows: list[dict[str, Any]], keys: list[str]) -> None:
+    """The rows as a Markdown table (numbers to 4 significant digits)."""
+
+    def fmt(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v).replace("|", "/")
+
+    print("| " + " | ".join(keys) + " |")
+    print("|" + "---|" * len(keys))
+    for r in rows[:60]:
+        print("| " + " | ".join(fmt(r.get(k, "")) for k in keys) + " |")
 
 
 def _directions(n: int, rng: np.random.Generator) -> np.ndarray:
