@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -114,7 +115,12 @@ def fit(
     if channels not in ("shared", "separate"):
         raise FitError(f"channels must be 'shared' or 'separate', got {channels!r}")
     get_loss(loss)
-    fd = prepare(data, theta_max_deg, name=name)
+    if isinstance(data, FitData) and data.source.get("theta_max_deg") == float(theta_max_deg):
+        fd = data  # already validated with this cutoff
+        if name is not None:
+            fd = dataclasses.replace(fd, source={**fd.source, "name": name})
+    else:
+        fd = prepare(data, theta_max_deg, name=name)
     if not np.any(fd.values > 0):
         raise FitError(f"all {fd.values.size} measured values are <= 0: nothing to fit")
     kwargs = dict(

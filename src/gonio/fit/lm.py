@@ -12,7 +12,7 @@ on 1e6 samples: XLA copies the loop-invariant data through the loop and its bran
 Step: solve ``(A + lam * D) delta = -g`` with Marquardt's scaling ``D = diag(A)`` (floored),
 project ``u + delta`` onto the box, accept when the gain ratio (actual over predicted decrease)
 exceeds 1e-4, and update ``lam`` with Nielsen's rule. Stops when an accepted step lowers the
-loss by less than ``ftol`` relatively, when a step is shorter than ``xtol`` relative to ``|u|``,
+loss by less than ``ftol`` relatively or the next step is predicted to, when a step is shorter than ``xtol`` relative to ``|u|``,
 when ``lam`` exceeds 1e14, or after ``max_iter`` accepted steps.
 """
 
@@ -47,6 +47,25 @@ class LMResult:
     history: list[float]
 
 
+def _step(g: np.ndarray, a: np.ndarray, lam: float) -> np.ndarray:
+    d = np.diag(a).copy()
+    d = np.maximum(d, 1e-12 * max(float(d.max(initial=0.0)), 1e-300))
+    h = a + lam * np.diag(d)
+    try:
+        delta = np.linalg.solve(h, -g)
+    except np.linalg.LinAlgError:
+        delta = np.linalg.lstsq(h, -g, rcond=None)[0]
+    return np.where(np.isfinite(delta), delta, 0.0)
+
+
+def _next_gain(
+    u: np.ndarray, g: np.ndarray, a: np.ndarray, lam: float, lo: np.ndarray, hi: np.ndarray
+) -> float:
+    """Decrease of the quadratic model predicted for the next (projected) step."""
+    step = np.clip(u + _step(g, a, lam), lo, hi) - u
+    return float(-(2.0 * g @ step + step @ a @ step))
+
+
 def levenberg_marquardt(
     normal: Normal,
     u0: np.ndarray,
@@ -68,15 +87,7 @@ def levenberg_marquardt(
     if not np.isfinite(cost):
         return LMResult(u, cost, 0, n_eval, STALLED, history)
     while it < max_iter:
-        d = np.diag(a).copy()
-        d = np.maximum(d, 1e-12 * max(float(d.max(initial=0.0)), 1e-300))
-        h = a + lam * np.diag(d)
-        try:
-            delta = np.linalg.solve(h, -g)
-        except np.linalg.LinAlgError:
-            delta = np.linalg.lstsq(h, -g, rcond=None)[0]
-        delta = np.where(np.isfinite(delta), delta, 0.0)
-        u_new = np.clip(u + delta, lo, hi)
+        u_new = np.clip(u + _step(g, a, lam), lo, hi)
         step = u_new - u
         small_step = np.linalg.norm(step) <= xtol * (np.linalg.norm(u) + xtol)
         if small_step:
@@ -94,7 +105,8 @@ def levenberg_marquardt(
             converged = actual <= ftol * cost
             u, cost, g, a = u_new, c_new, g_new, a_new
             it += 1
-            if converged:
+            if converged or _next_gain(u, g, a, lam, lo, hi) <= ftol * cost:
+                # (the second test saves a pass: the next step could not gain more than ftol)
                 status = CONVERGED_F
                 break
         else:
