@@ -12,8 +12,9 @@ on 1e6 samples: XLA copies the loop-invariant data through the loop and its bran
 Step: solve ``(A + lam * D) delta = -g`` with Marquardt's scaling ``D = diag(A)`` (floored),
 project ``u + delta`` onto the box, accept when the gain ratio (actual over predicted decrease)
 exceeds 1e-4, and update ``lam`` with Nielsen's rule. Stops when an accepted step lowers the
-loss by less than ``ftol`` relatively or the next step is predicted to, when a step is shorter than ``xtol`` relative to ``|u|``,
-when ``lam`` exceeds 1e14, or after ``max_iter`` accepted steps.
+loss by less than ``ftol`` relatively or the next step is predicted to, when a step is
+shorter than ``xtol`` relative to ``|u|``, when ``lam`` exceeds 1e14, or after ``max_iter``
+accepted steps.
 """
 
 from __future__ import annotations
