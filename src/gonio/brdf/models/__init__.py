@@ -10,6 +10,7 @@ from gonio.brdf.models.blinn_phong import BlinnPhong
 from gonio.brdf.models.lambert import Lambert
 from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
+from gonio.brdf.models.ward import Ward
 
 __all__ = [
     "BRDFModel",
@@ -21,5 +22,6 @@ __all__ = [
     "Param",
     "Phong",
     "Sum",
+    "Ward",
     "registry",
 ]
