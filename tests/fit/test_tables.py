@@ -69,7 +69,7 @@ def test_every_preset_recovers_its_own_table(name):
             continue
         v = np.asarray(tmpl.params()[k], float)
         kw[k] = v * 1.5 if spec.scale == "log" else np.clip(v * 0.8 + 0.05, spec.lower, spec.upper)
-    truth = tmpl.replace(**kw)
+    truth = tmpl.replace(**kw, **{t: kw[src] for t, src in tied.items()})
     table = TabulatedBRDF.from_model(truth, axes=AXES)
     res = gf.fit(table, model=name, loss="ngan")
     for k, v in kw.items():

@@ -99,4 +99,6 @@ def build(name: str) -> tuple[BRDFModel, dict[str, Any], dict[str, str]]:
         if len(built) > 1 and "lambert" in parts and pname == "rho_d":
             if not head.startswith("lambert"):
                 fixed[key] = 0.0
+    if fixed:
+        model = model.replace(**fixed)
     return model, fixed, tied
