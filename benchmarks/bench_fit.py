@@ -350,7 +350,10 @@ def real(model_names: list[str] | None = None) -> None:
     except (ImportError, AttributeError):
         print("real: gonio.io.load is not available; skipped")
         return
-    names = model_names or [m for m in presets.available() if m != "ts"]
+    names = model_names or [
+        m for m in ("lambert", "oren-nayar", "phong", "ward", "torrance-sparrow", "lambert+ward",
+                    "lambert+ts") if m in presets.available()
+    ]  # fmt: skip
     files = sorted(
         p for sub in ("cornell", "rgl", "alta") for p in (SHARED / sub).glob("*")
         if p.suffix in (".brdf", ".bsdf", ".alta", ".dat")
