@@ -239,7 +239,10 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         json.dump(summary, sys.stdout, indent=2)
         sys.stdout.write("\n")
     else:
-        _print_table(Console(), summary, data.source.get("name") or path.name, results)
+        out_console = Console()
+        if not out_console.is_terminal:  # piped: do not squeeze the table into 80 columns
+            out_console = Console(width=120)
+        _print_table(out_console, summary, data.source.get("name") or path.name, results)
     return 0
 
 
@@ -248,17 +251,17 @@ def _print_table(console: Any, summary: dict[str, Any], title: str, results: lis
 
     t = Table(title=f"{title}: {summary['table'][0]['metric']} fit")
     for col in ("model", "params", "loss", "chi2/dof", "BIC", "dBIC", "ngan", "low-e1", "ok"):
-        t.add_column(col, justify="right" if col not in ("model",) else "left")
+        t.add_column(col, justify="left" if col == "model" else "right", no_wrap=True)
     for row in summary["table"]:
         t.add_row(
             row["model"],
             str(row["n_params"]),
-            f"{row['loss']:.5g}",
-            f"{row['chi2_dof']:.4g}",
-            f"{row['bic']:.6g}",
+            f"{row['loss']:.4g}",
+            f"{row['chi2_dof']:.3g}",
+            f"{row['bic']:.5g}",
             f"{row['delta_bic']:.1f}",
-            f"{row['metrics']['ngan']:.4g}",
-            f"{row['metrics']['low-e1']:.4g}",
+            f"{row['metrics']['ngan']:.3g}",
+            f"{row['metrics']['low-e1']:.3g}",
             "yes" if row["converged"] else "NO",
         )
     console.print(t)
