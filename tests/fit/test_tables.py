@@ -75,3 +75,28 @@ def test_every_preset_recovers_its_own_table(name):
     res = gf.fit(table, model=name, loss="ngan")
     for k, v in kw.items():
         np.testing.assert_allclose(res.params[k], v, rtol=0.02, atol=2e-3, err_msg=k)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", presets.available())
+def test_no_nan_gradients_at_box_corners_for_every_preset(name):
+    import jax.numpy as jnp  # noqa: F401  (x64 already on)
+
+    from gonio.fit.losses import get_loss
+    from gonio.fit.objective import Problem
+    from gonio.fit.params import Layout
+    from tests.fit.synth import synthetic
+
+    tmpl, fixed, tied = presets.build(name)
+    data, _ = synthetic(models.Lambert(albedo=[0.3, 0.3, 0.3]), n=300, seed=1)
+    lay = Layout(tmpl, 3, fixed=fixed, tied=tied)
+    lo, hi = lay.box()
+    rng = np.random.default_rng(0)
+    corners = [lo, hi] + [np.where(rng.uniform(size=lo.size) < 0.5, lo, hi) for _ in range(6)]
+    for loss in ("wls", "low-e1"):
+        prob = Problem(lay, get_loss(loss), data)
+        for u in corners:
+            v, g = prob.value_and_grad(u)
+            assert np.isfinite(v) and np.all(np.isfinite(g)), (loss, u)
+            _, gg, a = prob.normal(u)
+            assert np.all(np.isfinite(gg)) and np.all(np.isfinite(a)), (loss, u)
