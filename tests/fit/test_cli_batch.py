@@ -112,6 +112,10 @@ def test_batch_resumes_after_interrupt(tmp_path, monkeypatch):
     res = json.loads((out / "m2" / "lambert.json").read_text())
     assert res["params"]["albedo"] == pytest.approx(0.4, abs=0.01)
     assert run_batch(paths, out, opts, jobs=1) == []  # all done: nothing to do
+    # asking for another model redoes the materials (keeping finished model files)
+    more = run_batch(paths, out, {**opts, "models": ["lambert", "oren-nayar"]}, jobs=1)
+    assert [s["material"] for s in more] == ["m0", "m1", "m2"]
+    assert (out / "m0" / "oren-nayar.json").exists()
 
 
 def _native_files(folder, n=2):

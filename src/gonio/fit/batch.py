@@ -140,11 +140,18 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
         }
 
 
-def pending(paths: Iterable[Path], out_dir: Path) -> tuple[list[Path], list[Path]]:
-    """Split ``paths`` into (to do, already done) by the presence of ``summary.json``."""
+def pending(
+    paths: Iterable[Path], out_dir: Path, models: Sequence[str] = ()
+) -> tuple[list[Path], list[Path]]:
+    """Split ``paths`` into (to do, already done): done means ``summary.json`` exists and so
+    does the result of every model in ``models`` (a rerun asking for a new model redoes the
+    material)."""
     todo, done = [], []
     for p in paths:
-        (done if (out_dir / material_name(p) / "summary.json").exists() else todo).append(p)
+        folder = out_dir / material_name(p)
+        ok = (folder / "summary.json").exists()
+        ok = ok and all((folder / f"{safe_stem(m)}.json").exists() for m in models)
+        (done if ok else todo).append(p)
     return todo, done
 
 
@@ -182,7 +189,9 @@ def run_batch(
     dup = {n for n in names if names.count(n) > 1}
     if dup:
         raise FitError(f"several inputs share the material name(s) {', '.join(sorted(dup))}")
-    todo, _ = pending(paths, out)
+    plain = [m for m in options.get("models", ()) if isinstance(m, str)]
+    separate = options.get("fit", {}).get("channels") == "separate"
+    todo, _ = pending(paths, out, () if separate else plain)
     summaries: list[dict[str, Any]] = []
 
     def finish(s: dict[str, Any]) -> None:

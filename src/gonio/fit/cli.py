@@ -278,7 +278,8 @@ def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any)
     from gonio.fit.batch import pending, run_batch
 
     console = Console(stderr=True)
-    todo, done = pending(paths, out)
+    separate = options["fit"].get("channels") == "separate"
+    todo, done = pending(paths, out, () if separate else options["models"])
     if done and not args.json:
         console.print(f"{len(done)} of {len(paths)} materials already done in {out}; resuming")
     failures = []
