@@ -279,7 +279,8 @@ def mcmc(
     # burn-in from the Laplace ball; walkers stranded far below the best (a bad start in a
     # multimodal or box-edge region) are moved onto copies of good ones before the main run
     n_burn = max(n_steps // 4, 100)
-    state = sampler.run_mcmc(walkers, n_burn, progress=False, rstate0=rstate)
+    start = emcee.State(walkers, random_state=rstate)
+    state = sampler.run_mcmc(start, n_burn, progress=False)
     lp = state.log_prob
     good = np.flatnonzero(lp > np.max(lp) - 10.0 * ndim)
     coords = state.coords.copy()
@@ -289,7 +290,7 @@ def mcmc(
             (bad.size, ndim)
         )
     sampler.reset()
-    sampler.run_mcmc(coords, n_steps, progress=False, rstate0=state.random_state)
+    sampler.run_mcmc(emcee.State(coords, random_state=state.random_state), n_steps, progress=False)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
