@@ -31,19 +31,22 @@ def load_fit_model(path: str | Path) -> Any:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise FormatError(f"{path}: not valid JSON ({exc})") from None
+    # A fit result keeps the description under "model_spec" ("model" is the preset's name);
+    # a bare to_dict() (or {"model": {...}}) is accepted too.
     desc = doc
     if isinstance(doc, dict) and "type" not in doc:
-        desc = doc.get("model")
-        if isinstance(desc, dict) and "type" not in desc and isinstance(desc.get("model"), dict):
-            desc = desc["model"]
+        desc = doc.get("model_spec", doc.get("model"))
     if not isinstance(desc, dict) or "type" not in desc:
-        raise FormatError(f"{path}: no model description (expected a 'model' object)")
+        raise FormatError(f"{path}: no model description (expected a 'model_spec' object)")
     try:
-        return Node.from_dict(desc)
+        model = Node.from_dict(desc)
     except ParameterError as exc:
         raise FormatError(f"{path}: {exc}") from None
     except (TypeError, ValueError, KeyError) as exc:
         raise FormatError(f"{path}: bad model description ({exc})") from None
+    if not hasattr(model, "sample") or not hasattr(model, "f"):
+        raise FormatError(f"{path}: describes a {type(model).__name__}, not a BRDF model")
+    return model
 
 
 def load_table(path: str | Path) -> Any:

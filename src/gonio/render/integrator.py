@@ -152,7 +152,9 @@ class _Technique:
     light_sampling: bool
 
 
-def resolve_sampler(material: Any, sampler: str, mis: bool | None) -> _Technique:
+def resolve_sampler(
+    material: Any, sampler: str, mis: bool | None, proposal: Any = None
+) -> _Technique:
     """Check ``sampler`` against the material and return the technique to run."""
     if sampler not in SAMPLERS:
         raise ParameterError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
@@ -171,7 +173,16 @@ def resolve_sampler(material: Any, sampler: str, mis: bool | None) -> _Technique
         )
     if sampler == "cosine" and _has_delta(material):
         raise ParameterError("sampler='cosine' cannot find the delta lobes of this material")
-    if sampler in ("auto", "mis", "brdf"):
+    if proposal is not None:
+        if not table:
+            raise ParameterError("proposal= applies to tabulated BRDFs only")
+        if not isinstance(proposal, BRDFModel) or _has_delta(proposal):
+            raise ParameterError("proposal must be an analytic BRDF model without delta lobes")
+        if sampler not in ("brdf", "rejection"):
+            raise ParameterError("proposal= is used by sampler='brdf' (lobe) or 'rejection'")
+    if sampler == "brdf" and table and proposal is not None:
+        kind = "lobe"
+    elif sampler in ("auto", "mis", "brdf"):
         kind = "inversion" if table else "model"
     else:
         kind = sampler
@@ -217,9 +228,9 @@ def _model_ops(model: BRDFModel, kind: str):
     return f, pdf, sample
 
 
-def _table_ops(table: Any, kind: str, rng: np.random.Generator):
+def _table_ops(table: Any, kind: str, rng: np.random.Generator, proposal: Any = None):
     def f(wi, wo):
-        return jnp.asarray(table.f(np.asarray(wi), np.asarray(wo)), jnp.float32)
+        return jnp.asarray(table.f(wi, wo), jnp.float32)
 
     if kind == "cosine":
 
@@ -229,20 +240,39 @@ def _table_ops(table: Any, kind: str, rng: np.random.Generator):
         def sample(wo, u):
             return _cos_sample(f, wo, u)
 
-    else:
+    elif kind == "lobe":
+        # The table sampled by an analytic model's own sampler (for instance its fit):
+        # directions and density from the model, values from the table.
 
         def pdf(wi, wo):
-            p = table.pdf(np.asarray(wi), np.asarray(wo), method=kind)
-            return jnp.asarray(p, jnp.float32)
+            return jnp.asarray(proposal.pdf(wi, wo), jnp.float32)
 
         def sample(wo, u):
-            u_np = np.asarray(u)
-            wo_np = np.broadcast_to(np.asarray(wo), (*u_np.shape[:-1], 3))
-            s = table.sample(wo_np, u_np, method=kind, rng=rng)
-            delta = getattr(s, "delta", None)
+            s = proposal.sample(wo, u)
             wi = jnp.asarray(s.wi, jnp.float32)
+            p = jnp.asarray(s.pdf, jnp.float32)
+            ok = p > 0
+            weight = (
+                f(wi, wo)
+                * jnp.where(ok, jnp.maximum(wi[..., 2], 0.0) / jnp.where(ok, p, 1.0), 0.0)[
+                    ..., None
+                ]
+            )
+            return wi, p, weight, jnp.zeros(p.shape, bool)
+
+    else:
+        extra = {} if proposal is None else {"proposal": proposal}
+
+        def pdf(wi, wo):
+            return jnp.asarray(table.pdf(wi, wo, method=kind, **extra), jnp.float32)
+
+        def sample(wo, u):
+            wo = jnp.broadcast_to(jnp.asarray(wo), (*u.shape[:-1], 3))
+            s = table.sample(wo, u, method=kind, rng=rng, **extra)
+            wi = jnp.asarray(s.wi, jnp.float32)
+            delta = getattr(s, "delta", None)
             if delta is None:
-                delta = np.zeros(wi.shape[:-1], dtype=bool)
+                delta = jnp.zeros(wi.shape[:-1], dtype=bool)
             return (
                 wi,
                 jnp.asarray(s.pdf, jnp.float32),
@@ -282,14 +312,16 @@ def _light_stage(lights: tuple[Light, ...], position: Array, frame: Array, u: Ar
     return out
 
 
-def _shade_light(light_samples, f_vals, brdf_pdfs, weights, mis: bool):
+def _shade_light(lights, light_samples, f_vals, brdf_pdfs, weights, mis: bool):
     """Sum over lights of f L cos / pdf (times the MIS weight); (P, S, C)."""
     total = 0.0
-    for (wi, value, pdf), f, pb in zip(light_samples, f_vals, brdf_pdfs, strict=True):
+    for light, (wi, value, pdf), f, pb in zip(
+        lights, light_samples, f_vals, brdf_pdfs, strict=True
+    ):
         cos = jnp.maximum(wi[..., 2], 0.0)
         ok = pdf > 0
         c = f * value * jnp.where(ok, cos / jnp.where(ok, pdf, 1.0), 0.0)[..., None]
-        if mis:
+        if mis and not light.is_delta:
             c = c * _power(pdf, pb)[..., None]
         total = total + c
     return total * weights[None, :, None]
@@ -329,7 +361,7 @@ def _model_tile(
         ls = _light_stage(lights, position, frame, u)
         fv = [f(wi, wo_s) for wi, _, _ in ls]
         pb = [pdf(wi, wo_s) if mis else None for wi, _, _ in ls]
-        total = total + _shade_light(ls, fv, pb, weights, mis)
+        total = total + _shade_light(lights, ls, fv, pb, weights, mis)
     if kind != "none":
         total = total + _shade_brdf(lights, position, frame, sample(wo_s, u[..., :2]), mis, weights)
     return jnp.sum(total, axis=1)
@@ -343,8 +375,8 @@ _light_stage_jit = jax.jit(
 
 
 @functools.partial(jax.jit, static_argnames=("mis",))
-def _table_light_sum(ls, fv, pb, weights, *, mis):
-    return jnp.sum(_shade_light(ls, fv, pb, weights, mis), axis=1)
+def _table_light_sum(lights, ls, fv, pb, weights, *, mis):
+    return jnp.sum(_shade_light(lights, ls, fv, pb, weights, mis), axis=1)
 
 
 @functools.partial(jax.jit, static_argnames=("mis",))
@@ -428,6 +460,8 @@ def render_sphere(
     tile_samples: int = DEFAULT_TILE_SAMPLES,
     progress: Callable[[int, int], None] | None = None,
     stats: RenderStats | None = None,
+    proposal: Any = None,
+    optimize: bool = True,
 ) -> np.ndarray:
     """Render the unit sphere made of ``material``: linear radiance, float32 ``(H, W, C)``.
 
@@ -449,6 +483,15 @@ def render_sphere(
     tile_samples : pixels x samples per kernel call (memory bound).
     progress : called as ``progress(done, total)`` after each tile.
     stats : filled with counts of what was done.
+    proposal : tables only: an analytic model (typically the table's fit). With
+        ``sampler="brdf"`` the table is sampled by the model's own sampler ("analytic lobe"
+        sampling: directions and pdf from the model, values from the table); with
+        ``sampler="rejection"`` it is the rejection sampler's proposal instead of cosine.
+    optimize : for benchmarks only: ``False`` turns off every shortcut that skips work a scene
+        does not need (pixels that miss the sphere are shaded and thrown away, delta lights are
+        sampled ``spp`` times with BRDF samples wasted on them, the environment importance map
+        is built even when unused, all channels are rendered and then cut). The image is the
+        same up to noise.
 
     Returns
     -------
@@ -461,7 +504,7 @@ def render_sphere(
     spp = int(spp)
     c_mat = material_channels(material)
     idx = _channel_index(material, channels, max(c_mat, *(lt.channels for lt in lights)))
-    if idx is not None:
+    if idx is not None and optimize:
         if c_mat > 1:
             material = (
                 restrict_model_channels(material, idx)
@@ -470,39 +513,63 @@ def render_sphere(
             )
         lights = [lt.with_channels(idx) for lt in lights]
         c_mat = material_channels(material)
+    tech = resolve_sampler(material, sampler, mis, proposal)
+    if _is_table(material) and tech.kind not in ("none", "cosine", "lobe", *TABLE_METHODS):
+        raise ParameterError(f"tables are sampled by {TABLE_METHODS}; got {tech.kind!r}")
     c_out = _output_channels(c_mat, lights)
-    tech = resolve_sampler(material, sampler, mis)
 
     hits = intersect_sphere(resolution, camera)
     stats = stats if stats is not None else RenderStats()
     stats.pixels = hits.count
     h, w = hits.shape
-    out = np.zeros((hits.count, c_out), dtype=np.float64)
-    if hits.count == 0:
-        return np.zeros((h, w, c_out), np.float32)
+    n_hit = hits.count
+    if n_hit == 0:
+        return np.zeros((h, w, c_out if idx is None else len(idx)), np.float32)
+    if not optimize:
+        # No early-out: shade as many pixels as the image has (misses get a copy of a hit's
+        # geometry, which costs the same) and keep only the real hits afterwards.
+        hits = _padded_hits(hits, h * w)
+        stats.pixels = h * w
 
-    delta_lights = tuple(lt for lt in lights if lt.is_delta)
-    area_lights = tuple(lt for lt in lights if not lt.is_delta)
-    table = _is_table(material)
-    if table and tech.kind not in ("none", "cosine") and tech.kind not in TABLE_METHODS:
-        raise ParameterError(f"tables are sampled by {TABLE_METHODS}; got {tech.kind!r}")
+    out = np.zeros((hits.count, c_out), dtype=np.float64)
+    if optimize:
+        delta_lights = tuple(lt for lt in lights if lt.is_delta)
+        area_lights = tuple(lt for lt in lights if not lt.is_delta)
+    else:
+        delta_lights, area_lights = (), tuple(lights)
 
     # Delta lights: exact, one evaluation per pixel.
     if delta_lights:
         out += _render_delta(material, delta_lights, hits, tile_samples, stats)
 
     if area_lights:
-        if tech.light_sampling:
+        if tech.light_sampling or not optimize:
             area_lights = tuple(
                 lt.importance() if isinstance(lt, Environment) else lt for lt in area_lights
             )
             stats.env_maps_built = sum(isinstance(lt, Environment) for lt in area_lights)
         out += _render_area(
-            material, area_lights, hits, spp, tech, seed, tile_samples, progress, stats
+            material, area_lights, hits, spp, tech, seed, tile_samples, progress, stats, proposal
         )
     elif progress is not None:
         progress(1, 1)
-    return hits.scatter(out.astype(np.float32))
+    out = out[:n_hit]
+    if idx is not None and not optimize:
+        out = out[..., idx] if out.shape[-1] > 1 else out
+    return SphereHits(
+        hits.shape, hits.index[:n_hit], hits.position[:n_hit], hits.frame[:n_hit], hits.wo[:n_hit]
+    ).scatter(out.astype(np.float32))
+
+
+def _padded_hits(hits: SphereHits, n: int) -> SphereHits:
+    reps = np.resize(np.arange(hits.count), n)
+    return SphereHits(
+        hits.shape,
+        np.concatenate([hits.index, np.zeros(n - hits.count, hits.index.dtype)]),
+        hits.position[reps],
+        hits.frame[reps],
+        hits.wo[reps],
+    )
 
 
 def _tiles(n: int, size: int):
@@ -539,7 +606,9 @@ def _render_delta(material, lights, hits: SphereHits, tile_samples, stats) -> np
     return np.concatenate(out, 0)
 
 
-def _render_area(material, lights, hits, spp, tech, seed, tile_samples, progress, stats):
+def _render_area(
+    material, lights, hits, spp, tech, seed, tile_samples, progress, stats, proposal=None
+):
     n_pix = hits.count
     dims = 2 + 2 * len(lights)
     sobol = _sobol(spp, dims, seed)
@@ -594,7 +663,7 @@ def _render_area(material, lights, hits, spp, tech, seed, tile_samples, progress
                     light_sampling=tech.light_sampling,
                 )
             else:
-                r = _table_tile(material, lights_t, pos, frame, wo, sb, sh, wb, tech, rng)
+                r = _table_tile(material, lights_t, pos, frame, wo, sb, sh, wb, tech, rng, proposal)
             pending.append((a, b, r))
             drain(IN_FLIGHT)
             stats.calls += 1
@@ -607,8 +676,10 @@ def _out_c(material, lights) -> int:
     return _output_channels(material_channels(material), lights)
 
 
-def _table_tile(table, lights, pos, frame, wo, sob, shift, weights, tech: _Technique, rng):
-    f, pdf, sample = _table_ops(table, tech.kind, rng)
+def _table_tile(
+    table, lights, pos, frame, wo, sob, shift, weights, tech: _Technique, rng, proposal=None
+):
+    f, pdf, sample = _table_ops(table, tech.kind, rng, proposal)
     u = _uniforms(sob, shift)
     wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
     total = 0.0
@@ -616,7 +687,7 @@ def _table_tile(table, lights, pos, frame, wo, sob, shift, weights, tech: _Techn
         ls = _light_stage_jit(lights, pos, frame, sob, shift)
         fv = [f(wi, wo_s) for wi, _, _ in ls]
         pb = [pdf(wi, wo_s) if tech.mis else None for wi, _, _ in ls]
-        total = total + _table_light_sum(ls, fv, pb, weights, mis=tech.mis)
+        total = total + _table_light_sum(lights, ls, fv, pb, weights, mis=tech.mis)
     if tech.kind != "none":
         brdf = sample(wo_s, u[..., :2])
         total = total + _table_brdf_sum(lights, pos, frame, brdf, weights, mis=tech.mis)

@@ -1,7 +1,7 @@
 """Image output: linear OpenEXR, tone-mapped sRGB PNG. Every file is written atomically.
 
 Linear radiance images are ``(H, W, C)`` float32. EXR keeps them as they are (channels ``R, G, B``
-for three channels, ``Y`` for one, ``C0 ... C{n-1}`` otherwise). The PNG is for people: an
+for three channels, ``Y`` for one, ``c0 ... c{n-1}`` otherwise). The PNG is for people: an
 exposure (by default the one that maps the 99.5th percentile of the sphere's luminance to 0.8 after
 tone mapping), the extended Reinhard curve, and the sRGB transfer function; one channel is shown
 as grey and other channel counts as the mean of their channels.
@@ -30,7 +30,7 @@ def _channel_names(c: int) -> list[str]:
         return ["R", "G", "B"]
     if c == 1:
         return ["Y"]
-    return [f"C{i}" for i in range(c)]
+    return [f"c{i}" for i in range(c)]
 
 
 def _as_image(img: np.ndarray) -> np.ndarray:
@@ -42,18 +42,25 @@ def _as_image(img: np.ndarray) -> np.ndarray:
     return a
 
 
+def _io_exr():
+    try:
+        from gonio.io import exr
+    except ImportError:
+        return None
+    return exr if hasattr(exr, "write_exr") and hasattr(exr, "read_exr") else None
+
+
 def write_exr(path: str | os.PathLike, img: np.ndarray) -> Path:
     """Write linear float32 ``img`` (H, W, C) as a ZIP-compressed scanline OpenEXR file."""
     import OpenEXR
 
-    # gonio.io owns the file formats; its EXR helpers are used when present, this is the
-    # fallback with the same layout.
-    try:
-        from gonio.io import exr as _io_exr  # type: ignore[attr-defined]
-    except ImportError:
-        _io_exr = None
-    if _io_exr is not None and hasattr(_io_exr, "write_exr"):
-        return Path(_io_exr.write_exr(path, img) or path)
+    # gonio.io owns the file formats; its EXR helper is used when present, this is the fallback
+    # with the same layout (float32, ZIP, R G B / Y / c<i> channels).
+    io_exr = _io_exr()
+    if io_exr is not None:
+        a = _as_image(img)
+        io_exr.write_exr(path, a, _channel_names(a.shape[2]))
+        return Path(path)
 
     a = _as_image(img)
     path = Path(path)
@@ -73,12 +80,13 @@ def write_exr(path: str | os.PathLike, img: np.ndarray) -> Path:
 
 def read_exr(path: str | os.PathLike) -> np.ndarray:
     """Read an OpenEXR file as float32 ``(H, W, C)``; RGB(A) in that order, alpha dropped."""
-    try:
-        from gonio.io import exr as _io_exr  # type: ignore[attr-defined]
-    except ImportError:
-        _io_exr = None
-    if _io_exr is not None and hasattr(_io_exr, "read_exr"):
-        return np.asarray(_io_exr.read_exr(path), dtype=np.float32)
+    io_exr = _io_exr()
+    if io_exr is not None:
+        img, names = io_exr.read_exr(path)
+        keep = [i for i, n in enumerate(names) if n != "A"]
+        if not keep:
+            raise FormatError(f"{path}: no image channels")
+        return np.asarray(img, dtype=np.float32)[..., keep]
 
     import OpenEXR
 
