@@ -136,8 +136,9 @@ def convergence(mats, tabs, spps, env, out_rows, images):
                         mse_45 = float(d[m45].mean())
                         out_rows.append(
                             dict(material=mname, representation=rep, strategy=label,
-                                 mis=mis, spp=spp, time_s=dt, cpu_s=cpu, rmse_all=math.sqrt(mse_all),
-                                 rmse_45=math.sqrt(mse_45), mse_45=mse_45)
+                                 mis=mis, spp=spp, time_s=dt, cpu_s=cpu,
+                                 rmse_all=math.sqrt(mse_all), rmse_45=math.sqrt(mse_45),
+                                 mse_45=mse_45)
                         )  # fmt: skip
                         print(
                             f"{mname:12s} {rep:8s} {label:14s} mis={mis!s:5s} spp={spp:4d} "
