@@ -348,40 +348,57 @@ def _uniforms(sobol: Array, shift: Array) -> Array:
     return u - jnp.floor(u)
 
 
+# A tile runs as three jitted stages: light sampling; the material (f and pdf at the light
+# samples, BRDF samples); shading. Measured on CPU, this is ~25% cheaper than one fused kernel,
+# where XLA recomputes the gather-heavy sampling code inside several consumers. It is also the
+# structure tables need, whose samplers keep host-side state between calls.
+
+
+@jax.jit
+def _light_stage_jit(lights, position, frame, sobol, shift):
+    return _light_stage(lights, position, frame, _uniforms(sobol, shift))
+
+
 @functools.partial(jax.jit, static_argnames=("kind", "mis", "light_sampling"))
-def _model_tile(
-    model, lights, position, frame, wo, sobol, shift, weights, *, kind, mis, light_sampling
-):
-    """Radiance sums (P, C) for one tile of an analytic model; the whole tile is one kernel."""
+def _model_stage(model, light_wi, wo, sobol, shift, *, kind, mis, light_sampling):
     f, pdf, sample = _model_ops(model, kind)
     u = _uniforms(sobol, shift)
     wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
+    fv = [f(wi, wo_s) for wi in light_wi] if light_sampling else None
+    pb = [pdf(wi, wo_s) for wi in light_wi] if light_sampling and mis else None
+    brdf = sample(wo_s, u[..., :2]) if kind != "none" else None
+    return fv, pb, brdf
+
+
+@functools.partial(jax.jit, static_argnames=("mis",))
+def _shade_stage(lights, ls, fv, pb, position, frame, brdf, weights, *, mis):
     total = 0.0
-    if light_sampling:
-        ls = _light_stage(lights, position, frame, u)
-        fv = [f(wi, wo_s) for wi, _, _ in ls]
-        pb = [pdf(wi, wo_s) if mis else None for wi, _, _ in ls]
-        total = total + _shade_light(lights, ls, fv, pb, weights, mis)
-    if kind != "none":
-        total = total + _shade_brdf(lights, position, frame, sample(wo_s, u[..., :2]), mis, weights)
+    if ls is not None:
+        pbs = pb if pb is not None else [None] * len(ls)
+        total = total + _shade_light(lights, ls, fv, pbs, weights, mis)
+    if brdf is not None:
+        total = total + _shade_brdf(lights, position, frame, brdf, mis, weights)
     return jnp.sum(total, axis=1)
 
 
-_light_stage_jit = jax.jit(
-    lambda lights, position, frame, sobol, shift: _light_stage(
-        lights, position, frame, _uniforms(sobol, shift)
-    )
-)
-
-
-@functools.partial(jax.jit, static_argnames=("mis",))
-def _table_light_sum(lights, ls, fv, pb, weights, *, mis):
-    return jnp.sum(_shade_light(lights, ls, fv, pb, weights, mis), axis=1)
-
-
-@functools.partial(jax.jit, static_argnames=("mis",))
-def _table_brdf_sum(lights, position, frame, brdf, weights, *, mis):
-    return jnp.sum(_shade_brdf(lights, position, frame, brdf, mis, weights), axis=1)
+def _tile(material, lights, pos, frame, wo, sob, shift, weights, tech: _Technique, rng,
+          proposal=None):  # fmt: skip
+    """Radiance sums (P, C) of one tile: P pixels x S samples (``weights`` masks padding)."""
+    ls = _light_stage_jit(lights, pos, frame, sob, shift) if tech.light_sampling else None
+    light_wi = [wi for wi, _, _ in ls] if ls is not None else []
+    if isinstance(material, BRDFModel):
+        fv, pb, brdf = _model_stage(
+            material, light_wi, wo, sob, shift,
+            kind=tech.kind, mis=tech.mis, light_sampling=tech.light_sampling,
+        )  # fmt: skip
+    else:
+        f, pdf, sample = _table_ops(material, tech.kind, rng, proposal)
+        u = _uniforms(sob, shift)
+        wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
+        fv = [f(wi, wo_s) for wi in light_wi] if ls is not None else None
+        pb = [pdf(wi, wo_s) for wi in light_wi] if ls is not None and tech.mis else None
+        brdf = sample(wo_s, u[..., :2]) if tech.kind != "none" else None
+    return _shade_stage(lights, ls, fv, pb, pos, frame, brdf, weights, mis=tech.mis)
 
 
 @jax.jit
@@ -624,7 +641,6 @@ def _render_area(
     total = len(tiles) * n_batches
     done = 0
     out = np.zeros((n_pix, max(1, _out_c(material, lights))), np.float64)
-    table = _is_table(material)
     rng = np.random.default_rng([seed, 2])
     lights_t = tuple(lights)
     # Kernel calls are dispatched asynchronously; keeping a few in flight lets the XLA CPU
@@ -648,22 +664,7 @@ def _render_area(
         for k in range(n_batches):
             sb = jnp.asarray(sob[k * s_batch : (k + 1) * s_batch])
             wb = jnp.asarray(wts[k * s_batch : (k + 1) * s_batch])
-            if not table:
-                r = _model_tile(
-                    material,
-                    lights_t,
-                    pos,
-                    frame,
-                    wo,
-                    sb,
-                    sh,
-                    wb,
-                    kind=tech.kind,
-                    mis=tech.mis,
-                    light_sampling=tech.light_sampling,
-                )
-            else:
-                r = _table_tile(material, lights_t, pos, frame, wo, sb, sh, wb, tech, rng, proposal)
+            r = _tile(material, lights_t, pos, frame, wo, sb, sh, wb, tech, rng, proposal)
             pending.append((a, b, r))
             drain(IN_FLIGHT)
             stats.calls += 1
@@ -674,21 +675,3 @@ def _render_area(
 
 def _out_c(material, lights) -> int:
     return _output_channels(material_channels(material), lights)
-
-
-def _table_tile(
-    table, lights, pos, frame, wo, sob, shift, weights, tech: _Technique, rng, proposal=None
-):
-    f, pdf, sample = _table_ops(table, tech.kind, rng, proposal)
-    u = _uniforms(sob, shift)
-    wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
-    total = 0.0
-    if tech.light_sampling:
-        ls = _light_stage_jit(lights, pos, frame, sob, shift)
-        fv = [f(wi, wo_s) for wi, _, _ in ls]
-        pb = [pdf(wi, wo_s) if tech.mis else None for wi, _, _ in ls]
-        total = total + _table_light_sum(lights, ls, fv, pb, weights, mis=tech.mis)
-    if tech.kind != "none":
-        brdf = sample(wo_s, u[..., :2])
-        total = total + _table_brdf_sum(lights, pos, frame, brdf, weights, mis=tech.mis)
-    return total
