@@ -138,3 +138,14 @@ def test_channels_subset_of_lights():
     np.testing.assert_allclose(np.asarray(e.image[..., 0]), studio_environment()[..., 2])
     d = Directional((0, 0, 1), [1.0, 2.0, 3.0]).with_channels(np.array([1]))
     np.testing.assert_allclose(d.irradiance, [2.0])
+
+
+def test_environment_from_exr_file(tmp_path):
+    from gonio.render.output import write_exr
+
+    img = studio_environment(16, 32)
+    p = write_exr(tmp_path / "env.exr", img)
+    env = Environment(p, scale=2.0)
+    np.testing.assert_allclose(np.asarray(env.image), 2 * img, rtol=1e-6)
+    with pytest.raises(ParameterError):
+        Environment(tmp_path / "missing.exr")

@@ -16,7 +16,8 @@ Sampling strategies (``sampler``):
     MIS of light sampling and the material's best BRDF sampler (an analytic model's own
     ``sample``; tabulated inversion for tables).
 ``"brdf"``
-    the material's own sampler (tables: ``"inversion"``).
+    the material's own sampler (tables: ``"inversion"``; with ``proposal=model``, a table is
+    sampled by that analytic model's sampler, "analytic lobe" sampling of a table by its fit).
 ``"cosine"``
     cosine-weighted hemisphere sampling, ignoring the BRDF's shape (the baseline).
 ``"inversion"`` / ``"alias"`` / ``"rejection"``
@@ -33,10 +34,12 @@ Random numbers: a scrambled Sobol' sequence (scipy.stats.qmc, seeded) of ``spp``
 independent uniform offset modulo 1 (Cranley-Patterson rotation), so pixels are independent
 unbiased estimates while each pixel keeps the Sobol' stratification.
 
-Work is split into tiles of pixels x samples of bounded size. Analytic models (JAX pytrees) run in
-one jitted float32 kernel per tile; tabulated BRDFs, whose samplers keep host-side state (lazily
-built per-outgoing-direction CDFs, rejection loops), are called between two jitted kernels (light
-sampling; shading).
+Work is split into tiles of pixels x samples of bounded size (``tile_samples``), each run as
+three jitted float32 stages: light sampling, the material (``f`` and ``pdf`` at the light
+samples, BRDF samples), shading. Analytic models are traced into the middle stage; tabulated
+BRDFs are called there directly, because their samplers keep host-side state (per-outgoing-
+direction CDFs built lazily for the buckets of outgoing directions actually seen, rejection
+loops).
 """
 
 from __future__ import annotations
