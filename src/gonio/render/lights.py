@@ -423,17 +423,17 @@ def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
 #: RGB radiance). Key light upper left in front, a large dim fill on the right, a strip overhead
 #: behind the sphere for a rim highlight.
 STUDIO_BOXES: tuple[tuple[tuple[float, float, float], float, float, tuple[float, ...]], ...] = (
-    ((-0.55, 0.55, 0.63), 14.0, 18.0, (9.0, 8.7, 8.2)),
-    ((0.85, 0.05, 0.52), 18.0, 28.0, (1.6, 1.7, 1.9)),
-    ((0.05, 0.75, -0.66), 30.0, 5.0, (5.0, 5.0, 5.0)),
+    ((-0.55, 0.55, 0.63), 14.0, 18.0, (16.0, 15.5, 14.5)),
+    ((0.85, 0.05, 0.52), 18.0, 28.0, (1.1, 1.2, 1.35)),
+    ((0.05, 0.75, -0.66), 30.0, 5.0, (6.0, 6.0, 6.0)),
 )
 
 
 def studio_environment(height: int = 128, width: int = 256) -> np.ndarray:
     """The built-in procedural studio: soft boxes on a dim gradient, lat-long ``(H, W, 3)``.
 
-    Linear RGB radiance. The gradient runs from a dark floor (0.02) to a slightly cool ceiling
-    (about 0.12); each soft box is a rectangle in angle with smooth 2-degree edges. Computed at
+    Linear RGB radiance. The gradient runs from a dark floor (0.01) to a slightly cool ceiling
+    (about 0.06); each soft box is a rectangle in angle with smooth 2-degree edges. Computed at
     pixel centres, so the image is exactly what the renderer samples.
     """
     y = (np.arange(height) + 0.5) / height
@@ -442,8 +442,8 @@ def studio_environment(height: int = 128, width: int = 256) -> np.ndarray:
     d = np.asarray(latlong_to_direction(jnp.asarray(np.stack([xx, yy], -1))), dtype=np.float64)
     up = d[..., 1]
     t = _smoothstep(-0.3, 1.0, up)[..., None]
-    floor = np.array([0.02, 0.02, 0.02])
-    ceiling = np.array([0.10, 0.11, 0.13])
+    floor = np.array([0.01, 0.01, 0.01])
+    ceiling = np.array([0.05, 0.055, 0.065])
     img = floor + (ceiling - floor) * t
     for center, hw, hh, rgb in STUDIO_BOXES:
         c = np.asarray(center, dtype=np.float64)
