@@ -123,7 +123,12 @@ def register(subparsers: Any) -> None:
         "camera axis, PHI from image right counter-clockwise; E the irradiance (default 1); "
         "repeat for several",
     )
-    p.add_argument("--env-scale", type=float, default=1.0, help="multiplies the environment radiance (default 1)")
+    p.add_argument(
+        "--env-scale",
+        type=float,
+        default=1.0,
+        help="multiplies the environment radiance (default 1)",
+    )
     p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
     p.add_argument("--resolution", type=int, default=256, help="image size in pixels (256)")
     p.add_argument(

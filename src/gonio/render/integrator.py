@@ -120,30 +120,23 @@ def restrict_model_channels(model: BRDFModel, idx: np.ndarray) -> BRDFModel:
     return model.replace(**new) if new else model
 
 
-def restrict_table_channels(table: Any, idx: np.ndarray) -> Any:
-    """A table with only the channels ``idx`` (values, sigma and channel metadata cut down)."""
-    import dataclasses
-
-    kw: dict[str, Any] = {"values": np.asarray(table.values)[..., idx]}
-    sigma = getattr(table, "sigma", None)
-    if sigma is not None:
-        kw["sigma"] = np.asarray(sigma)[..., idx]
-    ch = getattr(table, "channels", None)
-    if dataclasses.is_dataclass(ch) and getattr(ch, "names", None) is not None:
-        names = tuple(ch.names[i] for i in idx)
-        wl = getattr(ch, "wavelengths_nm", None)
-        kind = ch.kind
-        if kind == "rgb" and len(names) != 3:
-            kind = "mono" if len(names) == 1 else "spectral"
-        kw["channels"] = dataclasses.replace(
-            ch, kind=kind, names=names, wavelengths_nm=None if wl is None else np.asarray(wl)[idx]
-        )
-    if dataclasses.is_dataclass(table):
-        return dataclasses.replace(table, **kw)
-    keys = ("axes", "parameterization", "mask", "counts", "channels", "meta", "interpolation")
-    args = {k: getattr(table, k) for k in keys if hasattr(table, k)}
-    args.update(kw)
-    return type(table)(**args)
+def restrict_table_channels(table: Any, idx: np.ndarray) -> Any | None:
+    """A table with only the channels ``idx`` (values, sigma and channel description cut), or
+    None when the selection has no :class:`~gonio.brdf.tabulated.Channels` description (two
+    channels of an RGB table): the caller then renders every channel and cuts afterwards.
+    """
+    ch = table.channels
+    names = tuple(ch.names[i] for i in idx)
+    if ch.kind == "spectral":
+        new = type(ch)("spectral", names=names, wavelengths_nm=np.asarray(ch.wavelengths_nm)[idx])
+    elif len(idx) == 1:
+        new = type(ch)("mono", names=names)
+    elif list(idx) == list(range(len(ch.names))):
+        return table
+    else:
+        return None
+    sigma = None if table.sigma is None else np.asarray(table.sigma)[..., idx]
+    return table.replace(values=np.asarray(table.values)[..., idx], sigma=sigma, channels=new)
 
 
 @dataclass(frozen=True)
@@ -187,8 +180,12 @@ def resolve_sampler(
         kind = "lobe"
     elif sampler in ("auto", "mis", "brdf"):
         kind = "inversion" if table else "model"
+        if table and sampler != "brdf" and not hasattr(material, "sample"):
+            kind = "cosine"  # "auto": the best this table offers
     else:
         kind = sampler
+    if kind in TABLE_METHODS and not (hasattr(material, "sample") and hasattr(material, "pdf")):
+        raise ParameterError(f"this table cannot be sampled by {kind!r} (no sample/pdf methods)")
     use_mis = True if mis is None else bool(mis)
     if sampler == "mis" and not use_mis:
         raise ParameterError("sampler='mis' with mis=False is contradictory")
@@ -524,15 +521,20 @@ def render_sphere(
     spp = int(spp)
     c_mat = material_channels(material)
     idx = _channel_index(material, channels, max(c_mat, *(lt.channels for lt in lights)))
+    post_idx = idx  # channels still to cut from the result
     if idx is not None and optimize:
+        restricted = material
         if c_mat > 1:
-            material = (
+            restricted = (
                 restrict_model_channels(material, idx)
                 if isinstance(material, BRDFModel)
                 else restrict_table_channels(material, idx)
             )
-        lights = [lt.with_channels(idx) for lt in lights]
-        c_mat = material_channels(material)
+        if restricted is not None:
+            material = restricted
+            lights = [lt.with_channels(idx) for lt in lights]
+            c_mat = material_channels(material)
+            post_idx = None
     tech = resolve_sampler(material, sampler, mis, proposal)
     if _is_table(material) and tech.kind not in ("none", "cosine", "lobe", *TABLE_METHODS):
         raise ParameterError(f"tables are sampled by {TABLE_METHODS}; got {tech.kind!r}")
@@ -574,8 +576,8 @@ def render_sphere(
     elif progress is not None:
         progress(1, 1)
     out = out[:n_hit]
-    if idx is not None and not optimize:
-        out = out[..., idx] if out.shape[-1] > 1 else out
+    if post_idx is not None:
+        out = out[..., post_idx] if out.shape[-1] > 1 else out
     return SphereHits(
         hits.shape, hits.index[:n_hit], hits.position[:n_hit], hits.frame[:n_hit], hits.wo[:n_hit]
     ).scatter(out.astype(np.float32))
