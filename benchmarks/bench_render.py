@@ -256,6 +256,37 @@ def skips(mats, tabs, env, rows):
         print(f"skip {name}: cpu {c_on:.3f}s vs {c_off:.3f}s", file=sys.stderr)
 
 
+def lazy_tables(tabs, env) -> list[dict]:
+    """Sampling buckets (per-outgoing-direction structures) a table builds for what is in view."""
+    from gonio.render import Camera
+
+    table = tabs.get("glossy")
+    if table is None or not hasattr(table, "sampling_cache_size"):
+        return []
+    rows = []
+    scenes = [
+        ("directional light only (no BRDF sampling)", [Directional((0.3, 0.5, 0.8))], None, {}),
+        ("studio, light sampling only", env, None, {"sampler": "light"}),
+        ("studio, narrow perspective view (theta_o < ~20 deg)", env,
+         Camera.perspective(distance=4.0, fov_deg=5.0), {}),
+        ("studio, whole sphere", env, None, {}),
+    ]  # fmt: skip
+    for name, lights, camera, kw in scenes:
+        for method in ("inversion", "alias"):
+            fresh = table.replace()  # empty lazy caches
+            kw2 = {"sampler": method, **kw} if "sampler" not in kw else kw
+            t = time.perf_counter()
+            render_sphere(fresh, lights, resolution=64, spp=4, camera=camera, **kw2)
+            dt = time.perf_counter() - t
+            built = fresh.sampling_cache_size(method)
+            total = int(table.sampling_res[0])
+            rows.append(dict(scene=name, method=method, buckets_built=built,
+                             buckets_total=total, first_render_s=dt))  # fmt: skip
+            print(f"lazy {name} {method}: {rows[-1]['buckets_built']} buckets, {dt:.1f}s",
+                  file=sys.stderr)  # fmt: skip
+    return rows
+
+
 def write_csv(path: Path, rows: list[dict]):
     if not rows:
         return
@@ -311,6 +342,8 @@ def main(argv=None) -> int:
     full_size(mats, tabs, env, skip_rows)
     skips(mats, tabs, env, skip_rows)
     write_csv(out / "render_skips.csv", skip_rows)
+    lazy_rows = lazy_tables(tabs, env)
+    write_csv(out / "render_lazy_tables.csv", lazy_rows)
 
     markdown(rows, 64)
     print("\n### Timings and skips\n")
@@ -321,6 +354,13 @@ def main(argv=None) -> int:
             f"| {r['case']} | {r['optimized_s']:.3f} | {r['optimized_cpu_s']:.3f} | "
             f"{r['unoptimized_s']:.3f} / {r['unoptimized_cpu_s']:.3f} | {r['first_call_s']:.3f} |"
         )
+    if lazy_rows:
+        print("\n### Table sampling structures built (per outgoing-direction bucket)\n")
+        print("| scene | method | buckets built / total | first render (s) |")
+        print("|---|---|---:|---:|")
+        for r in lazy_rows:
+            print(f"| {r['scene']} | {r['method']} | {r['buckets_built']} / "
+                  f"{r['buckets_total']} | {r['first_render_s']:.2f} |")  # fmt: skip
     print(f"\nload average at the end: {os.getloadavg()}")
     return 0
 
