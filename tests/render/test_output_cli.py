@@ -79,8 +79,10 @@ def test_parse_light_degrees():
 
 
 def _fit_file(tmp_path, model, name="fit.json"):
+    """A file shaped like gonio.fit's result JSON: "model" names the preset, "model_spec" is
+    the model's to_dict()."""
     p = tmp_path / name
-    p.write_text(json.dumps({"model": model.to_dict(), "loss": 0.1}))
+    p.write_text(json.dumps({"model": "lambert", "model_spec": model.to_dict(), "loss": "wls"}))
     return p
 
 
@@ -88,6 +90,9 @@ def test_load_fit_model(tmp_path):
     m = models.Lambert([0.2, 0.3, 0.4])
     got = load_fit_model(_fit_file(tmp_path, m))
     np.testing.assert_allclose(np.asarray(got.albedo), [0.2, 0.3, 0.4])
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps(m.to_dict()))
+    np.testing.assert_allclose(np.asarray(load_fit_model(bare).albedo), [0.2, 0.3, 0.4])
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
     with pytest.raises(FormatError):
