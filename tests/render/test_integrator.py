@@ -203,3 +203,36 @@ def test_directional_light_closed_form(model):
     f = np.asarray(model.f(wi, wo))
     expect = f * e * np.maximum(wi[..., 2], 0)[..., None]
     np.testing.assert_allclose(img[inner], expect, rtol=2e-3, atol=1e-5)
+
+
+def test_mirror_reflects_the_environment():
+    """A perfect mirror (reflectance 1) under a uniform environment of radiance 1 is 1."""
+    mirror = models.SpecularReflection()
+    img = render_sphere(mirror, Environment(1.0), resolution=N, spp=4)
+    n, hit = ortho_normals(N)
+    inner = hit & (n[..., 2] > 0.05)
+    np.testing.assert_allclose(img[inner], 1.0, rtol=1e-4)
+
+
+def test_mirror_plus_diffuse_is_unbiased_across_samplers():
+    """A sum with a delta lobe: MIS and pure BRDF sampling agree (16 seeds, |z| < 6).
+
+    A smooth sky (brightness rising toward +y and +x) rather than the studio: BRDF sampling
+    alone finds the studio's small boxes so rarely at 8 spp that its per-seed spread is heavy
+    tailed and the t statistic would not apply (checked separately: at 4096 spp both agree).
+    """
+    h, w = 32, 64
+    v = np.linspace(1.5, 0.1, h)[:, None] * np.linspace(0.5, 1.5, w)[None, :]
+    sky = Environment(np.stack([v, 0.8 * v, 0.6 * v], -1))
+    m = models.Lambert(0.3) + models.SpecularReflection()
+    kw = dict(resolution=16, spp=8)
+    ref = block_means(seed_stack(m, sky, 16, **kw), 4)
+    other = block_means(seed_stack(m, sky, 16, mis=False, **kw), 4)
+    assert np.max(np.abs(z_scores(other, ref))) < 6
+
+
+@pytest.mark.parametrize("sampler", ["light", "cosine"])
+def test_delta_materials_refuse_samplers_that_cannot_find_them(sampler):
+    with pytest.raises(ParameterError):
+        render_sphere(models.SpecularReflection(), Environment(1.0), resolution=4, spp=1,
+                      sampler=sampler)  # fmt: skip
