@@ -144,3 +144,43 @@ def test_cli_bad_input_is_one_line(tmp_path, capsys, argv):
     err = capsys.readouterr().err
     assert rc != 0 and err.startswith("gonio: ") and err.count("\n") == 1
     assert not (tmp_path / "o.png").exists()
+
+
+def test_cli_measured_table_against_fits(tmp_path, capsys):
+    """End to end: a table on disk, two fit files; the right fit has the smaller error."""
+    tabulated = pytest.importorskip("gonio.brdf.tabulated")
+    from gonio import io
+
+    truth = models.Lambert([0.1, 0.08, 0.05]) + models.Phong(rho_d=0.0, rho_s=0.5, n=30.0)
+    axes = tabulated.default_axes("half_diff_iso", 32, 32, 32)
+    table = tabulated.TabulatedBRDF.from_model(truth, axes=axes)
+    tpath = tmp_path / "measured.brdf.h5"
+    io.save(table, tpath)
+    good = _fit_file(tmp_path, truth, "good.json")
+    wrong = models.Lambert([0.1, 0.08, 0.05]) + models.Phong(rho_d=0.0, rho_s=0.5, n=5.0)
+    bad = _fit_file(tmp_path, wrong, "bad.json")
+    out = tmp_path / "cmp.png"
+    rc = main(
+        [
+            "render",
+            "--measured",
+            str(tpath),
+            "--fitted",
+            str(good),
+            "--fitted",
+            str(bad),
+            "--light",
+            "dir:25,60",
+            "--resolution",
+            "24",
+            "--out",
+            str(out),
+            "--json",
+        ]
+    )
+    assert rc == 0
+    report = json.loads(capsys.readouterr().out)
+    errs = report["errors"]
+    assert errs["good"]["rmse"] < 0.5 * errs["bad"]["rmse"]
+    assert out.stat().st_size > 1000
+    assert {"measured", "good", "bad"} <= set(report["images"])
