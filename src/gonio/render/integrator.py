@@ -141,7 +141,9 @@ def restrict_table_channels(table: Any, idx: np.ndarray) -> Any | None:
 
 @dataclass(frozen=True)
 class _Technique:
-    """How BRDF samples are drawn: ``kind`` is "none", "cosine", "model" or a table method."""
+    """How BRDF samples are drawn: ``kind`` is "none" (light sampling only), "cosine", "model"
+    (the analytic model's own sampler), "lobe" (a table sampled by an analytic proposal) or a
+    table method ("inversion", "alias", "rejection")."""
 
     kind: str
     mis: bool
