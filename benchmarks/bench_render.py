@@ -299,18 +299,40 @@ def write_csv(path: Path, rows: list[dict]):
 
 
 def markdown(rows, spp):
+    """Rows at ``spp``, plus each strategy's largest spp when its sweep stopped earlier."""
+    best: dict[tuple, dict] = {}
+    for r in rows:
+        k = (r["material"], r["representation"], r["strategy"], r["mis"])
+        if r["spp"] <= spp and (k not in best or r["spp"] > best[k]["spp"]):
+            best[k] = r
+    rows = list(best.values())
     print(f"\n### Efficiency at {spp} spp (theta_o <= 45 deg; relative to cosine, same MIS)\n")
+    print("(a strategy whose sweep stopped earlier is shown at its largest spp, in brackets)\n")
     print("| material | repr. | strategy | MIS | wall (s) | CPU (s) | RMSE | eff. vs cosine |")
     print("|---|---|---|---|---:|---:|---:|---:|")
     for r in rows:
-        if r["spp"] != spp:
-            continue
+        label = r["strategy"] if r["spp"] == spp else f"{r['strategy']} [{r['spp']} spp]"
         print(
-            f"| {r['material']} | {r['representation']} | {r['strategy']} | "
+            f"| {r['material']} | {r['representation']} | {label} | "
             f"{'yes' if r['mis'] else 'no'} | {r['time_s']:.3f} | {r['cpu_s']:.3f} | "
             f"{r['rmse_45']:.4g} | "
             f"{r['efficiency_vs_cosine_45']:.2f} |"
         )
+
+
+def read_csv(path: Path) -> list[dict]:
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        for k, v in r.items():
+            if v in ("True", "False"):
+                r[k] = v == "True"
+            else:
+                try:
+                    r[k] = int(v) if k == "spp" else float(v)
+                except ValueError:
+                    pass
+    return rows
 
 
 def main(argv=None) -> int:
@@ -318,9 +340,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer spp values, smaller reference")
     ap.add_argument("--out", default=str(RESULTS), help="output folder")
+    ap.add_argument(
+        "--report", action="store_true", help="only re-plot and re-print from the CSVs in --out"
+    )
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.report:
+        rows = read_csv(out / "render_convergence.csv")
+        plot(rows, out / "render_efficiency.png")
+        markdown(rows, 64)
+        return 0
     spps = [4, 16, 64] if args.quick else [4, 16, 64, 256]
     if args.quick:
         REF_SPP = 2048
