@@ -194,8 +194,9 @@ def resolve_sampler(
     return _Technique(kind, use_mis, use_mis)
 
 
-# Material operations for a technique, as functions of (wi, wo) and (wo, u). For analytic models
-# they are JAX code and are traced into the kernel; for tables they call the table eagerly.
+# Material operations for a technique, as functions of (wi, wo) and (wo, u). Analytic models,
+# and tables sampled by cosine or an analytic lobe, are traced into the jitted material stage;
+# tables sampled by their own methods are called eagerly.
 
 
 def _cos_sample(material_f: Callable, wo: Array, u: Array) -> tuple[Array, Array, Array, Array]:
@@ -206,11 +207,26 @@ def _cos_sample(material_f: Callable, wo: Array, u: Array) -> tuple[Array, Array
     return wi, pdf, weight, jnp.zeros(pdf.shape, dtype=bool)
 
 
-def _model_ops(model: BRDFModel, kind: str):
-    def f(wi, wo):
-        return model.f(wi, wo)
+def _model_ops(model: Any, kind: str, proposal: Any = None):
+    """Traceable operations: ``model`` is an analytic model, or a table (whose ``f`` is JAX code)
+    with kind "cosine", "lobe" (sampled by the analytic ``proposal``) or "none"."""
 
-    if kind == "cosine":
+    def f(wi, wo):
+        return jnp.asarray(model.f(wi, wo), wi.dtype)
+
+    if kind == "lobe":
+
+        def pdf(wi, wo):
+            return proposal.pdf(wi, wo)
+
+        def sample(wo, u):
+            s = proposal.sample(wo, u)
+            ok = s.pdf > 0
+            cos = jnp.maximum(s.wi[..., 2], 0.0)
+            w = f(s.wi, wo) * jnp.where(ok, cos / jnp.where(ok, s.pdf, 1.0), 0.0)[..., None]
+            return s.wi, s.pdf, w, jnp.zeros(s.pdf.shape, bool)
+
+    elif kind == "cosine":
 
         def pdf(wi, wo):
             return warp.cosine_hemisphere_pdf(wi) * (wo[..., 2] > 0)
@@ -231,56 +247,29 @@ def _model_ops(model: BRDFModel, kind: str):
 
 
 def _table_ops(table: Any, kind: str, rng: np.random.Generator, proposal: Any = None):
+    """Operations of a table sampled by one of its own methods (called eagerly: the table's
+    samplers build their per-outgoing-direction structures on the host, lazily)."""
+    extra = {} if proposal is None else {"proposal": proposal}
+
     def f(wi, wo):
         return jnp.asarray(table.f(wi, wo), jnp.float32)
 
-    if kind == "cosine":
+    def pdf(wi, wo):
+        return jnp.asarray(table.pdf(wi, wo, method=kind, **extra), jnp.float32)
 
-        def pdf(wi, wo):
-            return warp.cosine_hemisphere_pdf(wi) * (wo[..., 2] > 0)
-
-        def sample(wo, u):
-            return _cos_sample(f, wo, u)
-
-    elif kind == "lobe":
-        # The table sampled by an analytic model's own sampler (for instance its fit):
-        # directions and density from the model, values from the table.
-
-        def pdf(wi, wo):
-            return jnp.asarray(proposal.pdf(wi, wo), jnp.float32)
-
-        def sample(wo, u):
-            s = proposal.sample(wo, u)
-            wi = jnp.asarray(s.wi, jnp.float32)
-            p = jnp.asarray(s.pdf, jnp.float32)
-            ok = p > 0
-            weight = (
-                f(wi, wo)
-                * jnp.where(ok, jnp.maximum(wi[..., 2], 0.0) / jnp.where(ok, p, 1.0), 0.0)[
-                    ..., None
-                ]
-            )
-            return wi, p, weight, jnp.zeros(p.shape, bool)
-
-    else:
-        extra = {} if proposal is None else {"proposal": proposal}
-
-        def pdf(wi, wo):
-            return jnp.asarray(table.pdf(wi, wo, method=kind, **extra), jnp.float32)
-
-        def sample(wo, u):
-            wo = jnp.broadcast_to(jnp.asarray(wo), (*u.shape[:-1], 3))
-            s = table.sample(wo, u, method=kind, rng=rng, **extra)
-            wi = jnp.asarray(s.wi, jnp.float32)
-            delta = getattr(s, "delta", None)
-            if delta is None:
-                delta = jnp.zeros(wi.shape[:-1], dtype=bool)
-            return (
-                wi,
-                jnp.asarray(s.pdf, jnp.float32),
-                jnp.asarray(s.weight, jnp.float32),
-                jnp.asarray(delta, bool),
-            )
+    def sample(wo, u):
+        wo = jnp.broadcast_to(jnp.asarray(wo), (*u.shape[:-1], 3))
+        s = table.sample(wo, u, method=kind, rng=rng, **extra)
+        wi = jnp.asarray(s.wi, jnp.float32)
+        delta = getattr(s, "delta", None)
+        if delta is None:
+            delta = jnp.zeros(wi.shape[:-1], dtype=bool)
+        return (
+            wi,
+            jnp.asarray(s.pdf, jnp.float32),
+            jnp.asarray(s.weight, jnp.float32),
+            jnp.asarray(delta, bool),
+        )
 
     return f, pdf, sample
 
@@ -362,8 +351,8 @@ def _light_stage_jit(lights, position, frame, sobol, shift):
 
 
 @functools.partial(jax.jit, static_argnames=("kind", "mis", "light_sampling"))
-def _model_stage(model, light_wi, wo, sobol, shift, *, kind, mis, light_sampling):
-    f, pdf, sample = _model_ops(model, kind)
+def _model_stage(model, proposal, light_wi, wo, sobol, shift, *, kind, mis, light_sampling):
+    f, pdf, sample = _model_ops(model, kind, proposal)
     u = _uniforms(sobol, shift)
     wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
     fv = [f(wi, wo_s) for wi in light_wi] if light_sampling else None
@@ -388,9 +377,10 @@ def _tile(material, lights, pos, frame, wo, sob, shift, weights, tech: _Techniqu
     """Radiance sums (P, C) of one tile: P pixels x S samples (``weights`` masks padding)."""
     ls = _light_stage_jit(lights, pos, frame, sob, shift) if tech.light_sampling else None
     light_wi = [wi for wi, _, _ in ls] if ls is not None else []
-    if isinstance(material, BRDFModel):
+    # Tables are traced too (their f is JAX code) unless one of their own samplers is used.
+    if isinstance(material, BRDFModel) or tech.kind not in TABLE_METHODS:
         fv, pb, brdf = _model_stage(
-            material, light_wi, wo, sob, shift,
+            material, proposal if tech.kind == "lobe" else None, light_wi, wo, sob, shift,
             kind=tech.kind, mis=tech.mis, light_sampling=tech.light_sampling,
         )  # fmt: skip
     else:
