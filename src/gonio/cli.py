@@ -17,7 +17,12 @@ from gonio import __version__
 from gonio.errors import GonioError
 
 #: Modules that contribute subcommands, in the order they appear in ``--help``.
-COMMAND_MODULES: tuple[str, ...] = ("gonio.io.cli", "gonio.render.cli")
+COMMAND_MODULES: tuple[str, ...] = (
+    "gonio.io.cli",
+    "gonio.rigs.cli",
+    "gonio.acquire.cli",
+    "gonio.render.cli",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -226,3 +226,27 @@ def test_examples_load_and_match_the_schema():
     bad["grid"]["axes"][0]["warp"] = "cubic"
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(bad, schema)
+
+
+def test_hdf5_c_tools_read_the_documented_layout(tmp_path):
+    """The HDF5 C library's own tools (no h5py) see the layout FORMAT.md describes."""
+    import shutil
+    import subprocess
+
+    if shutil.which("h5ls") is None:
+        pytest.skip("HDF5 command-line tools (h5ls) not installed")
+    p = tmp_path / "t.brdf.h5"
+    save(_table(n=(40, 60, 90), seed=9), p, lossy=0.01)
+    out = subprocess.run(
+        ["h5ls", "-v", f"{p}/values"], capture_output=True, text=True, check=True
+    ).stdout
+    assert "Chunks:    {" in out and ", 60, 90, 1}" in out
+    assert "shuffle" in out and "deflate" in out and "unsigned short" in out
+    out = subprocess.run(
+        ["h5ls", "-r", str(EXAMPLES / "tiny-gridded.brdf.h5")],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    for name in ("/axes/theta_h/nodes", "/channels", "/mask", "/values", "/sigma", "/counts"):
+        assert name in out

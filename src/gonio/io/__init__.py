@@ -73,11 +73,14 @@ def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -
 def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
     """Save ``obj`` in the format named by the extension of ``path``, atomically.
 
+    An object with ``to_table()`` (e.g. :class:`gonio.io.rgl.RGLBSDF`) is tabulated first.
     ``.brdf.h5`` (or ``.h5``): native (``lossy``: guaranteed relative precision, e.g. 0.005);
     ``.binary``: MERL (RGB half/diff tables; others are resampled); ``.exr``: one image per
     ``phi_d`` slice of a half/diff table (multi-part EXR).
     """
     name = os.fspath(path).lower()
+    if hasattr(obj, "to_table") and not hasattr(obj, "axes"):
+        obj = obj.to_table()  # an exact evaluator (RGL BSDF): store its MERL-grid tabulation
     if lossy is not None and not name.endswith((".h5", ".hdf5")):
         raise ParameterError("lossy encoding is only available for .brdf.h5 output")
     if name.endswith((".h5", ".hdf5")):

@@ -183,6 +183,7 @@ def read_alta(
             sigma = sigma / cos_v
     if pout == "XYZ_COLOR":
         values = spectral.xyz_to_linear_srgb(values)
+        sigma = None  # per-channel intervals do not map through the colour matrix
     if not np.any(keep):
         raise fail(path, "no sample lies above the horizon")
     source: dict[str, Any] = {

@@ -246,6 +246,9 @@ def write_native(
         Default: lossless float32.
     level : int
         Deflate level 0..9.
+    _hook : callable(stage), optional
+        Test hook called with "attrs" and "values" while the file is being written (the tests
+        raise from it to prove that a crash leaves no file behind).
 
     Returns
     -------
