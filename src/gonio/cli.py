@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.rigs.cli",
     "gonio.acquire.cli",
     "gonio.fit.cli",
+    "gonio.render.cli",
 )
 
 
