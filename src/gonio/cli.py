@@ -17,7 +17,7 @@ from gonio import __version__
 from gonio.errors import GonioError
 
 #: Modules that contribute subcommands, in the order they appear in ``--help``.
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = ("gonio.io.cli",)
 
 
 def build_parser() -> argparse.ArgumentParser:

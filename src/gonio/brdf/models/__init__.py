@@ -6,14 +6,33 @@
 
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
+from gonio.brdf.models.blinn_phong import BlinnPhong
+from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.oren_nayar import OrenNayar
+from gonio.brdf.models.phong import Phong
+from gonio.brdf.models.specular import SpecularReflection, SpecularTransmission
+from gonio.brdf.models.torrance_sparrow import TorranceSparrow
+from gonio.brdf.models.ward import Ward
 
 __all__ = [
     "BRDFModel",
     "BRDFSample",
+    "BlinnPhong",
+    "Conductor",
+    "Dielectric",
+    "Fresnel",
     "Lambert",
+    "NoFresnel",
     "Node",
+    "OrenNayar",
     "Param",
+    "Phong",
+    "Schlick",
+    "SpecularReflection",
+    "SpecularTransmission",
     "Sum",
+    "TorranceSparrow",
+    "Ward",
     "registry",
 ]
