@@ -21,6 +21,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.io.cli",
     "gonio.rigs.cli",
     "gonio.acquire.cli",
+    "gonio.fit.cli",
+    "gonio.render.cli",
 )
 
 

@@ -186,7 +186,7 @@ def test_extreme_roughness_is_finite(dist, dtype):
     wi, wo = jnp.asarray(wi[ok]), jnp.asarray(wo[ok])
     h = frames.normalize(wi + wo)
     u = jnp.asarray(np.array([[0, 0], [mc.EPS1, mc.EPS1], [0.5, 0.5], [1e-12, mc.EPS1]], dtype))
-    for alpha in (1e-4, 1e-3, 0.5, 1.0):
+    for alpha in (1e-4, 1.0):
 
         def total(a, alpha=alpha):
             a = jnp.asarray(a, dtype)
@@ -203,7 +203,7 @@ def test_extreme_roughness_is_finite(dist, dtype):
                 out += jnp.sum(hv) + jnp.sum(mf.visible_pdf(wov, hv, a, dist))
             return out
 
-        val, grad = jax.value_and_grad(total)(np.asarray(alpha, dtype))
+        val, grad = jax.jit(jax.value_and_grad(total))(np.asarray(alpha, dtype))
         assert np.isfinite(val), f"{dist} alpha={alpha} {dtype}: {val}"
         assert np.isfinite(grad), f"{dist} alpha={alpha} {dtype}: gradient {grad}"
     # The peak value at alpha = 1e-4 is 1/(pi alpha^2) for every distribution.

@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf import frames
+from gonio.brdf.models._base import BRDFSample
 from gonio.errors import FormatError, ParameterError
 
 Array = jnp.ndarray
@@ -59,6 +60,10 @@ PARAMETERIZATIONS = {
 }
 INTERPOLATIONS = ("linear", "nearest")
 _EPS_ANGLE = 1e-9
+
+
+def _one_minus_eps(dtype: Any) -> float:
+    return float(np.nextafter(np.dtype(dtype).type(1.0), np.dtype(dtype).type(0.0)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -853,6 +858,101 @@ class TabulatedBRDF:
         if not jnp.issubdtype(dtype, jnp.floating):
             dtype = jnp.float64
         return _interpolate(self._spec, self._data, [a.astype(dtype) for a in arrs])
+
+    # -- sampling ----------------------------------------------------------------------------------
+    def _sampler(self) -> Any:
+        from gonio.brdf._table_sampling import TableSampler
+
+        sampler = self._host.samplers.get("table")
+        if sampler is None:
+            sampler = TableSampler(self)
+            self._host.samplers["table"] = sampler
+        return sampler
+
+    def sample(
+        self,
+        wo: Any,
+        u: Any,
+        method: str = "inversion",
+        rng: Any = None,
+        proposal: Any = "cosine",
+    ) -> BRDFSample:
+        """Importance-sample ``wi`` proportionally to ``mean_channels(f) cos(theta_i)``.
+
+        Parameters
+        ----------
+        wo : ``(..., 3)`` outgoing directions.
+        u : ``(..., 2)`` uniform numbers in [0, 1).
+        method : ``"inversion"``, ``"alias"`` (piecewise-constant density per incident-grid cell
+            and outgoing bucket) or ``"rejection"`` (exactly ``g cos / rho(wo)``); see
+            :mod:`gonio.brdf._table_sampling`.
+        rng : rejection only: where the extra random numbers come from (a NumPy Generator, an
+            int seed or a JAX key); default: derived deterministically from ``u``.
+        proposal : rejection only: ``"cosine"`` or an analytic model whose ``sample``/``pdf`` is
+            used (mixed with 10 % cosine sampling).
+
+        Returns
+        -------
+        BRDFSample ``(wi, pdf, weight = f cos / pdf, delta = False)``; ``pdf`` equals
+        ``self.pdf(wi, wo, method, proposal)``. A failed sample has pdf 0 and weight 0.
+
+        Sampling structures are built lazily for the outgoing buckets met (all of them when
+        called under ``jit``), see :meth:`sampling_cache_size`.
+        """
+        wo = jnp.asarray(wo)
+        if not jnp.issubdtype(wo.dtype, jnp.floating):
+            wo = wo.astype(jnp.float64)
+        u = jnp.asarray(u).astype(wo.dtype)
+        if wo.shape[-1:] != (3,) or u.shape[-1:] != (2,):
+            raise ParameterError(
+                f"sample needs wo (..., 3) and u (..., 2), got {wo.shape}, {u.shape}"
+            )
+        shape = jnp.broadcast_shapes(wo.shape[:-1], u.shape[:-1])
+        wo = jnp.broadcast_to(wo, (*shape, 3))
+        u = jnp.clip(jnp.broadcast_to(u, (*shape, 2)), 0.0, _one_minus_eps(wo.dtype))
+        ok_o = wo[..., 2] > 0
+        wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        wi, pdf = self._sampler().sample(wo_s, u, method, rng, proposal)
+        wi = wi.astype(wo.dtype)
+        pdf = pdf.astype(wo.dtype)
+        ok = ok_o & (wi[..., 2] > 0) & (pdf > 0)
+        val = self.f(wi, wo_s)
+        cos_i = jnp.maximum(wi[..., 2:3], 0.0)
+        weight = jnp.where(ok[..., None], val * cos_i / jnp.where(ok, pdf, 1.0)[..., None], 0.0)
+        return BRDFSample(wi, jnp.where(ok, pdf, 0.0), weight, jnp.zeros(shape, bool))
+
+    def pdf(self, wi: Any, wo: Any, method: str = "inversion", proposal: Any = "cosine") -> Array:
+        """Density of :meth:`sample` (same ``method``/``proposal``) over ``wi`` per unit solid
+        angle, shape ``(...)``; 0 when either direction is on or below the horizon."""
+        wi, wo = _as_dirs(wi, wo)
+        ok_o = wo[..., 2] > 0
+        wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        p = self._sampler().pdf(wi, wo_s, method, proposal)
+        return jnp.where(ok_o & (wi[..., 2] > 0), p, 0.0).astype(wo.dtype)
+
+    def sampling_cache_size(self, method: str | None = None) -> int:
+        """Number of outgoing-direction buckets whose sampling structures have been built (for
+        one method, or summed over all)."""
+        sampler = self._host.samplers.get("table")
+        return 0 if sampler is None else sampler.cache_size(method)
+
+    def sampling_buckets(self, method: str) -> list[int]:
+        """Indices of the outgoing buckets built for ``method`` (theta_o bin, or
+        ``theta_bin * n_phi_bins + phi_bin`` for anisotropic tables)."""
+        sampler = self._host.samplers.get("table")
+        return [] if sampler is None else sampler.built_buckets(method)
+
+    def directional_albedo(self, wo: Any, n: int = 128) -> Array:
+        """``int f cos dwi`` at ``wo (..., 3)`` -> ``(..., C)``: midpoint rule over an ``n x 2n``
+        grid uniform in (cos theta_i, phi_i) (deterministic)."""
+        wo = jnp.asarray(wo, jnp.float64)
+        c = (jnp.arange(n) + 0.5) / n
+        p = (jnp.arange(2 * n) + 0.5) * (math.pi / n)
+        cc, pp = jnp.meshgrid(c, p, indexing="ij")
+        s = jnp.sqrt(1 - cc**2)
+        wi = jnp.stack([s * jnp.cos(pp), s * jnp.sin(pp), cc], -1).reshape(-1, 3)
+        val = self.f(wi, wo[..., None, :]) * wi[:, 2:3]
+        return jnp.sum(val, axis=-2) * (2 * math.pi / (2 * n * n))
 
     # -- conversion --------------------------------------------------------------------------------
     def node_directions(self) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,14 @@ Shadowing (``shadowing``):
     for GGX. Blinn has no closed-form Smith term; it uses the Beckmann ``Lambda`` at the same
     alpha, the standard approximation (Walter et al. 2007, section 5.2).
 
+Sampling: :func:`sample_ndf` draws half vectors with density ``D(h) cos(theta_h)`` for every
+distribution (closed-form inversion). :func:`sample_visible` draws visible normals with density
+``G1(wo) max(0, wo.h) D(h) / cos(theta_o)`` and is exact for GGX (Heitz 2018). Beckmann's
+visible-normal distribution has no closed-form inverse (Heitz & d'Eon 2014 invert it
+numerically); it is not offered here, so Beckmann and Blinn use ``sample_ndf``. A BRDF using
+either sampler turns the half-vector density into a density of ``wi`` with the Jacobian
+``1 / (4 wo.h)``.
+
 Models never need ``G`` alone: they need ``G / (4 cos_i cos_o)``, which :func:`visibility`
 computes without dividing by the cosines (finite at grazing angles). The Smith form works with
 ``mu = cos theta * Lambda``, which stays finite where ``Lambda`` itself diverges.

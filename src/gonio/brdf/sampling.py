@@ -1,0 +1,489 @@
+"""Generic sampling building blocks: piecewise-constant 1-D/2-D distributions, alias tables and
+rejection sampling.
+
+Every structure may hold a *batch* of distributions (weights of shape ``(..., n)``); a query then
+names the distribution it draws from with ``which`` (an integer array, flat index into the batch
+dimensions). Construction runs once on the host (NumPy, float64); sampling and density
+evaluation are pure JAX, vectorized over the queries, and keep the dtype of ``u`` (the float32
+arrays are derived from the float64 ones, and every reported probability is computed from the
+same arrays the sampler uses, so pdfs stay consistent with samples in either precision).
+
+Used by :class:`gonio.brdf.tabulated.TabulatedBRDF` (sampling f cos over incident directions)
+and by the renderer (environment-map importance sampling).
+
+References: Pharr, Jakob & Humphreys, *Physically Based Rendering* 4th ed., sections A.1 (alias
+method), A.5 (sampling piecewise-constant functions); Vose, "A linear algorithm for generating
+random numbers with a given distribution", IEEE TSE 1991.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from gonio.errors import ParameterError
+
+Array = jnp.ndarray
+
+_ONE_MINUS_EPS32 = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+_ONE_MINUS_EPS64 = float(np.nextafter(1.0, 0.0))
+
+
+def _one_minus_eps(dtype: Any) -> float:
+    return _ONE_MINUS_EPS64 if jnp.dtype(dtype) == jnp.float64 else _ONE_MINUS_EPS32
+
+
+def _float_u(u: Any) -> Array:
+    u = jnp.asarray(u)
+    if not jnp.issubdtype(u.dtype, jnp.floating):
+        u = u.astype(jnp.float64)
+    return jnp.clip(u, 0.0, _one_minus_eps(u.dtype))
+
+
+def _bin_position(k: Array, r: Array, n: int) -> Array:
+    """``(k + r) / n`` kept inside bin ``k`` as :func:`_bin_of` sees it, despite rounding."""
+    dt = r.dtype
+    kf = k.astype(dt)
+    x = (kf + r) / n
+    hi = jnp.nextafter((kf + 1) / n, jnp.zeros((), dt))
+    return jnp.clip(x, kf / n, hi)
+
+
+def _bin_of(x: Array, n: int) -> Array:
+    """Bin ``k`` of ``x`` with the edges ``k / n`` computed in ``x``'s dtype (int32, clamped)."""
+    k = jnp.clip(jnp.floor(x * n).astype(jnp.int32), 0, n - 1)
+    kf = k.astype(x.dtype)
+    k = jnp.where((x < kf / n) & (k > 0), k - 1, k)
+    kf = k.astype(x.dtype)
+    return jnp.where((x >= (kf + 1) / n) & (k < n - 1), k + 1, k)
+
+
+def _check_weights(weights: Any, what: str, min_dims: int = 1) -> np.ndarray:
+    try:
+        w = np.asarray(weights, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{what}: weights must be numbers") from None
+    if w.ndim < min_dims or w.shape[-1] < 1 or w.size == 0:
+        raise ParameterError(f"{what}: weights need at least {min_dims} non-empty dimension(s)")
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise ParameterError(f"{what}: weights must be finite and >= 0")
+    return w
+
+
+def _normalized_cdf(w: np.ndarray) -> np.ndarray:
+    """``(..., n) -> (..., n + 1)`` CDF from 0 to exactly 1; an all-zero row becomes uniform."""
+    total = w.sum(axis=-1, keepdims=True)
+    n = w.shape[-1]
+    w = np.where(total > 0, w, 1.0)
+    total = np.where(total > 0, total, float(n))
+    c = np.cumsum(w, axis=-1) / total
+    c = np.concatenate([np.zeros((*w.shape[:-1], 1)), c], axis=-1)
+    c[..., -1] = 1.0
+    return np.minimum(c, 1.0)
+
+
+def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
+    """Largest ``k`` in ``[0, n)`` with ``cdf_flat[base + k] <= u`` for each query (int32).
+
+    ``cdf_flat`` holds many CDFs of ``n + 1`` entries back to back; ``base`` is where each query's
+    CDF starts. Written as a branchless binary search with a fixed number of gathers because
+    ``jnp.searchsorted`` searches a single sorted array, while here every query may search a
+    different row.
+    """
+    idx = jnp.zeros(u.shape, jnp.int32)
+    step = 1 << max(0, (n - 1).bit_length() - 1) if n > 1 else 0
+    while step:
+        cand = idx + step
+        ok = cand <= n - 1
+        val = jnp.take(cdf_flat, base + jnp.minimum(cand, n - 1), mode="clip")
+        idx = jnp.where(ok & (val <= u), cand, idx)
+        step >>= 1
+    return idx
+
+
+class Distribution1D:
+    """Piecewise-constant density on ``[0, 1)`` with ``n`` equal bins (or a batch of them).
+
+    Parameters
+    ----------
+    weights : ``(..., n)`` non-negative; each row is normalized (an all-zero row is uniform).
+
+    Attributes
+    ----------
+    probs : ``(..., n)`` float64 bin probabilities.
+    cdf : ``(..., n + 1)`` float64.
+    """
+
+    def __init__(self, weights: Any) -> None:
+        w = _check_weights(weights, "Distribution1D")
+        self.batch_shape = w.shape[:-1]
+        self.n = w.shape[-1]
+        self.cdf = _normalized_cdf(w)
+        self.probs = np.diff(self.cdf, axis=-1)
+        flat = self.cdf.reshape(-1)
+        self._cdf = {jnp.float64: jnp.asarray(flat), jnp.float32: jnp.asarray(flat, jnp.float32)}
+
+    def _arrays(self, dtype: Any) -> Array:
+        return self._cdf[jnp.float64 if jnp.dtype(dtype) == jnp.float64 else jnp.float32]
+
+    def _base(self, which: Any, shape: tuple[int, ...]) -> Array:
+        if which is None:
+            if self.batch_shape:
+                raise ParameterError("Distribution1D: a batched distribution needs 'which'")
+            return jnp.zeros(shape, jnp.int32)
+        return jnp.asarray(which, jnp.int32) * (self.n + 1)
+
+    def sample_discrete(self, u: Any, which: Any = None) -> tuple[Array, Array, Array]:
+        """Draw a bin: ``(index int32, u_remapped in [0, 1), probability of the bin)``."""
+        u = _float_u(u)
+        return _sample_discrete_cdf(self._arrays(u.dtype), self._base(which, u.shape), self.n, u)
+
+    def sample(self, u: Any, which: Any = None) -> tuple[Array, Array, Array]:
+        """Draw ``x in [0, 1)``: ``(x, density at x, bin index)``."""
+        k, r, p = self.sample_discrete(u, which)
+        return _bin_position(k, r, self.n), p * self.n, k
+
+    def pdf(self, x: Any, which: Any = None) -> Array:
+        """Density at ``x in [0, 1)`` (0 outside)."""
+        x = jnp.asarray(x)
+        if not jnp.issubdtype(x.dtype, jnp.floating):
+            x = x.astype(jnp.float64)
+        k = _bin_of(x, self.n)
+        cdf = self._arrays(x.dtype)
+        base = self._base(which, x.shape)
+        p = jnp.take(cdf, base + k + 1, mode="clip") - jnp.take(cdf, base + k, mode="clip")
+        return jnp.where((x >= 0) & (x < 1), p * self.n, 0.0)
+
+    def prob(self, k: Any, which: Any = None, dtype: Any = jnp.float64) -> Array:
+        """Probability of bin ``k`` (as the sampler in ``dtype`` realizes it)."""
+        k = jnp.asarray(k, jnp.int32)
+        cdf = self._arrays(dtype)
+        base = self._base(which, k.shape)
+        return jnp.take(cdf, base + k + 1, mode="clip") - jnp.take(cdf, base + k, mode="clip")
+
+
+def _sample_discrete_cdf(cdf: Array, base: Array, n: int, u: Array) -> tuple[Array, Array, Array]:
+    k = find_interval(cdf, base, n, u)
+    lo = jnp.take(cdf, base + k, mode="clip")
+    hi = jnp.take(cdf, base + k + 1, mode="clip")
+    p = hi - lo
+    r = jnp.where(p > 0, (u - lo) / jnp.where(p > 0, p, 1.0), 0.0)
+    return k, jnp.clip(r, 0.0, _one_minus_eps(u.dtype)), p
+
+
+class Distribution2D:
+    """Piecewise-constant density on ``[0, 1)^2`` over an ``ny x nx`` grid (or a batch of them),
+    sampled by marginal (rows, ``u[..., 0]``) then conditional (columns, ``u[..., 1]``) CDF
+    inversion.
+
+    Parameters
+    ----------
+    weights : ``(..., ny, nx)`` non-negative cell weights.
+    """
+
+    def __init__(self, weights: Any) -> None:
+        w = _check_weights(weights, "Distribution2D", min_dims=2)
+        self.batch_shape = w.shape[:-2]
+        self.ny, self.nx = w.shape[-2:]
+        self.marginal = Distribution1D(w.sum(axis=-1))
+        self.conditional = Distribution1D(w)
+        self.probs = self.marginal.probs[..., :, None] * self.conditional.probs
+
+    def sample(self, u: Any, which: Any = None) -> tuple[Array, Array, tuple[Array, Array]]:
+        """``u (..., 2) -> (xy (..., 2) in [0, 1)^2, density on the unit square, (iy, ix))``."""
+        cells, (ry, rx), p = self.sample_cell(u, which)
+        iy, ix = cells
+        x = _bin_position(ix, rx, self.nx)
+        y = _bin_position(iy, ry, self.ny)
+        return jnp.stack([x, y], -1), p * (self.nx * self.ny), (iy, ix)
+
+    def sample_cell(
+        self, u: Any, which: Any = None
+    ) -> tuple[tuple[Array, Array], tuple[Array, Array], Array]:
+        """Draw a cell: ``((iy, ix), (ry, rx) remapped uniforms in the cell, cell probability)``."""
+        u = _float_u(u)
+        iy, ry, py = self.marginal.sample_discrete(u[..., 0], which)
+        row = iy if which is None else jnp.asarray(which, jnp.int32) * self.ny + iy
+        ix, rx, px = self.conditional.sample_discrete(u[..., 1], row)
+        return (iy, ix), (ry, rx), py * px
+
+    def cell_prob(self, iy: Any, ix: Any, which: Any = None, dtype: Any = jnp.float64) -> Array:
+        """Probability of cell ``(iy, ix)`` exactly as :meth:`sample_cell` realizes it."""
+        iy = jnp.asarray(iy, jnp.int32)
+        ix = jnp.asarray(ix, jnp.int32)
+        row = iy if which is None else jnp.asarray(which, jnp.int32) * self.ny + iy
+        return self.marginal.prob(iy, which, dtype) * self.conditional.prob(ix, row, dtype)
+
+    def pdf(self, xy: Any, which: Any = None) -> Array:
+        """Density at ``xy (..., 2)`` on the unit square (0 outside)."""
+        xy = jnp.asarray(xy)
+        if not jnp.issubdtype(xy.dtype, jnp.floating):
+            xy = xy.astype(jnp.float64)
+        x, y = xy[..., 0], xy[..., 1]
+        ix = _bin_of(x, self.nx)
+        iy = _bin_of(y, self.ny)
+        p = self.cell_prob(iy, ix, which, xy.dtype) * (self.nx * self.ny)
+        inside = (x >= 0) & (x < 1) & (y >= 0) & (y < 1)
+        return jnp.where(inside, p, 0.0)
+
+
+def _vose(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vose's alias construction for one normalized distribution ``p (n,)``.
+
+    A plain Python loop: the construction is inherently sequential (two work lists), runs once per
+    table, and neither NumPy nor SciPy provides it.
+    """
+    n = p.size
+    scaled = (p * n).tolist()
+    q = [1.0] * n
+    alias = list(range(n))
+    small = [i for i, s in enumerate(scaled) if s < 1.0]
+    large = [i for i, s in enumerate(scaled) if s >= 1.0]
+    while small and large:
+        s = small.pop()
+        g = large.pop()
+        q[s] = scaled[s]
+        alias[s] = g
+        scaled[g] = (scaled[g] + scaled[s]) - 1.0
+        (small if scaled[g] < 1.0 else large).append(g)
+    for i in large + small:  # leftovers are 1 up to rounding
+        q[i] = 1.0
+        alias[i] = i
+    return np.asarray(q), np.asarray(alias, dtype=np.int32)
+
+
+class AliasTable:
+    """Walker/Vose alias table: draws one of ``n`` outcomes in O(1) (or a batch of tables).
+
+    Parameters
+    ----------
+    weights : ``(..., n)`` non-negative (an all-zero row is uniform).
+
+    The probability reported for an outcome (``probs``) is the one the table realizes: an
+    outcome's mass is collected from its own column and from the columns aliasing to it.
+    """
+
+    def __init__(self, weights: Any) -> None:
+        w = _check_weights(weights, "AliasTable")
+        self.batch_shape = w.shape[:-1]
+        self.n = w.shape[-1]
+        rows = w.reshape(-1, self.n)
+        total = rows.sum(axis=1, keepdims=True)
+        p = np.where(total > 0, rows / np.where(total > 0, total, 1.0), 1.0 / self.n)
+        q = np.empty_like(p)
+        alias = np.empty(p.shape, np.int32)
+        for r in range(p.shape[0]):
+            q[r], alias[r] = _vose(p[r])
+        self.threshold = q.reshape(w.shape)
+        self.alias = alias.reshape(w.shape)
+        # the realized probabilities, recomputed from the table itself
+        realized = q / self.n
+        for r in range(p.shape[0]):
+            np.add.at(realized[r], alias[r], (1.0 - q[r]) / self.n)
+        self.probs = realized.reshape(w.shape)
+        flat_alias = (alias + (np.arange(p.shape[0], dtype=np.int32) * self.n)[:, None]).reshape(-1)
+        self._alias = jnp.asarray(flat_alias.astype(np.int32))
+        self._q = {
+            jnp.float64: jnp.asarray(q.reshape(-1)),
+            jnp.float32: jnp.asarray(q.reshape(-1), jnp.float32),
+        }
+        self._p = {
+            jnp.float64: jnp.asarray(realized.reshape(-1)),
+            jnp.float32: jnp.asarray(realized.reshape(-1), jnp.float32),
+        }
+
+    def _key(self, dtype: Any) -> Any:
+        return jnp.float64 if jnp.dtype(dtype) == jnp.float64 else jnp.float32
+
+    def sample_discrete(self, u: Any, which: Any = None) -> tuple[Array, Array, Array]:
+        """Draw an outcome: ``(index int32, u_remapped in [0, 1), probability of the outcome)``."""
+        u = _float_u(u)
+        if which is None:
+            if self.batch_shape:
+                raise ParameterError("AliasTable: a batched table needs 'which'")
+            base = jnp.zeros(u.shape, jnp.int32)
+        else:
+            base = jnp.asarray(which, jnp.int32) * self.n
+        key = self._key(u.dtype)
+        return alias_sample(self._q[key], self._alias, self._p[key], base, self.n, u)
+
+    def prob(self, k: Any, which: Any = None, dtype: Any = jnp.float64) -> Array:
+        k = jnp.asarray(k, jnp.int32)
+        base = 0 if which is None else jnp.asarray(which, jnp.int32) * self.n
+        return jnp.take(self._p[self._key(dtype)], base + k, mode="clip")
+
+
+def alias_sample(
+    q: Array, alias_flat: Array, probs: Array, base: Array, n: int, u: Array
+) -> tuple[Array, Array, Array]:
+    """Core of :meth:`AliasTable.sample_discrete` on flat arrays (``alias_flat`` holds flat
+    indices); returns ``(index within the row, u_remapped, probability)``."""
+    s = u * n
+    col = jnp.minimum(jnp.floor(s).astype(jnp.int32), n - 1)
+    r = s - col.astype(u.dtype)
+    flat = base + col
+    thr = jnp.take(q, flat, mode="clip")
+    keep = r < thr
+    chosen = jnp.where(keep, flat, jnp.take(alias_flat, flat, mode="clip"))
+    rr = jnp.where(
+        keep, r / jnp.where(thr > 0, thr, 1.0), (r - thr) / jnp.where(thr < 1, 1 - thr, 1.0)
+    )
+    rr = jnp.clip(rr, 0.0, _one_minus_eps(u.dtype))
+    return chosen - base, rr, jnp.take(probs, chosen, mode="clip")
+
+
+# ---------------------------------------------------------------------------------------------
+# Rejection sampling
+# ---------------------------------------------------------------------------------------------
+def _hash32(x: Array) -> Array:
+    """``lowbias32`` integer hash (Chris Wellons): a bijection on uint32 with good avalanche."""
+    x = x ^ (x >> 16)
+    x = x * jnp.uint32(0x7FEB352D)
+    x = x ^ (x >> 15)
+    x = x * jnp.uint32(0x846CA68B)
+    return x ^ (x >> 16)
+
+
+def seeds_from_u(u: Array) -> Array:
+    """A uint32 seed per query derived from the bits of its uniforms ``u (..., k)``.
+
+    This is the deterministic default source of the extra random numbers a rejection sampler
+    needs: the same ``u`` always gives the same sample.
+    """
+    u = jnp.asarray(u)
+    if u.dtype == jnp.float64:
+        b = jax.lax.bitcast_convert_type(u, jnp.uint64)
+        b32 = (b ^ (b >> 32)).astype(jnp.uint32)
+    else:
+        b32 = jax.lax.bitcast_convert_type(u.astype(jnp.float32), jnp.uint32)
+    h = jnp.full(u.shape[:-1], 0x9E3779B9, jnp.uint32)
+    for k in range(u.shape[-1]):
+        h = _hash32(h ^ _hash32(b32[..., k] + jnp.uint32(k * 0x632BE5AB)))
+    return h
+
+
+def seeds_from_rng(rng: Any, shape: tuple[int, ...]) -> Array:
+    """uint32 seeds from a NumPy Generator, an integer seed, or a JAX PRNG key."""
+    if isinstance(rng, (int, np.integer)):
+        rng = np.random.default_rng(int(rng))
+    if isinstance(rng, np.random.Generator):
+        return jnp.asarray(rng.integers(0, 2**32, size=shape, dtype=np.uint64).astype(np.uint32))
+    try:
+        return jax.random.bits(rng, shape, jnp.uint32)
+    except (TypeError, ValueError):
+        raise ParameterError(
+            "rng must be a numpy Generator, an integer seed or a JAX PRNG key"
+        ) from None
+
+
+def hash_uniform(seed: Array, counter: int | Array, dtype: Any = jnp.float32) -> Array:
+    """A uniform number in ``[0, 1)`` from ``(seed, counter)``: counter-based, stateless."""
+    x = _hash32(seed ^ _hash32(jnp.asarray(counter, jnp.uint32) * jnp.uint32(0x9E3779B9) + 1))
+    x = _hash32(x + jnp.uint32(0x85EBCA6B))
+    if jnp.dtype(dtype) == jnp.float64:
+        y = _hash32(x ^ jnp.uint32(0xC2B2AE35))
+        v = (x.astype(jnp.float64) * 2.0**21 + (y >> 11).astype(jnp.float64)) * 2.0**-53
+        return v.astype(jnp.float64)
+    return ((x >> 8).astype(jnp.float32) * np.float32(2.0**-24)).astype(dtype)
+
+
+def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> Callable[..., Any]:
+    """Wrap a one-proposal function into the jit-compiled step :func:`rejection_sample` runs.
+
+    ``round_fn(*inputs, u_prop (m, 2), u_acc (m,), *consts) -> (x (m, d), accepted (m,))`` draws
+    one proposal per query from ``u_prop`` and accepts it when ``u_acc`` is below the acceptance
+    ratio. Query ``i``'s ``r``-th proposal uses the caller's ``u`` when ``r = 0`` and
+    :func:`hash_uniform` counters ``3r, 3r + 1`` after that; its acceptance test uses ``3r + 2``.
+    Keep the returned step and reuse it: each new one compiles again.
+    """
+
+    def step(inputs, u, seeds, rounds, consts):
+        dtype = u.dtype
+        r = rounds.astype(jnp.uint32)
+        hashed = jnp.stack(
+            [hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1
+        )
+        up = jnp.where((r == 0)[:, None], u, hashed)
+        ua = hash_uniform(seeds, 3 * r + 2, dtype)
+        return round_fn(*inputs, up, ua, *consts)
+
+    return jax.jit(step)
+
+
+def rejection_sample(
+    step: Callable[..., tuple[Array, Array]],
+    inputs: tuple[Any, ...],
+    u: Any,
+    seeds: Any,
+    max_rounds: int = 4096,
+    consts: tuple[Any, ...] = (),
+    chunk: int = 1 << 16,
+) -> tuple[Array, Array, Array]:
+    """Run a vectorized rejection sampler until every query has accepted a proposal.
+
+    Parameters
+    ----------
+    step : from :func:`rejection_step`.
+    inputs : per-query arrays with leading dimension N (e.g. the outgoing directions).
+    u : ``(N, 2)`` the caller's uniforms, used for the first proposals.
+    seeds : ``(N,)`` uint32 seeds of the further random numbers (:func:`seeds_from_u`,
+        :func:`seeds_from_rng`).
+    max_rounds : queries still rejected after this many proposals fail (``ok`` False).
+    consts : extra arguments passed unchanged to every call.
+    chunk : largest batch per call; batches are padded to 1024, 8192 or 65536 queries so only
+        a few shapes are ever compiled.
+
+    Returns
+    -------
+    x : ``(N, d)`` accepted proposals (the last proposal where failed).
+    ok : ``(N,)`` bool.
+    rounds : ``(N,)`` int32 number of proposals each query used.
+
+    Queries that are done are removed between calls (on the host), so the total work is about
+    ``N / acceptance`` proposals, and the result does not depend on the chunking.
+    """
+    inputs = tuple(np.asarray(a) for a in inputs)
+    u = np.asarray(u)
+    seeds = np.asarray(seeds)
+    n = u.shape[0]
+    x_out = None
+    ok = np.zeros(n, bool)
+    rounds = np.zeros(n, np.int32)
+    pending = np.arange(n)
+    while pending.size:
+        m = min(pending.size, chunk)
+        size = 1024
+        while size < m:
+            size *= 8
+        part = pending[:m]
+        idx = np.concatenate([part, np.full(size - m, part[0])])
+        x, acc = step(tuple(a[idx] for a in inputs), u[idx], seeds[idx], rounds[idx], consts)
+        x = np.asarray(x)[:m]
+        acc = np.asarray(acc)[:m]
+        if x_out is None:
+            x_out = np.zeros((n, *x.shape[1:]), x.dtype)
+        x_out[part] = x  # accepted queries leave `pending` and keep this proposal
+        rounds[part] += 1
+        ok[part[acc]] = True
+        failed = part[~acc]
+        failed = failed[rounds[failed] < max_rounds]
+        pending = np.concatenate([pending[m:], failed])
+    return jnp.asarray(x_out), jnp.asarray(ok), jnp.asarray(rounds)
+
+
+__all__ = [
+    "AliasTable",
+    "Distribution1D",
+    "Distribution2D",
+    "alias_sample",
+    "find_interval",
+    "hash_uniform",
+    "rejection_sample",
+    "rejection_step",
+    "seeds_from_rng",
+    "seeds_from_u",
+]

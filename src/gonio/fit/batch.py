@@ -1,0 +1,251 @@
+"""Fitting many materials: one output folder per material, streamed to disk, resumable.
+
+Layout of ``out_dir``::
+
+    <material>/<model>.json         one fit result per model (written atomically)
+    <material>/<model>-*.png        plots (unless disabled)
+    <material>/summary.json         the comparison; written last, it marks the material done
+    batch.jsonl                     one line per finished (or failed) material, appended
+
+A rerun skips every material whose ``summary.json`` exists, so an interrupted batch resumes where
+it stopped. Work runs in a local process pool (``spawn`` start method: JAX is multithreaded and
+must not be forked) or on a Dask cluster (``scheduler="tcp://host:8786"``); each task reads its
+file, fits, writes its folder and returns a small summary, so results never travel back in bulk.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from gonio.errors import FitError, GonioError
+
+#: File name endings considered measurement files when a folder is given.
+DATA_SUFFIXES = (".h5", ".hdf5", ".binary", ".bsdf", ".brdf", ".alta", ".dat", ".csv")
+
+
+def material_name(path: Path) -> str:
+    """``acryl_blue`` for ``acryl_blue.brdf``, ``x`` for ``x.brdf.h5``."""
+    return path.name.split(".")[0] or path.name
+
+
+def _is_data_file(q: Path) -> bool:
+    return q.is_file() and not q.name.startswith(".") and q.name.lower().endswith(DATA_SUFFIXES)
+
+
+def expand_inputs(inputs: Sequence[str | Path]) -> list[Path]:
+    """Files named by paths, folders (their data files) and glob patterns, deduplicated.
+
+    Raises
+    ------
+    FitError
+        When an input matches nothing.
+    """
+    out: list[Path] = []
+    for item in inputs:
+        s = str(item)
+        p = Path(s)
+        if p.is_dir():
+            found = sorted(
+                q
+                for q in p.iterdir()
+                if q.is_file()
+                and not q.name.startswith(".")
+                and q.name.lower().endswith(DATA_SUFFIXES)
+            )
+        elif any(ch in s for ch in "*?["):
+            found = sorted(Path(q) for q in glob.glob(s) if Path(q).is_file())
+        elif p.is_file():
+            found = [p]
+        else:
+            raise FitError(f"{s}: no such file or directory")
+        if not found:
+            raise FitError(f"{s}: no measurement files found")
+        out.extend(found)
+    seen: set[Path] = set()
+    unique = []
+    for p in out:
+        r = p.resolve()
+        if r not in seen:
+            seen.add(r)
+            unique.append(p)
+    return unique
+
+
+def safe_stem(name: str) -> str:
+    """A file-name-safe version of a model name (``lambert+ts`` -> ``lambert+ts``)."""
+    return "".join(ch if ch.isalnum() or ch in "+-_." else "_" for ch in name)
+
+
+def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, Any]:
+    """Fit every model of ``options["models"]`` to one file and write its folder.
+
+    Returns a small summary (``material``, ``status`` "ok"/"error", ``recommended``,
+    ``error``). Runs in worker processes: imports happen here.
+    """
+    import gonio.brdf  # noqa: F401  (float64)
+    from gonio.fit.compare import summarize
+    from gonio.fit.data import prepare
+    from gonio.fit.result import write_json
+
+    src = Path(path)
+    name = options.get("material") or material_name(src)
+    folder = Path(out_dir) / name
+    opts = dict(options.get("fit", {}))
+    try:
+        from gonio.fit.api import fit
+
+        data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
+        results = fit(data, model=list(options["models"]), **opts)
+        results = results if isinstance(results, list) else [results]
+        folder.mkdir(parents=True, exist_ok=True)
+        files = []
+        for r in results:
+            stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
+            files.append(str(r.save(folder / f"{stem}.json")))
+            if options.get("plots", True):
+                from gonio.fit.plots import plot_result
+
+                plot_result(r, data, folder, stem)
+        comp = summarize(results)
+        summary = {
+            "material": name,
+            "path": str(src),
+            "status": "ok",
+            "files": files,
+            **comp.to_json(),
+        }
+        write_json(summary, folder / "summary.json")
+        return {
+            "material": name,
+            "status": "ok",
+            "recommended": comp.recommended,
+            "table": comp.to_json()["table"],
+        }
+    except GonioError as exc:
+        return {"material": name, "status": "error", "error": str(exc)}
+    except Exception as exc:  # a bug in one material must not stop the batch; keep its trace
+        return {
+            "material": name,
+            "status": "error",
+            "error": f"{type(exc).__name__}: {exc}",
+            "trace": traceback.format_exc(),
+        }
+
+
+def pending(
+    paths: Iterable[Path], out_dir: Path, models: Sequence[str] = ()
+) -> tuple[list[Path], list[Path]]:
+    """Split ``paths`` into (to do, already done): done means ``summary.json`` exists and so
+    does the result of every model in ``models`` (a rerun asking for a new model redoes the
+    material)."""
+    todo, done = [], []
+    for p in paths:
+        folder = out_dir / material_name(p)
+        ok = (folder / "summary.json").exists()
+        ok = ok and all((folder / f"{safe_stem(m)}.json").exists() for m in models)
+        (done if ok else todo).append(p)
+    return todo, done
+
+
+def _journal(out_dir: Path, record: dict[str, Any]) -> None:
+    line = json.dumps({k: v for k, v in record.items() if k != "table"}) + "\n"
+    with open(out_dir / "batch.jsonl", "a") as fh:
+        fh.write(line)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def run_batch(
+    paths: Sequence[Path],
+    out_dir: str | Path,
+    options: dict[str, Any],
+    jobs: int = 2,
+    scheduler: str | None = None,
+    on_done: Callable[[dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Fit every file not yet done; returns the summaries of this run (done ones skipped).
+
+    Parameters
+    ----------
+    paths : measurement files.
+    out_dir : output folder (created).
+    options : ``{"models": [...], "fit": {fit() keyword arguments}, "plots": bool}``.
+    jobs : worker processes of the local pool (1 runs in this process).
+    scheduler : address of a Dask scheduler; when given, tasks run on that cluster.
+    on_done : called with each summary as it arrives (progress display); an exception raised
+        there (e.g. KeyboardInterrupt) stops the batch, leaving finished materials on disk.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = [material_name(p) for p in paths]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise FitError(f"several inputs share the material name(s) {', '.join(sorted(dup))}")
+    plain = [m for m in options.get("models", ()) if isinstance(m, str)]
+    separate = options.get("fit", {}).get("channels") == "separate"
+    todo, _ = pending(paths, out, () if separate else plain)
+    summaries: list[dict[str, Any]] = []
+
+    def finish(s: dict[str, Any]) -> None:
+        _journal(out, s)
+        summaries.append(s)
+        if on_done is not None:
+            on_done(s)
+
+    if not todo:
+        return summaries
+    if scheduler:
+        _run_dask(todo, out, options, scheduler, finish)
+    elif jobs <= 1:
+        for p in todo:
+            finish(fit_material(str(p), str(out), options))
+    else:
+        ctx = get_context("spawn")
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+            futures = {pool.submit(fit_material, str(p), str(out), options) for p in todo}
+            try:
+                while futures:
+                    done, futures = wait(futures, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        finish(fut.result())
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
+    return summaries
+
+
+def _run_dask(
+    todo: list[Path],
+    out: Path,
+    options: dict[str, Any],
+    scheduler: str,
+    finish: Callable[[dict[str, Any]], None],
+) -> None:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise FitError(
+            "--scheduler needs dask.distributed (pip install 'dask[distributed]')"
+        ) from None
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise FitError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+    try:
+        futures = [
+            client.submit(fit_material, str(p.resolve()), str(out.resolve()), options, pure=False)
+            for p in todo
+        ]
+        for fut in as_completed(futures):
+            finish(fut.result())
+    finally:
+        client.close()

@@ -1,0 +1,316 @@
+"""``gonio fit``: fit analytic models to measured BRDF files (one file, or a batch)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from gonio.errors import FitError
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``fit`` subcommand."""
+    from gonio.fit.losses import LOSSES
+
+    p = subparsers.add_parser(
+        "fit",
+        help="fit analytic BRDF models (with uncertainty) to measured files",
+        description=(
+            "Fit one or more analytic BRDF models to a measured BRDF (native .brdf.h5, MERL "
+            ".binary, RGL .bsdf, Cornell .brdf, ALTA). One JSON per model, plots and a "
+            "comparison are written to --out. Several files, a folder or a glob pattern run "
+            "as a resumable batch: OUT/<material>/ per file, skipped when already done."
+        ),
+    )
+    p.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="FILE_DIR_OR_GLOB",
+        help="measurement file(s), folder(s) of files, or quoted glob patterns",
+    )
+    p.add_argument(
+        "--model",
+        "-m",
+        action="append",
+        dest="models",
+        metavar="NAME",
+        help="model to fit (repeatable): a lobe name or lobes joined by '+', e.g. "
+        "lambert+ward; 'gonio fit --list-models x' lists them. Default: lambert+ward "
+        "and lambert+ts where available",
+    )
+    p.add_argument(
+        "--list-models", action="store_true", help="print the valid model names and exit"
+    )
+    p.add_argument(
+        "--loss",
+        default="wls",
+        choices=sorted(LOSSES),
+        help="metric to minimize (default wls: chi-square with the data's sigma; "
+        "ngan: cosine-weighted L2; low-e1/low-e2: log metrics; cube-root)",
+    )
+    p.add_argument(
+        "--uncertainty",
+        default="none",
+        choices=("none", "laplace", "mcmc"),
+        help="parameter intervals: Laplace (Gauss-Newton at the optimum) or MCMC "
+        "(emcee, with a model-discrepancy noise term); default none",
+    )
+    p.add_argument(
+        "--theta-max",
+        type=float,
+        default=80.0,
+        metavar="DEG",
+        help="discard samples with incident or outgoing polar angle above DEG degrees (default 80)",
+    )
+    p.add_argument(
+        "--channels",
+        default="shared",
+        choices=("shared", "separate"),
+        help="shared lobe shapes with per-channel albedos (default), or each "
+        "channel fitted on its own",
+    )
+    p.add_argument(
+        "--optimizer",
+        default="lm",
+        choices=("lm", "lbfgs", "slsqp"),
+        help="local method: Levenberg-Marquardt on the JAX Jacobian (default) or "
+        "nlopt L-BFGS / SLSQP with JAX gradients",
+    )
+    p.add_argument(
+        "--global",
+        dest="global_method",
+        default="none",
+        choices=("none", "crs2", "mlsl", "direct"),
+        help="nlopt global search on a subsample before the local stage (default none; "
+        "multi-start is always on)",
+    )
+    p.add_argument(
+        "--starts", type=int, default=8, metavar="N", help="multi-start points (default 8)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
+    p.add_argument(
+        "--fix",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="hold a parameter fixed, e.g. --fix ward.rho_d=0 (repeatable)",
+    )
+    p.add_argument(
+        "--mcmc-steps",
+        type=int,
+        default=2000,
+        metavar="N",
+        help="MCMC steps per walker (default 2000)",
+    )
+    p.add_argument(
+        "--out",
+        "-o",
+        default="fit-results",
+        metavar="DIR",
+        help="output folder (default ./fit-results)",
+    )
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=int,
+        default=2,
+        metavar="N",
+        help="worker processes for a batch (default 2; 1 = in this process)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run a batch on a Dask cluster, e.g. tcp://10.0.0.5:8786",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print a machine-readable summary on stdout instead of tables",
+    )
+    p.set_defaults(func=run)
+
+
+def _default_models() -> list[str]:
+    from gonio.fit.presets import available
+
+    names = available()
+    chosen = [m for m in ("lambert+ward", "lambert+ts") if m in names]
+    return chosen or ["lambert"]
+
+
+def _parse_fix(items: list[str]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        key, eq, val = item.partition("=")
+        try:
+            if not eq:
+                raise ValueError
+            out[key.strip()] = float(val)
+        except ValueError:
+            raise FitError(f"--fix expects KEY=NUMBER, got {item!r}") from None
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of ``gonio fit``."""
+    from gonio.fit.presets import available, build
+
+    if args.list_models:
+        print("\n".join(available()))
+        return 0
+    models = args.models or _default_models()
+    for m in models:
+        build(m)  # unknown names fail here, before any work
+    if args.theta_max <= 0 or args.theta_max > 90:
+        raise FitError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
+    if args.starts < 1 or args.mcmc_steps < 10 or args.jobs < 1:
+        raise FitError("--starts and --jobs must be >= 1 and --mcmc-steps >= 10")
+    from gonio.fit.batch import expand_inputs
+
+    paths = expand_inputs(args.inputs)
+    fit_opts: dict[str, Any] = {
+        "loss": args.loss,
+        "uncertainty": None if args.uncertainty == "none" else args.uncertainty,
+        "theta_max_deg": args.theta_max,
+        "channels": args.channels,
+        "optimizer": args.optimizer,
+        "global_method": None if args.global_method == "none" else args.global_method,
+        "n_starts": args.starts,
+        "seed": args.seed,
+        "mcmc_steps": args.mcmc_steps,
+        "fixed": _parse_fix(args.fix) or None,
+    }
+    options = {"models": models, "fit": fit_opts, "plots": not args.no_plots}
+    out = Path(args.out)
+    single = len(paths) == 1 and not Path(args.inputs[0]).is_dir() and len(args.inputs) == 1
+    if single:
+        return _run_single(paths[0], out, options, args.json)
+    return _run_batch(paths, out, options, args)
+
+
+def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -> int:
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    from gonio.fit.api import fit
+    from gonio.fit.batch import safe_stem
+    from gonio.fit.compare import summarize
+    from gonio.fit.data import prepare
+    from gonio.fit.result import write_json
+
+    console = Console(stderr=True)
+    opts = dict(options["fit"])
+    results = []
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=as_json,
+    ) as bar:
+        task = bar.add_task(f"reading {path.name}")
+        data = prepare(path, opts["theta_max_deg"])
+        for m in options["models"]:
+            r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
+            results += r if isinstance(r, list) else [r]
+        comp = summarize(results)
+        files = []
+        for r in results:
+            stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
+            bar.update(task, description=f"writing {stem}")
+            files.append(str(r.save(out / f"{stem}.json")))
+            if options["plots"]:
+                from gonio.fit.plots import plot_result
+
+                files += [str(p) for p in plot_result(r, data, out, stem)]
+    summary = {
+        "material": data.source.get("name"),
+        "path": str(path),
+        "files": files,
+        **comp.to_json(),
+    }
+    write_json(summary, out / "summary.json")
+    if as_json:
+        json.dump(summary, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        out_console = Console()
+        if not out_console.is_terminal:  # piped: do not squeeze the table into 80 columns
+            out_console = Console(width=120)
+        _print_table(out_console, summary, data.source.get("name") or path.name, results)
+    return 0
+
+
+def _print_table(console: Any, summary: dict[str, Any], title: str, results: list[Any]) -> None:
+    from rich.table import Table
+
+    t = Table(title=f"{title}: {summary['table'][0]['metric']} fit")
+    for col in ("model", "params", "loss", "chi2/dof", "BIC", "dBIC", "ngan", "low-e1", "ok"):
+        t.add_column(col, justify="left" if col == "model" else "right", no_wrap=True)
+    for row in summary["table"]:
+        t.add_row(
+            row["model"],
+            str(row["n_params"]),
+            f"{row['loss']:.4g}",
+            f"{row['chi2_dof']:.3g}",
+            f"{row['bic']:.5g}",
+            f"{row['delta_bic']:.1f}",
+            f"{row['metrics']['ngan']:.3g}",
+            f"{row['metrics']['low-e1']:.3g}",
+            "yes" if row["converged"] else "NO",
+        )
+    console.print(t)
+    for r in results:
+        if r.warnings:
+            console.print(f"[yellow]{r.name}:[/yellow] " + "; ".join(r.warnings))
+    console.print(f"recommended: [bold]{summary['recommended']}[/bold] ({summary['reason']})")
+
+
+def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any) -> int:
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    from gonio.fit.batch import pending, run_batch
+
+    console = Console(stderr=True)
+    separate = options["fit"].get("channels") == "separate"
+    todo, done = pending(paths, out, () if separate else options["models"])
+    if done and not args.json:
+        console.print(f"{len(done)} of {len(paths)} materials already done in {out}; resuming")
+    failures = []
+    with Progress(
+        *Progress.get_default_columns()[:1],
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=console,
+        disable=args.json,
+    ) as bar:
+        task = bar.add_task("fitting", total=len(todo))
+
+        def on_done(s: dict[str, Any]) -> None:
+            bar.advance(task)
+            if s["status"] != "ok":
+                failures.append(s)
+                if not args.json:
+                    console.print(f"[red]{s['material']}[/red]: {s['error']}")
+
+        summaries = run_batch(
+            todo, out, options, jobs=args.jobs, scheduler=args.scheduler, on_done=on_done
+        )
+    if args.json:
+        json.dump(
+            {"out": str(out), "done_before": [str(p) for p in done], "results": summaries},
+            sys.stdout,
+            indent=2,
+        )
+        sys.stdout.write("\n")
+    else:
+        ok = len(summaries) - len(failures)
+        console.print(f"{ok} fitted, {len(failures)} failed, {len(done)} skipped; results in {out}")
+    return 1 if failures else 0

@@ -1,0 +1,159 @@
+"""Fit metrics, each written as a sum of squared residuals so every optimizer can use it.
+
+Notation: ``y`` measured and ``f`` fitted BRDF value (sr^-1) of sample n and channel c;
+``sigma`` the per-value standard deviation; ``w`` the quadrature weight of the sample (the
+solid-angle measure of its cell, 1 for scattered samples); ``W = sum_n w_n``; ``C`` channels;
+``cos_i`` the cosine of the incident polar angle. Every loss is ``L = sum_{n,c} r_nc^2`` and the
+number reported for it (``value``) is stated next to the formula.
+
+``wls`` (weighted least squares, the statistical default)
+    ``r = (f - y) / sigma`` (``sigma = 1`` when the data has none); value ``L`` = chi^2.
+``ngan`` (Ngan, Durand & Matusik 2005, cosine-weighted L2 with solid-angle weights)
+    ``r = sqrt(w / (C W)) (f - y) cos_i``; value ``sqrt(L)``, the weighted RMS in sr^-1.
+``low-e1`` (Löw, Kronander, Ynnerman & Unger 2012, log metric with the cosine)
+    ``r = sqrt(w / (C W)) [ln(1 + f cos_i) - ln(1 + y cos_i)]``; value ``sqrt(L)``.
+``low-e2`` (the same without the cosine)
+    ``r = sqrt(w / (C W)) [ln(1 + f) - ln(1 + y)]``; value ``sqrt(L)``.
+``cube-root`` (compresses the specular peak, as in later fitting studies)
+    ``r = sqrt(w / (C W)) [cbrt(f + eps) - cbrt(y + eps)]`` with ``eps = 1e-6`` sr^-1, which
+    keeps the derivative finite where the model is 0; value ``sqrt(L)``.
+
+Measured values slightly below zero (noise) are kept as measured; inside the logarithms they are
+clamped so that ``1 + y cos_i >= 0.1``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from gonio.errors import FitError
+from gonio.fit.data import FitData
+
+Array = jnp.ndarray
+
+_EPS_CBRT = 1e-6
+_LOG_FLOOR = 0.1
+
+
+@dataclass(frozen=True)
+class Loss:
+    """A selectable metric.
+
+    Attributes
+    ----------
+    name : key used by ``fit(loss=...)`` and the CLI.
+    value_kind : ``"chi2"`` (value = L) or ``"rms"`` (value = sqrt(L)).
+    statistical : True when the residuals are standardized by the data's sigma, so that
+        L is a chi-square and a Gaussian likelihood follows directly.
+    doc : the formula in one line.
+    needs : names of the per-sample constants the residual uses.
+    """
+
+    name: str
+    value_kind: str
+    statistical: bool
+    doc: str
+    _residual: Callable[[Any, dict[str, Any], Any], Any]
+    needs: tuple[str, ...]
+
+    def constants(self, data: FitData) -> dict[str, np.ndarray]:
+        """Per-sample constants the residual needs, as float64 NumPy arrays."""
+        y = data.values
+        out: dict[str, np.ndarray] = {"y": y}
+        cos_i = data.wi[:, 2:3]
+        for key in self.needs:
+            if key == "inv_sigma":
+                out[key] = np.ones_like(y) if data.sigma is None else 1.0 / data.sigma
+            elif key == "scale":
+                w = data.weights
+                out[key] = np.sqrt(w / (y.shape[1] * w.sum()))[:, None]
+            elif key == "cos_i":
+                out[key] = np.ascontiguousarray(cos_i)
+            elif key == "log_y_cos":
+                out[key] = np.log(np.maximum(1.0 + y * cos_i, _LOG_FLOOR))
+            elif key == "log_y":
+                out[key] = np.log(np.maximum(1.0 + y, _LOG_FLOOR))
+            elif key == "cbrt_y":
+                out[key] = np.cbrt(y + _EPS_CBRT)
+        return out
+
+    def residual(self, f: Array, k: dict[str, Array]) -> Array:
+        """Residuals ``(N, C)`` for model values ``f`` ``(N, C or 1)`` and constants ``k`` (JAX)."""
+        f = jnp.broadcast_to(f, k["y"].shape)
+        return self._residual(f, k, jnp)
+
+    def residual_np(self, f: np.ndarray, k: dict[str, np.ndarray]) -> np.ndarray:
+        """The same in NumPy (for reporting without tracing or device transfers)."""
+        f = np.broadcast_to(f, k["y"].shape)
+        return self._residual(f, k, np)
+
+    def value(self, sum_sq: float) -> float:
+        """The reported number for ``L = sum r^2``."""
+        return float(sum_sq) if self.value_kind == "chi2" else float(np.sqrt(max(sum_sq, 0.0)))
+
+
+def _wls(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    return (f - k["y"]) * k["inv_sigma"]
+
+
+def _ngan(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    return k["scale"] * (f - k["y"]) * k["cos_i"]
+
+
+def _low_e1(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    lf = xp.log(xp.maximum(1.0 + f * k["cos_i"], _LOG_FLOOR))
+    return k["scale"] * (lf - k["log_y_cos"])
+
+
+def _low_e2(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    lf = xp.log(xp.maximum(1.0 + f, _LOG_FLOOR))
+    return k["scale"] * (lf - k["log_y"])
+
+
+def _cube_root(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    return k["scale"] * (xp.cbrt(xp.maximum(f, 0.0) + _EPS_CBRT) - k["cbrt_y"])
+
+
+LOSSES: dict[str, Loss] = {
+    "wls": Loss(
+        "wls", "chi2", True, "sum ((f - y) / sigma)^2; sigma = 1 when absent", _wls,
+        ("inv_sigma",),
+    ),
+    "ngan": Loss(
+        "ngan", "rms", False, "sqrt(sum w ((f - y) cos_i)^2 / (C W))", _ngan, ("scale", "cos_i")
+    ),
+    "low-e1": Loss(
+        "low-e1", "rms", False, "sqrt(sum w (ln(1+f cos_i) - ln(1+y cos_i))^2 / (C W))", _low_e1,
+        ("scale", "cos_i", "log_y_cos"),
+    ),
+    "low-e2": Loss(
+        "low-e2", "rms", False, "sqrt(sum w (ln(1+f) - ln(1+y))^2 / (C W))", _low_e2,
+        ("scale", "log_y"),
+    ),
+    "cube-root": Loss(
+        "cube-root", "rms", False, "sqrt(sum w (cbrt(f+eps) - cbrt(y+eps))^2 / (C W))",
+        _cube_root, ("scale", "cbrt_y"),
+    ),
+}  # fmt: skip
+
+
+def get_loss(name: str | Loss) -> Loss:
+    """Look a loss up by name; FitError listing the valid names otherwise."""
+    if isinstance(name, Loss):
+        return name
+    try:
+        return LOSSES[name]
+    except KeyError:
+        raise FitError(f"unknown loss {name!r}; valid: {', '.join(LOSSES)}") from None
+
+
+def evaluate(loss: str | Loss, f: np.ndarray, data: FitData) -> float:
+    """The reported value of ``loss`` for model values ``f`` (N, C) on ``data``."""
+    lo = get_loss(loss)
+    r = lo.residual_np(np.asarray(f, dtype=np.float64), lo.constants(data))
+    return lo.value(float(np.sum(r * r)))

@@ -1,0 +1,210 @@
+"""The compiled objective: residuals, cost, gradient and normal equations of one fit problem.
+
+``jax.jit`` sits here, at the objective boundary. The data travel as jit *arguments* (never as
+closed-over constants, which XLA would embed in the program and recompile per material), padded
+and split into equal chunks so that memory stays bounded on a full MERL table: the normal
+equations ``A = J^T J`` (P x P) and ``g = J^T r`` are accumulated chunk by chunk with one
+forward-mode Jacobian pass (``jacfwd``, P tangents) per chunk, so the cost in N is one pass.
+All arithmetic is float64.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from gonio.fit.data import FitData
+from gonio.fit.losses import Loss
+from gonio.fit.params import Layout
+
+Array = jnp.ndarray
+
+#: Rows per chunk of the accumulated normal equations.
+DEFAULT_CHUNK = 32768
+
+
+@dataclass
+class Problem:
+    """A fit problem: layout (which parameters, how mapped), loss and data, compiled.
+
+    Attributes
+    ----------
+    layout, loss, data : the pieces.
+    n_residuals : number M of residuals (valid samples times channels).
+    arrays : the device-side data pytree passed to the compiled functions.
+    """
+
+    layout: Layout
+    loss: Loss
+    data: FitData
+    chunk: int = DEFAULT_CHUNK
+
+    def __post_init__(self) -> None:
+        n = self.data.n
+        k = max(1, -(-n // self.chunk))
+        size = -(-n // k)  # equal chunks, at most `chunk` rows
+        # round up so that data sets of similar size share compiled code
+        size = min(-(-size // 256) * 256, max(self.chunk, 256))
+        pad = k * size - n
+        consts = self.loss.constants(self.data)
+        up = np.array([0.0, 0.0, 1.0])
+
+        def padded(a: np.ndarray, fill: Any) -> np.ndarray:
+            if pad:
+                extra = np.broadcast_to(np.asarray(fill, dtype=a.dtype), (pad, *a.shape[1:]))
+                a = np.concatenate([a, extra])
+            return a.reshape(k, size, *a.shape[1:])
+
+        arrays = {
+            "wi": padded(self.data.wi, up),
+            "wo": padded(self.data.wo, up),
+            "mask": padded(np.ones((n, 1)), 0.0),
+            "k": {key: padded(v, 1.0 if key == "inv_sigma" else 0.0) for key, v in consts.items()},
+        }
+        self.arrays = jax.tree_util.tree_map(jnp.asarray, arrays)
+        self.n_chunks, self.chunk_rows = k, size
+        self.n_residuals = n * self.data.channels
+        self.n_params = self.layout.size
+        self._build()
+
+    # -- compiled functions ---------------------------------------------------------------------
+    def _build(self) -> None:
+        self.fns = compiled(self.layout, self.loss)
+
+    # -- NumPy conveniences ---------------------------------------------------------------------
+    def cost(self, u: np.ndarray) -> float:
+        """``L = sum r^2`` at ``u``."""
+        return float(self.fns.cost(jnp.asarray(u, jnp.float64), self.arrays, self.layout.template))
+
+    def value_and_grad(self, u: np.ndarray) -> tuple[float, np.ndarray]:
+        """``L`` and ``dL/du`` at ``u``."""
+        v, g = self.fns.value_and_grad(
+            jnp.asarray(u, jnp.float64), self.arrays, self.layout.template
+        )
+        return float(v), np.asarray(g)
+
+    def normal(self, u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(L, J^T r, J^T J)`` at ``u``."""
+        s, g, a = self.fns.normal(jnp.asarray(u, jnp.float64), self.arrays, self.layout.template)
+        return float(s), np.asarray(g), np.asarray(a)
+
+    def hessian(self, u: np.ndarray) -> np.ndarray:
+        """Exact Hessian ``d2L/du2`` (P x P)."""
+        return np.asarray(
+            self.fns.hessian(jnp.asarray(u, jnp.float64), self.arrays, self.layout.template)
+        )
+
+    def residuals(self, u: np.ndarray) -> np.ndarray:
+        """Residuals of the valid samples, (N, C)."""
+        r = np.asarray(
+            self.fns.residuals(jnp.asarray(u, jnp.float64), self.arrays, self.layout.template)
+        )
+        return r.reshape(-1, self.data.channels)[: self.data.n]
+
+    def predict(self, u: np.ndarray) -> np.ndarray:
+        """Model values at the data's directions, (N, C) in sr^-1."""
+        f = np.asarray(
+            self.fns.predict(jnp.asarray(u, jnp.float64), self.arrays, self.layout.template)
+        )
+        f = f.reshape(-1, f.shape[-1])[: self.data.n]
+        return np.broadcast_to(f, (self.data.n, self.data.channels))
+
+    def with_data(self, data: FitData) -> Problem:
+        """The same layout and loss on other data (e.g. a subsample)."""
+        return Problem(self.layout, self.loss, data, self.chunk)
+
+
+class Compiled:
+    """Jitted functions of one (model structure, fitted parameters, loss) combination.
+
+    Every function takes ``(u, arrays, template)``: the template model is an argument (a pytree)
+    rather than a closed-over constant, so that fits of the same model structure to other data
+    or from other templates reuse the compiled code.
+    """
+
+    def __init__(self, layout: Layout, loss: Loss) -> None:
+        entries = layout.entries
+
+        tied = dict(layout.tied)
+
+        def to_model(u: Array, tmpl: Any) -> Any:
+            parts = {}
+            for e in entries:
+                v = layout._forward(e, u[e.offset : e.offset + e.size])
+                parts[e.key] = v if e.spec.per_channel else v[0]
+            for target, source in tied.items():
+                parts[target] = parts[source]
+            return tmpl.replace(**parts)
+
+        def chunk_res(u: Array, c: dict[str, Any], tmpl: Any) -> Array:
+            f = to_model(u, tmpl).f(c["wi"], c["wo"])
+            r = loss.residual(f, c["k"])
+            return (r * c["mask"]).reshape(-1)
+
+        def cost(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
+            def step(acc: Array, c: dict[str, Any]) -> tuple[Array, None]:
+                r = chunk_res(u, c, tmpl)
+                return acc + jnp.dot(r, r), None
+
+            total, _ = jax.lax.scan(step, jnp.zeros((), u.dtype), arrays)
+            return total
+
+        def normal(u: Array, arrays: dict[str, Any], tmpl: Any) -> tuple[Array, Array, Array]:
+            p = u.shape[0]
+
+            def step(acc: tuple[Array, Array, Array], c: dict[str, Any]) -> tuple[Any, None]:
+                def res_aux(v: Array) -> tuple[Array, Array]:
+                    r = chunk_res(v, c, tmpl)
+                    return r, r
+
+                jac, r = jax.jacfwd(res_aux, has_aux=True)(u)
+                s, g, a = acc
+                return (s + jnp.dot(r, r), g + jac.T @ r, a + jac.T @ jac), None
+
+            init = (jnp.zeros((), u.dtype), jnp.zeros(p, u.dtype), jnp.zeros((p, p), u.dtype))
+            (s, g, a), _ = jax.lax.scan(step, init, arrays)
+            return s, g, a
+
+        def residuals(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
+            return jax.vmap(lambda c: chunk_res(u, c, tmpl))(arrays).reshape(-1)
+
+        def predict(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
+            model = to_model(u, tmpl)
+            return jax.vmap(lambda c: model.f(c["wi"], c["wo"]))(arrays)
+
+        self.to_model = to_model
+        self.chunk_res = chunk_res
+        self.cost_raw = cost
+        self.normal_raw = normal
+        self.cost = jax.jit(cost)
+        self.value_and_grad = jax.jit(jax.value_and_grad(cost))
+        self.normal = jax.jit(normal)
+        self.residuals = jax.jit(residuals)
+        self.predict = jax.jit(predict)
+        self.hessian = jax.jit(jax.hessian(cost))
+
+
+_CACHE: dict[Any, Compiled] = {}
+
+
+def compiled(layout: Layout, loss: Loss) -> Compiled:
+    """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
+    key = (
+        jax.tree_util.tree_structure(layout.template),
+        tuple(
+            (e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.spec.per_channel)
+            for e in layout.entries
+        ),
+        tuple(layout.tied.items()),
+        loss.name,
+    )
+    fns = _CACHE.get(key)
+    if fns is None:
+        if len(_CACHE) > 64:
+            _CACHE.clear()
+        fns = _CACHE[key] = Compiled(layout, loss)
+    return fns

@@ -1,0 +1,281 @@
+"""Optimizers: multi-start Levenberg–Marquardt, nlopt global search and nlopt local polish.
+
+Strategy of :func:`optimize` (every step seeded, nothing to restart by hand):
+
+1. On a random subsample of at most ``subsample`` samples (fixed seed), optionally run an nlopt
+   global method (``"crs2"``: controlled random search with local mutation; ``"mlsl"``:
+   multi-level single linkage with L-BFGS local searches; ``"direct"``: DIRECT-L) inside the
+   box of the reparameterized space (see :mod:`gonio.fit.params`).
+2. From ``n_starts`` points (the template's values, the global result, and uniform random points
+   of the start box) run the chosen local method on the subsample, all starts at once
+   (``vmap``) for LM.
+3. Polish the best on the full data with the local method: ``"lm"`` (Levenberg–Marquardt on the
+   JAX Jacobian, the default: every loss is a sum of squares), ``"lbfgs"`` or ``"slsqp"``
+   (nlopt's LD_LBFGS / LD_SLSQP with exact JAX gradients).
+4. If the polish did not meet its tolerance, restart it from where it stopped (at most
+   ``max_restarts`` times).
+
+Parameters that end on the edge of the search box are reported in ``on_bounds``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import nlopt
+import numpy as np
+
+from gonio.errors import FitError
+from gonio.fit.lm import CONVERGED_F, CONVERGED_X, STALLED, STATUS_TEXT, levenberg_marquardt
+from gonio.fit.objective import Problem
+
+LOCAL_METHODS = ("lm", "lbfgs", "slsqp")
+GLOBAL_METHODS = ("crs2", "mlsl", "direct")
+
+_NLOPT_LOCAL = {"lbfgs": nlopt.LD_LBFGS, "slsqp": nlopt.LD_SLSQP}
+_NLOPT_GLOBAL = {"crs2": nlopt.GN_CRS2_LM, "mlsl": nlopt.G_MLSL_LDS, "direct": nlopt.GN_DIRECT_L}
+
+
+@dataclass
+class OptimResult:
+    """Outcome of :func:`optimize`.
+
+    Attributes
+    ----------
+    u : (P,) optimum in the reparameterized space.
+    cost : ``L = sum r^2`` at ``u`` on the full data.
+    converged : whether the final local method met its tolerance.
+    message : the final method's stopping reason.
+    method, global_method : what ran.
+    n_iter : iterations (LM: Jacobian evaluations; nlopt: objective evaluations) of the polish.
+    on_bounds : flat parameter names ending on their box edge.
+    starts : costs of the multi-start runs on the subsample (best first).
+    timings : seconds per stage (``global``, ``starts``, ``polish``, ``total``).
+    """
+
+    u: np.ndarray
+    cost: float
+    converged: bool
+    message: str
+    method: str
+    global_method: str | None
+    n_iter: int
+    on_bounds: list[str]
+    starts: list[float] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+# -- LM ------------------------------------------------------------------------------------------
+def run_lm(
+    problem: Problem,
+    u0: np.ndarray,
+    max_iter: int = 200,
+    ftol: float = 1e-10,
+    xtol: float = 1e-9,
+) -> tuple[np.ndarray, float, int, int]:
+    """Levenberg–Marquardt from ``u0`` (P,) or from several starts (S, P), one after the other.
+
+    Returns ``(u, cost, n_iter, status)``; with several starts, arrays over starts.
+    """
+    lo, hi = problem.layout.box()
+    u0 = np.asarray(u0, np.float64)
+    starts = u0[None] if u0.ndim == 1 else u0
+    outs = []
+    for s in starts:
+        r = levenberg_marquardt(problem.normal, s, lo, hi, max_iter, ftol, xtol)
+        outs.append((r.u, r.cost, r.it, r.status))
+    if u0.ndim == 1:
+        return outs[0]
+    return tuple(np.array([o[i] for o in outs]) for i in range(4))  # type: ignore[return-value]
+
+
+# -- nlopt ---------------------------------------------------------------------------------------
+class _Tracker:
+    """nlopt objective with exact JAX gradients; remembers the best point (nlopt may raise)."""
+
+    def __init__(self, problem: Problem, scale: float):
+        self.problem = problem
+        self.scale = scale
+        self.best_u: np.ndarray | None = None
+        self.best = np.inf
+        self.n = 0
+
+    def __call__(self, x: np.ndarray, grad: np.ndarray) -> float:
+        self.n += 1
+        if grad.size > 0:
+            v, g = self.problem.value_and_grad(x)
+            g = np.where(np.isfinite(g), g, 0.0)
+            grad[:] = g / self.scale
+        else:
+            v = self.problem.cost(x)
+        if not np.isfinite(v):
+            return 1e300
+        if v < self.best:
+            self.best, self.best_u = v, np.array(x)
+        return v / self.scale
+
+
+def run_nlopt(
+    problem: Problem,
+    u0: np.ndarray,
+    method: str,
+    maxeval: int = 2000,
+    seed: int = 0,
+    ftol_rel: float = 1e-12,
+    xtol_rel: float = 1e-10,
+) -> tuple[np.ndarray, float, int, str]:
+    """One nlopt run (local ``"lbfgs"``/``"slsqp"`` or global ``"crs2"``/``"mlsl"``/``"direct"``)
+    inside the box. Returns ``(u, cost, n_evaluations, message)``."""
+    p = problem.n_params
+    lo, hi = problem.layout.box()
+    nlopt.srand(int(seed))
+    algo = _NLOPT_LOCAL.get(method, _NLOPT_GLOBAL.get(method))
+    if algo is None:
+        raise FitError(f"unknown optimizer {method!r}")
+    opt = nlopt.opt(algo, p)
+    if method == "mlsl":
+        local = nlopt.opt(nlopt.LD_LBFGS, p)
+        local.set_ftol_rel(1e-8)
+        local.set_maxeval(200)
+        opt.set_local_optimizer(local)
+    opt.set_lower_bounds(lo)
+    opt.set_upper_bounds(hi)
+    u0 = np.clip(np.asarray(u0, dtype=np.float64), lo, hi)
+    c0 = problem.cost(u0)
+    tracker = _Tracker(problem, scale=c0 if np.isfinite(c0) and c0 > 0 else 1.0)
+    opt.set_min_objective(tracker)
+    opt.set_maxeval(int(maxeval))
+    if method in _NLOPT_LOCAL:
+        opt.set_ftol_rel(ftol_rel)
+        opt.set_xtol_rel(xtol_rel)
+    elif method != "direct":  # DIRECT stops far too early on a relative-change test
+        opt.set_ftol_rel(1e-8)
+    try:
+        opt.optimize(u0)
+        message = _nlopt_message(opt.last_optimize_result())
+    except nlopt.RoundoffLimited:
+        message = "roundoff limited (best point kept)"
+    except (RuntimeError, ValueError) as exc:  # nlopt reports failures as exceptions
+        message = f"nlopt failure: {exc}"
+    if tracker.best_u is None:
+        return u0, c0, tracker.n, message
+    return tracker.best_u, tracker.best, tracker.n, message
+
+
+def _nlopt_message(code: int) -> str:
+    return {
+        nlopt.SUCCESS: "success",
+        nlopt.STOPVAL_REACHED: "stopval reached",
+        nlopt.FTOL_REACHED: "converged (ftol)",
+        nlopt.XTOL_REACHED: "converged (xtol)",
+        nlopt.MAXEVAL_REACHED: "stopped: evaluation limit reached",
+        nlopt.MAXTIME_REACHED: "stopped: time limit reached",
+    }.get(code, f"nlopt code {code}")
+
+
+# -- driver --------------------------------------------------------------------------------------
+def optimize(
+    problem: Problem,
+    method: str = "lm",
+    global_method: str | None = None,
+    n_starts: int = 8,
+    seed: int = 0,
+    subsample: int = 4000,
+    max_iter: int = 200,
+    max_restarts: int = 3,
+    start: np.ndarray | None = None,
+) -> OptimResult:
+    """Minimize the problem's loss; see the module docstring for the strategy.
+
+    Parameters
+    ----------
+    problem : the compiled problem on the full data.
+    method : local method: ``"lm"``, ``"lbfgs"`` or ``"slsqp"``.
+    global_method : None, ``"crs2"``, ``"mlsl"`` or ``"direct"``.
+    n_starts : number of starting points of the multi-start stage (>= 1).
+    seed : seed of the subsample and the random starts.
+    subsample : samples used by the global and multi-start stages (all when fewer).
+    max_iter : iteration limit of each local run.
+    max_restarts : automatic restarts of the polish when it stops before converging.
+    start : optional (P,) starting point used instead of the template's values.
+    """
+    if method not in LOCAL_METHODS:
+        raise FitError(f"unknown optimizer {method!r}; valid: {', '.join(LOCAL_METHODS)}")
+    if global_method is not None and global_method not in GLOBAL_METHODS:
+        raise FitError(
+            f"unknown global method {global_method!r}; valid: {', '.join(GLOBAL_METHODS)}"
+        )
+    t_start = time.perf_counter()
+    layout = problem.layout
+    timings: dict[str, float] = {}
+    sub = problem
+    if problem.data.n > subsample:
+        sub = problem.with_data(problem.data.random_subset(subsample, seed))
+
+    starts = layout.random_starts(max(int(n_starts), 1), seed)
+    if start is not None:
+        starts[0] = np.clip(start, *layout.box())
+    t0 = time.perf_counter()
+    if global_method is not None:
+        maxeval = 200 * layout.size if global_method != "direct" else 400 * layout.size
+        ug, _, _, _ = run_nlopt(sub, starts[0], global_method, maxeval=maxeval, seed=seed)
+        starts = np.vstack([ug[None], starts])
+    timings["global"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    if len(starts) > 1 or sub is not problem:
+        if method == "lm":
+            # a few iterations from every start, then the two best to convergence
+            us, costs, _, _ = run_lm(sub, starts, max_iter=min(12, max_iter))
+            costs = np.where(np.isfinite(costs), costs, np.inf)
+            top = np.argsort(costs)[:2]
+            us2, costs2, _, _ = run_lm(sub, us[top], max_iter=max_iter)
+            us[top], costs[top] = us2, costs2
+        else:
+            runs = [run_nlopt(sub, s, method, maxeval=50 * max_iter) for s in starts]
+            us = np.stack([r[0] for r in runs])
+            costs = np.array([r[1] for r in runs])
+        costs = np.where(np.isfinite(costs), costs, np.inf)
+        order = np.argsort(costs)
+        best = us[order[0]]
+        start_costs = [float(costs[i]) for i in order]
+    else:
+        best, start_costs = starts[0], []
+    timings["starts"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    converged, message, n_iter, cost = False, "", 0, np.inf
+    u = best
+    for _ in range(max_restarts + 1):
+        if method == "lm":
+            u, cost_a, it, status = run_lm(problem, u, max_iter=max_iter)
+            cost = float(cost_a)
+            n_iter += int(it)
+            message = STATUS_TEXT[int(status)]
+            converged = int(status) in (CONVERGED_F, CONVERGED_X, STALLED)
+        else:
+            u, cost, n, message = run_nlopt(problem, u, method, maxeval=50 * max_iter)
+            n_iter += n
+            converged = "converged" in message or message in ("success", "roundoff limited")
+        if converged:
+            break
+    timings["polish"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    if not np.isfinite(cost):
+        raise FitError(
+            f"the {method} fit produced a non-finite loss; the data may not be fittable by "
+            f"this model"
+        )
+    return OptimResult(
+        u=np.asarray(u),
+        cost=float(cost),
+        converged=bool(converged),
+        message=message,
+        method=method,
+        global_method=global_method,
+        n_iter=n_iter,
+        on_bounds=layout.on_bounds(np.asarray(u)),
+        starts=start_costs,
+        timings=timings,
+    )

@@ -1,0 +1,178 @@
+"""Diagnostic plots of a fit (matplotlib, Agg backend; PNG files written atomically).
+
+``residual_map``   mean log ratio ``ln((f + e) / (y + e))`` over (theta_h, theta_d) bins,
+                   averaged over channels (e = 1e-3 sr^-1 keeps dark cells readable): red where
+                   the model is too bright, blue where too dark.
+``polar_slices``   in-plane slices (wo in the plane of incidence, within 3 degrees) of the
+                   measurement for a few incident angles, with the fitted model as lines; and
+                   fitted-vs-measured values for all samples.
+``corner_plot``    the posterior's 1-D and 2-D marginals (``corner``), from MCMC samples or
+                   from draws of the Laplace Gaussian.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from scipy.stats import binned_statistic_2d
+
+from gonio.fit.data import FitData
+
+_EPS = 1e-3
+
+
+def _save(fig: Any, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        Path(tmp).unlink(missing_ok=True)
+    return path
+
+
+def residual_map(data: FitData, f: np.ndarray, path: str | Path, title: str = "") -> Path:
+    """Plot the binned log-ratio residual over (theta_h, theta_d) in degrees; returns the path."""
+    th, td, _ = data.half_diff()
+    ratio = np.mean(np.log((np.maximum(f, 0) + _EPS) / (np.maximum(data.values, 0) + _EPS)), -1)
+    stat, xe, ye, _ = binned_statistic_2d(
+        np.degrees(td),
+        np.degrees(th),
+        ratio,
+        statistic="mean",
+        bins=45,
+        range=[[0, 90], [0, 90]],
+    )
+    lim = np.nanpercentile(np.abs(stat), 98) if np.isfinite(stat).any() else 1.0
+    lim = max(float(lim), 1e-3)
+    fig, ax = plt.subplots(figsize=(5.2, 4.4))
+    im = ax.pcolormesh(xe, ye, stat.T, cmap="RdBu_r", vmin=-lim, vmax=lim)
+    fig.colorbar(im, ax=ax, label="mean ln((f+e)/(y+e))")
+    ax.set_xlabel("theta_d (deg)")
+    ax.set_ylabel("theta_h (deg)")
+    ax.set_title(title or "residuals (fitted vs measured)")
+    return _save(fig, path)
+
+
+def polar_slices(
+    data: FitData, model: Any, path: str | Path, title: str = "", f: np.ndarray | None = None
+) -> Path:
+    """In-plane slices measured (dots) vs fitted (lines), plus fitted-vs-measured scatter."""
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10.5, 4.2))
+    theta_i = np.degrees(np.arccos(np.clip(data.wi[:, 2], -1, 1)))
+    phi_i = np.arctan2(data.wi[:, 1], data.wi[:, 0])
+    phi_o = np.arctan2(data.wo[:, 1], data.wo[:, 0])
+    dphi = np.angle(np.exp(1j * (phi_o - phi_i)))
+    sin_o = np.hypot(data.wo[:, 0], data.wo[:, 1])
+    off_plane = np.degrees(np.arcsin(np.clip(np.abs(np.sin(dphi)) * sin_o, 0, 1)))
+    colors = plt.cm.viridis(np.linspace(0, 0.9, 4))
+    shown = 0
+    for target, col in zip((0.0, 20.0, 40.0, 60.0), colors, strict=True):
+        sel = (np.abs(theta_i - target) < 3.0) & (off_plane < 3.0)
+        if sel.sum() < 3:
+            continue
+        shown += 1
+        theta_o = np.degrees(np.arccos(np.clip(data.wo[sel, 2], -1, 1)))
+        signed = np.where(np.cos(dphi[sel]) < 0, theta_o, -theta_o)  # + on the mirror side
+        y = np.mean(data.values[sel], -1)
+        ax.scatter(signed, np.maximum(y, 1e-4), s=6, color=col, alpha=0.6)
+        ti = np.radians(target)
+        wi = np.array([np.sin(ti), 0.0, np.cos(ti)])
+        to = np.radians(np.linspace(-89, 89, 357))
+        wo = np.stack([-np.sin(to), np.zeros_like(to), np.cos(to)], -1)
+        fm = np.mean(np.asarray(model.f(np.broadcast_to(wi, wo.shape), wo)), -1)
+        ax.plot(np.degrees(to), np.maximum(fm, 1e-4), color=col, label=f"theta_i = {target:g}")
+    ax.set_yscale("log")
+    ax.set_xlabel("theta_o in the plane of incidence (deg, + = mirror side)")
+    ax.set_ylabel("BRDF (1/sr), channel mean")
+    ax.set_title("in-plane slices" if shown else "no in-plane samples")
+    if shown:
+        ax.legend(fontsize=8)
+    if f is None:
+        f = np.asarray(model.f(data.wi, data.wo))
+    f = np.broadcast_to(f, data.values.shape)
+    idx = np.random.default_rng(0).choice(data.n, size=min(data.n, 20000), replace=False)
+    for c in range(data.channels):
+        ax2.scatter(
+            np.maximum(data.values[idx, c], 1e-5),
+            np.maximum(f[idx, c], 1e-5),
+            s=2,
+            alpha=0.3,
+            label=data.channel_names[c] if data.channels <= 4 else None,
+        )
+    lims = [1e-5, max(float(np.nanmax(data.values)), 1e-3) * 2]
+    ax2.plot(lims, lims, "k--", lw=0.8)
+    ax2.set_xscale("log")
+    ax2.set_yscale("log")
+    ax2.set_xlabel("measured (1/sr)")
+    ax2.set_ylabel("fitted (1/sr)")
+    if data.channels <= 4:
+        ax2.legend(fontsize=8, markerscale=4)
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def corner_plot(
+    samples: np.ndarray, names: list[str], path: str | Path, truths: Any = None, title: str = ""
+) -> Path:
+    """Corner plot of posterior samples (S, P) in physical units."""
+    import corner
+
+    samples = np.asarray(samples)
+    keep = np.ptp(samples, axis=0) > 0
+    fig = corner.corner(
+        samples[:, keep],
+        labels=[n for n, k in zip(names, keep, strict=True) if k],
+        truths=None if truths is None else np.asarray(truths)[keep],
+        quantiles=[0.025, 0.5, 0.975],
+        show_titles=True,
+        title_fmt=".3g",
+        title_kwargs={"fontsize": 8},
+        label_kwargs={"fontsize": 8},
+    )
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+def laplace_samples(unc: Any, n: int = 4000, seed: int = 0) -> np.ndarray:
+    """Draws from the Laplace Gaussian (physical units, delta method) for a corner plot."""
+    std = np.where(np.isfinite(unc.std), unc.std, 0.0)
+    cov = unc.correlation * np.outer(std, std)
+    rng = np.random.default_rng(seed)
+    return rng.multivariate_normal(unc.center, cov, size=n, method="eigh")
+
+
+def plot_result(result: Any, data: FitData, out_dir: str | Path, stem: str) -> list[Path]:
+    """Every plot of one result into ``out_dir`` as ``<stem>-*.png``; returns the paths."""
+    out_dir = Path(out_dir)
+    f = np.asarray(result.model.f(data.wi, data.wo))
+    paths = [
+        residual_map(data, f, out_dir / f"{stem}-residuals.png", title=result.name),
+        polar_slices(data, result.model, out_dir / f"{stem}-slices.png", result.name, f=f),
+    ]
+    unc = result.uncertainty
+    if unc is not None and len(unc.names) >= 1:
+        samples = unc.samples if unc.samples is not None else laplace_samples(unc)
+        if len(unc.names) <= 12:
+            paths.append(
+                corner_plot(
+                    samples,
+                    unc.names,
+                    out_dir / f"{stem}-corner.png",
+                    title=f"{result.name} ({unc.method})",
+                )
+            )
+    return paths

@@ -1,0 +1,104 @@
+"""Model names accepted by ``gonio fit --model`` and ``gonio.fit.fit(model="...")``.
+
+A name is one lobe or several joined by ``+`` (``"lambert+ward"``, ``"lambert+ts+ts"``). Each
+lobe name maps to a constructor of :mod:`gonio.brdf.models`; names whose model is not part of
+this installation are not offered. When a sum contains a ``lambert`` lobe, the other lobes'
+own diffuse term (a parameter named ``rho_d``) is fixed at 0, because two diffuse terms would
+be the same parameter twice (not identifiable).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from gonio.brdf import models
+from gonio.brdf.models import BRDFModel
+from gonio.errors import FitError
+
+
+def _make(cls_name: str, **kw: Any) -> Callable[[], BRDFModel] | None:
+    cls = getattr(models, cls_name, None)
+    if cls is None:
+        return None
+
+    def build() -> BRDFModel:
+        return cls(**kw)
+
+    return build
+
+
+def _ts(distribution: str, shadowing: str) -> Callable[[], BRDFModel] | None:
+    cls = getattr(models, "TorranceSparrow", None)
+    if cls is None:
+        return None
+
+    def build() -> BRDFModel:
+        kw: dict[str, Any] = {"distribution": distribution, "shadowing": shadowing}
+        schlick = getattr(models, "Schlick", None)
+        if schlick is not None:
+            kw["fresnel"] = schlick()
+        return cls(**kw)
+
+    return build
+
+
+def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
+    return {
+        "lambert": _make("Lambert"),
+        "oren-nayar": _make("OrenNayar"),
+        "phong": _make("Phong"),
+        "blinn-phong": _make("BlinnPhong"),
+        "ward": _make("Ward", variant="original"),
+        "ward-duer": _make("Ward", variant="duer"),
+        "ward-balanced": _make("Ward", variant="balanced"),
+        "torrance-sparrow": _ts("beckmann", "vcavity"),
+        "ts": _ts("beckmann", "vcavity"),
+        "ts-ggx-smith": _ts("ggx", "smith"),
+    }
+
+
+_COMBOS = ("lambert+ward", "lambert+ts", "lambert+ts+ts", "lambert+ts-ggx-smith")
+
+
+def available() -> list[str]:
+    """Every valid model name of this installation (single lobes, then the usual sums)."""
+    lobes = {k: v for k, v in _lobes().items() if v is not None}
+    names = [k for k in lobes if k != "ts"]
+    names += [c for c in _COMBOS if all(p in lobes for p in c.split("+"))]
+    return names
+
+
+def build(name: str) -> tuple[BRDFModel, dict[str, Any], dict[str, str]]:
+    """Template model, fixed parameters and tied parameters for a model name.
+
+    Ward lobes are fitted isotropic (``alpha_y`` tied to ``alpha_x``): measurements of
+    isotropic materials (every table in the half-diff-iso parameterization) cannot tell the
+    two apart.
+
+    Raises
+    ------
+    FitError
+        For an unknown name (the message lists the valid ones).
+    """
+    lobes = {k: v for k, v in _lobes().items() if v is not None}
+    parts = [p.strip().lower() for p in str(name).split("+")]
+    if not parts or any(p not in lobes for p in parts):
+        raise FitError(f"unknown model {name!r}; valid: {', '.join(available())}")
+    built = [lobes[p]() for p in parts]
+    model = built[0]
+    for b in built[1:]:
+        model = model + b
+    fixed: dict[str, Any] = {}
+    tied: dict[str, str] = {}
+    for key in model.param_specs():
+        head, _, pname = key.rpartition(".")
+        prefix = f"{head}." if head else ""
+        if pname == "alpha_y" and f"{prefix}alpha_x" in model.param_specs():
+            tied[key] = f"{prefix}alpha_x"
+        if len(built) > 1 and "lambert" in parts and pname == "rho_d":
+            if not head.startswith("lambert"):
+                fixed[key] = 0.0
+    if fixed:
+        model = model.replace(**fixed)
+    return model, fixed, tied

@@ -1,0 +1,196 @@
+"""Image output: linear OpenEXR, tone-mapped sRGB PNG. Every file is written atomically.
+
+Linear radiance images are ``(H, W, C)`` float32. EXR keeps them as they are (channels ``R, G, B``
+for three channels, ``Y`` for one, ``c0 ... c{n-1}`` otherwise). The PNG is for people: an
+exposure (by default the one that maps the 99.5th percentile of the sphere's luminance to 0.8 after
+tone mapping), the extended Reinhard curve, and the sRGB transfer function; one channel is shown
+as grey and other channel counts as the mean of their channels.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from gonio.errors import FormatError, ParameterError
+
+
+def _atomic_target(path: Path, suffix: str):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _channel_names(c: int) -> list[str]:
+    if c == 3:
+        return ["R", "G", "B"]
+    if c == 1:
+        return ["Y"]
+    return [f"c{i}" for i in range(c)]
+
+
+def _as_image(img: np.ndarray) -> np.ndarray:
+    a = np.asarray(img, dtype=np.float32)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or a.shape[0] < 1 or a.shape[1] < 1 or a.shape[2] < 1:
+        raise ParameterError(f"image must be (H, W) or (H, W, C), got {np.shape(img)}")
+    return a
+
+
+def _io_exr():
+    try:
+        from gonio.io import exr
+    except ImportError:
+        return None
+    return exr if hasattr(exr, "write_exr") and hasattr(exr, "read_exr") else None
+
+
+def write_exr(path: str | os.PathLike, img: np.ndarray) -> Path:
+    """Write linear float32 ``img`` (H, W, C) as a ZIP-compressed scanline OpenEXR file."""
+    import OpenEXR
+
+    # gonio.io owns the file formats; its EXR helper is used when present, this is the fallback
+    # with the same layout (float32, ZIP, R G B / Y / c<i> channels).
+    io_exr = _io_exr()
+    if io_exr is not None:
+        a = _as_image(img)
+        io_exr.write_exr(path, a, _channel_names(a.shape[2]))
+        return Path(path)
+
+    a = _as_image(img)
+    path = Path(path)
+    tmp = _atomic_target(path, ".exr")
+    names = _channel_names(a.shape[2])
+    channels = {n: np.ascontiguousarray(a[..., i]) for i, n in enumerate(names)}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    try:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def read_exr(path: str | os.PathLike) -> np.ndarray:
+    """Read an OpenEXR file as float32 ``(H, W, C)``; RGB(A) in that order, alpha dropped."""
+    io_exr = _io_exr()
+    if io_exr is not None:
+        img, names = io_exr.read_exr(path)
+        keep = [i for i, n in enumerate(names) if n != "A"]
+        if not keep:
+            raise FormatError(f"{path}: no image channels")
+        return np.asarray(img, dtype=np.float32)[..., keep]
+
+    import OpenEXR
+
+    path = Path(path)
+    try:
+        with OpenEXR.File(str(path)) as f:
+            chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+    except Exception as exc:  # OpenEXR raises plain exceptions on corrupt files
+        raise FormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    planes: list[np.ndarray] = []
+    for key in sorted(chans, key=_order):
+        a = chans[key]
+        if key in ("A", "RGBA") and a.ndim == 2:
+            continue
+        a = a[..., :3] if key == "RGBA" else a
+        planes.append(a if a.ndim == 3 else a[..., None])
+    if not planes:
+        raise FormatError(f"{path}: no image channels")
+    try:
+        out = np.concatenate(planes, axis=-1).astype(np.float32)
+    except ValueError:
+        raise FormatError(f"{path}: channels of different sizes") from None
+    return out
+
+
+def _order(name: str) -> tuple[int, str]:
+    rank = {"RGBA": 0, "RGB": 0, "R": 1, "G": 2, "B": 3, "Y": 4}
+    return rank.get(name, 10), name
+
+
+def luminance(img: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of an RGB image, the channel mean otherwise: (H, W)."""
+    a = _as_image(img)
+    if a.shape[2] == 3:
+        return a @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    return a.mean(axis=-1)
+
+
+def auto_exposure(img: np.ndarray, percentile: float = 99.5) -> float:
+    """Exposure that maps the given percentile of the non-zero luminance to 0.8 after
+    :func:`tonemap` (the whole image is treated alike, so several images compared side by side
+    should share one exposure)."""
+    lum = luminance(img)
+    lum = lum[lum > 0]
+    if lum.size == 0:
+        return 1.0
+    ref = float(np.percentile(lum, percentile))
+    if not np.isfinite(ref) or ref <= 0:
+        return 1.0
+    return _reinhard_inverse(0.8) / ref
+
+
+_WHITE = 4.0
+
+
+def _reinhard(x: np.ndarray) -> np.ndarray:
+    return x * (1.0 + x / _WHITE**2) / (1.0 + x)
+
+
+def _reinhard_inverse(y: float) -> float:
+    lo, hi = 0.0, _WHITE
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if _reinhard(np.float64(mid)) < y:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def srgb_encode(x: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function on [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def tonemap(img: np.ndarray, exposure: float | None = None) -> np.ndarray:
+    """Display image in [0, 1], (H, W, 3) float32: exposure, Reinhard on luminance, sRGB.
+
+    The curve acts on luminance and scales the channels alike, so hues do not shift.
+    """
+    a = _as_image(img)
+    if exposure is None:
+        exposure = auto_exposure(a)
+    if a.shape[2] != 3:
+        a = np.repeat(a.mean(axis=-1, keepdims=True), 3, axis=-1)
+    a = np.maximum(a, 0.0) * float(exposure)
+    lum = luminance(a)
+    scale = np.where(lum > 0, _reinhard(lum) / np.where(lum > 0, lum, 1.0), 0.0)
+    return srgb_encode(a * scale[..., None]).astype(np.float32)
+
+
+def write_png(path: str | os.PathLike, img: np.ndarray, exposure: float | None = None) -> Path:
+    """Tone-map linear ``img`` and write an 8-bit sRGB PNG."""
+    from PIL import Image
+
+    disp = tonemap(img, exposure)
+    data = np.round(disp * 255.0).astype(np.uint8)
+    path = Path(path)
+    tmp = _atomic_target(path, ".png")
+    try:
+        Image.fromarray(data).save(tmp, format="PNG")
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path

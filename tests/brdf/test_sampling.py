@@ -1,0 +1,371 @@
+"""Tests of gonio.brdf.sampling (distributions, alias tables, rejection) and of table sampling.
+
+Statistical tests use fixed seeds; chi-square tests run at a family-wise level of 0.01 with a
+Sidak correction over the tests of each group (N_DISCRETE, N_TABLE).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from gonio.brdf import frames, warp
+from gonio.brdf.chi2 import chi2_test
+from gonio.brdf.sampling import (
+    AliasTable,
+    Distribution1D,
+    Distribution2D,
+    hash_uniform,
+    rejection_sample,
+    rejection_step,
+    seeds_from_u,
+)
+from gonio.brdf.tabulated import Axis, TabulatedBRDF
+from gonio.errors import ParameterError
+from tests.brdf.test_tabulated import _GGXLike
+
+HALF = math.pi / 2
+N_DISCRETE = 8  # chi-square tests on discrete outcomes in this module
+N_TABLE = 12  # chi-square tests of table samplers (default + slow)
+SIDAK_DISCRETE = 1 - (1 - 0.01) ** (1 / N_DISCRETE)
+
+
+def _pearson(counts: np.ndarray, probs: np.ndarray) -> float:
+    n = counts.sum()
+    keep = probs > 0
+    assert counts[~keep].sum() == 0, "outcomes of probability 0 were drawn"
+    exp = probs[keep] * n
+    assert exp.min() >= 5, "test design: expected counts too small"
+    return float(stats.chisquare(counts[keep], exp).pvalue)
+
+
+def _weights(shape, seed):
+    rng = np.random.default_rng(seed)
+    w = rng.uniform(0.05, 1.0, shape) ** 2
+    w[rng.random(shape) < 0.1] = 0.0
+    return w
+
+
+# -- discrete distributions ---------------------------------------------------------------------
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_distribution1d_chi2_and_pdf(dtype):
+    w = _weights(50, 1)
+    d = Distribution1D(w)
+    u = np.random.default_rng(2).random(1_000_000).astype(dtype)
+    x, pdf, k = d.sample(u)
+    counts = np.bincount(np.asarray(k), minlength=50)
+    assert _pearson(counts, w / w.sum()) > SIDAK_DISCRETE
+    assert x.dtype == dtype and pdf.dtype == dtype
+    np.testing.assert_allclose(np.asarray(d.pdf(x)), np.asarray(pdf), rtol=1e-6)
+    # the continuous position lands in the sampled bin (edges k / n in the sample's precision)
+    kk, xx = np.asarray(k).astype(dtype), np.asarray(x)
+    assert np.all((kk / dtype(50) <= xx) & (xx < (kk + 1) / dtype(50)))
+    # pdf integrates to 1
+    grid = (np.arange(50) + 0.5) / 50
+    assert np.sum(np.asarray(d.pdf(grid))) / 50 == pytest.approx(1.0, abs=1e-6)
+
+
+def test_distribution2d_chi2_and_batches():
+    w = _weights((3, 12, 20), 3)
+    d = Distribution2D(w)
+    rng = np.random.default_rng(4)
+    which = rng.integers(0, 3, 1_000_000)
+    xy, pdf, (iy, ix) = d.sample(rng.random((1_000_000, 2)), which)
+    np.testing.assert_allclose(np.asarray(d.pdf(xy, which)), np.asarray(pdf), rtol=1e-9)
+    for b in range(3):
+        sel = np.asarray(which) == b
+        cells = np.asarray(iy)[sel] * 20 + np.asarray(ix)[sel]
+        counts = np.bincount(cells, minlength=240)
+        p = w[b] / w[b].sum()
+        assert _pearson(counts, p.ravel()) > 1 - (1 - SIDAK_DISCRETE) ** (1 / 3)
+    np.testing.assert_allclose(d.probs.sum(axis=(1, 2)), 1.0)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_alias_table_chi2(dtype):
+    w = _weights(300, 5)
+    a = AliasTable(w)
+    np.testing.assert_allclose(a.probs, w / w.sum(), atol=1e-12)
+    u = np.random.default_rng(6).random(1_000_000).astype(dtype)
+    k, r, p = a.sample_discrete(u)
+    k = np.asarray(k)
+    counts = np.bincount(k, minlength=300)
+    assert _pearson(counts, w / w.sum()) > SIDAK_DISCRETE
+    np.testing.assert_allclose(np.asarray(p), (w / w.sum())[k], rtol=1e-5)
+    # the remapped number is uniform again (used to place the sample inside its cell)
+    assert stats.kstest(np.asarray(r, np.float64), "uniform").pvalue > SIDAK_DISCRETE
+
+
+def test_alias_table_batched():
+    w = _weights((4, 30), 7)
+    a = AliasTable(w)
+    rng = np.random.default_rng(8)
+    which = rng.integers(0, 4, 400_000)
+    k, _, p = a.sample_discrete(rng.random(400_000), which)
+    k, which = np.asarray(k), np.asarray(which)
+    np.testing.assert_allclose(np.asarray(p), (w / w.sum(1, keepdims=True))[which, k], rtol=1e-9)
+    counts = np.bincount(which * 30 + k, minlength=120).reshape(4, 30)
+    stat = sum(
+        stats.chisquare(
+            counts[b][w[b] > 0], (w[b] / w[b].sum())[w[b] > 0] * counts[b].sum()
+        ).statistic
+        for b in range(4)
+    )
+    dof = int((w > 0).sum()) - 4
+    assert stats.chi2.sf(stat, dof) > SIDAK_DISCRETE
+
+
+def test_hash_uniform_is_uniform_and_deterministic():
+    seeds = seeds_from_u(jnp.asarray(np.random.default_rng(9).random((200_000, 2))))
+    x = np.asarray(hash_uniform(seeds, 7, jnp.float64))
+    assert x.min() >= 0 and x.max() < 1
+    counts = np.histogram(x, bins=100, range=(0, 1))[0]
+    assert _pearson(counts, np.full(100, 0.01)) > SIDAK_DISCRETE
+    np.testing.assert_array_equal(np.asarray(hash_uniform(seeds, 7, jnp.float64)), x)
+    y = np.asarray(hash_uniform(seeds, 8, jnp.float64))
+    assert abs(np.corrcoef(x, y)[0, 1]) < 0.01
+
+
+def test_rejection_sample_generic():
+    """Target density 3 x^2 on [0, 1) from uniform proposals; independent of chunking."""
+
+    def round_fn(dummy, up, ua):
+        x = up[:, 0]
+        return x[:, None], ua < x * x
+
+    step = rejection_step(round_fn)
+    n = 300_000
+    u = np.random.default_rng(10).random((n, 2))
+    seeds = seeds_from_u(jnp.asarray(u))
+    x, ok, rounds = rejection_sample(step, (np.zeros(n),), u, seeds)
+    assert bool(np.all(np.asarray(ok)))
+    x = np.asarray(x)[:, 0]
+    counts = np.histogram(x, bins=20, range=(0, 1))[0]
+    edges = np.linspace(0, 1, 21)
+    assert _pearson(counts, np.diff(edges**3)) > SIDAK_DISCRETE
+    assert np.asarray(rounds).mean() == pytest.approx(3.0, rel=0.02)  # acceptance 1/3
+    x2, _, _ = rejection_sample(step, (np.zeros(n),), u, seeds, chunk=1024)
+    np.testing.assert_array_equal(np.asarray(x2)[:, 0], x)
+
+
+def test_bad_weights():
+    with pytest.raises(ParameterError):
+        Distribution1D([1.0, -1.0])
+    with pytest.raises(ParameterError):
+        AliasTable([np.nan, 1.0])
+    with pytest.raises(ParameterError):
+        Distribution2D([1.0, 2.0])
+    with pytest.raises(ParameterError, match="which"):
+        Distribution1D(np.ones((2, 3))).sample(0.5)
+
+
+# -- table sampling -----------------------------------------------------------------------------
+def _axes(n=45):
+    return (
+        Axis("theta_h", n, 0.0, HALF, "sqrt"),
+        Axis("theta_d", n, 0.0, HALF),
+        Axis("phi_d", n, 0.0, math.pi, periodic=True),
+    )
+
+
+@pytest.fixture(scope="module")
+def glossy():
+    return TabulatedBRDF.from_model(_GGXLike(kd=0.2, ks=0.7, alpha=0.25), axes=_axes())
+
+
+@pytest.fixture(scope="module")
+def rough():
+    return TabulatedBRDF.from_model(_GGXLike(kd=0.2, ks=0.7, alpha=0.5), axes=_axes())
+
+
+def _chi2(table, theta_o_deg, method, proposal="cosine", phi_o=0.0, n=1_000_000):
+    wo = np.asarray(frames.spherical_to_direction(math.radians(theta_o_deg), phi_o))
+
+    def sample(u):
+        s = table.sample(wo, u, method=method, proposal=proposal)
+        return np.asarray(s.wi), np.asarray(s.pdf)
+
+    def pdf(wi):
+        return np.asarray(table.pdf(wi, wo, method=method, proposal=proposal))
+
+    # inversion/alias densities are constant on the sampler's 64 x 128 (theta, phi - phi_o) grid:
+    # histogram on the same grid so the expected counts are integrated exactly
+    kw = {"res_theta": 64, "res_phi": 128} if method != "rejection" else {}
+    r = chi2_test(sample, pdf, n_samples=n, n_tests=N_TABLE, **kw)
+    assert r.passed, f"{method} at theta_o={theta_o_deg}: {r.message}"
+    assert r.pdf_integral <= 1 + 1e-3
+    return r
+
+
+@pytest.mark.parametrize("theta_o", [0, 45, 85])
+def test_inversion_chi2(glossy, theta_o):
+    _chi2(glossy, theta_o, "inversion")
+
+
+@pytest.mark.parametrize("theta_o", [30, 85])
+def test_alias_chi2(glossy, theta_o):
+    _chi2(glossy, theta_o, "alias")
+
+
+def test_rejection_chi2_cosine(rough):
+    _chi2(rough, 40, "rejection")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("theta_o", [0, 85])
+def test_rejection_chi2_cosine_slow(rough, theta_o):
+    _chi2(rough, theta_o, "rejection")
+
+
+class _MirrorLobe:
+    """A cosine-power lobe about the mirror direction (a stand-in for a fitted analytic lobe)."""
+
+    def __init__(self, n):
+        self.n = n
+
+    def sample(self, wo, u):
+        r = frames.reflect(jnp.asarray(wo))
+        w = warp.square_to_cosine_power_lobe(jnp.asarray(u), self.n)
+
+        class S:
+            wi = frames.to_world(frames.frame_from_normal(r), w)
+
+        return S
+
+    def pdf(self, wi, wo):
+        c = jnp.sum(jnp.asarray(wi) * frames.reflect(jnp.asarray(wo)), -1)
+        return jnp.where(c > 0, warp.cosine_power_lobe_pdf(jnp.maximum(c, 0.0), self.n), 0.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("theta_o", [20, 60])
+def test_rejection_chi2_lobe_proposal(glossy, theta_o):
+    _chi2(glossy, theta_o, "rejection", proposal=_MirrorLobe(8.0))
+
+
+@pytest.mark.slow
+def test_anisotropic_table_samplers():
+    axes = (
+        Axis("theta_h", 24, 0.0, HALF, "sqrt"),
+        Axis("phi_h", 24, 0.0, 2 * math.pi, periodic=True),
+        Axis("theta_d", 24, 0.0, HALF),
+        Axis("phi_d", 48, 0.0, 2 * math.pi, periodic=True),
+    )
+    t = TabulatedBRDF.from_model(
+        _GGXLike(alpha=0.45),
+        axes=axes,
+        parameterization="half_diff_aniso",
+        sampling_res=(8, 32, 64),
+    )
+    wo = np.asarray(frames.spherical_to_direction(math.radians(50), 0.0))
+    for method in ("inversion", "alias"):
+
+        def sample(u, method=method):
+            s = t.sample(wo, u, method=method)
+            return np.asarray(s.wi), np.asarray(s.pdf)
+
+        r = chi2_test(
+            sample,
+            lambda wi, method=method: np.asarray(t.pdf(wi, wo, method=method)),
+            n_samples=1_000_000,
+            n_tests=N_TABLE,
+            res_theta=32,
+            res_phi=64,
+        )
+        assert r.passed, f"anisotropic {method}: {r.message}"
+    assert t.sampling_buckets("inversion") == [int(50 / 90 * 8) * 16 + 0]
+
+
+def test_sample_weight_and_pdf_consistency():
+    rough = TabulatedBRDF.from_model(
+        _GGXLike(kd=0.2, ks=0.7, alpha=0.5), axes=_axes(24), sampling_res=(6, 32, 64)
+    )
+    rng = np.random.default_rng(11)
+    n = 3000
+    th = rng.uniform(0, math.radians(85), n)
+    wo = np.asarray(frames.spherical_to_direction(th, rng.uniform(0, 2 * math.pi, n)))
+    u = rng.random((n, 2))
+    for method in ("inversion", "alias", "rejection"):
+        s = rough.sample(wo, u, method=method)
+        ok = np.asarray(s.pdf) > 0
+        assert ok.mean() > 0.99
+        wi = np.asarray(s.wi)[ok]
+        np.testing.assert_allclose(
+            np.asarray(rough.pdf(wi, wo[ok], method=method)), np.asarray(s.pdf)[ok], rtol=1e-5
+        )
+        f = np.asarray(rough.f(wi, wo[ok]))
+        expect = f * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
+        np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-5)
+        # float32 in, float32 out
+        s32 = rough.sample(wo[:10].astype(np.float32), u[:10].astype(np.float32), method=method)
+        assert s32.wi.dtype == jnp.float32 and s32.pdf.dtype == jnp.float32
+
+
+def test_laziness_and_cache():
+    t = TabulatedBRDF.from_model(_GGXLike(), axes=_axes(20), sampling_res=(16, 32, 64))
+    assert t.sampling_cache_size() == 0
+    wo = np.asarray(frames.spherical_to_direction(math.radians(30), 1.0))
+    wi = np.asarray(frames.spherical_to_direction(math.radians(20), 2.0))
+    t.f(wi, wo)  # evaluation never builds sampling structures
+    assert t.sampling_cache_size() == 0
+    t.pdf(wi, wo, method="inversion")
+    assert t.sampling_buckets("inversion") == [int(30 / 90 * 16)]
+    assert t.sampling_cache_size("alias") == 0 and t.sampling_cache_size("rejection") == 0
+    # many directions in the same bucket, and in one more
+    wos = np.asarray(frames.spherical_to_direction(np.radians([30.5, 31.0, 31.9, 80.0]), 0.3))
+    t.sample(wos, np.full((4, 2), 0.5), method="inversion")
+    assert t.sampling_buckets("inversion") == [int(30 / 90 * 16), int(80 / 90 * 16)]
+    t.sample(wos[:1], np.full((1, 2), 0.5), method="alias")
+    assert t.sampling_cache_size("alias") == 1
+    # a pytree round trip shares the cache
+    leaves, tree = jax.tree_util.tree_flatten(t)
+    t2 = jax.tree_util.tree_unflatten(tree, leaves)
+    assert t2.sampling_cache_size("inversion") == 2
+
+
+def test_sampling_under_jit_builds_every_bucket():
+    t = TabulatedBRDF.from_model(_GGXLike(), axes=_axes(12), sampling_res=(4, 16, 32))
+    wo = jnp.asarray(frames.spherical_to_direction(0.4, 0.2))
+    u = jnp.asarray(np.random.default_rng(0).random((64, 2)))
+    eager = t.sample(wo, u, method="inversion")
+    jitted = jax.jit(lambda w, uu: t.sample(w, uu, method="inversion"))(wo, u)
+    np.testing.assert_allclose(np.asarray(jitted.wi), np.asarray(eager.wi), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(jitted.pdf), np.asarray(eager.pdf), rtol=1e-12)
+    assert t.sampling_cache_size("inversion") == 4
+
+
+def test_rejection_randomness():
+    t = TabulatedBRDF.from_model(_GGXLike(alpha=0.5), axes=_axes(12), sampling_res=(4, 16, 32))
+    wo = np.asarray(frames.spherical_to_direction(0.7, 0.0))
+    u = np.random.default_rng(1).random((2000, 2))
+    a = t.sample(wo, u, method="rejection")
+    b = t.sample(wo, u, method="rejection")
+    np.testing.assert_array_equal(np.asarray(a.wi), np.asarray(b.wi))  # default: derived from u
+    c = t.sample(wo, u, method="rejection", rng=np.random.default_rng(5))
+    d = t.sample(wo, u, method="rejection", rng=5)
+    np.testing.assert_array_equal(np.asarray(c.wi), np.asarray(d.wi))
+    assert not np.array_equal(np.asarray(a.wi), np.asarray(c.wi))
+    assert np.all(np.asarray(a.pdf) > 0)
+
+
+def test_horizon_and_bad_arguments():
+    t = TabulatedBRDF.from_model(_GGXLike(), axes=_axes(12), sampling_res=(4, 16, 32))
+    below = np.array([0.6, 0.0, -0.8])
+    for method in ("inversion", "alias", "rejection"):
+        s = t.sample(below, [0.3, 0.3], method=method)
+        assert float(s.pdf) == 0 and np.all(np.asarray(s.weight) == 0)
+        assert float(t.pdf([0, 0, 1.0], below, method=method)) == 0
+        assert float(t.pdf(below, [0, 0, 1.0], method=method)) == 0
+    with pytest.raises(ParameterError, match="method"):
+        t.sample([0, 0, 1.0], [0.5, 0.5], method="metropolis")
+    with pytest.raises(ParameterError, match="proposal"):
+        t.sample([0, 0, 1.0], [0.5, 0.5], method="rejection", proposal="uniform")
+    with pytest.raises(ParameterError, match="rng"):
+        t.sample([0, 0, 1.0], [0.5, 0.5], method="rejection", rng="seed")
+    with pytest.raises(ParameterError, match="sampling_res"):
+        TabulatedBRDF.from_model(_GGXLike(), axes=_axes(12), sampling_res=(4, 0, 32))
