@@ -371,6 +371,7 @@ class ImagingCamera:
             log_time_cov=hdr.log_time_cov,
             pose_sigma_points=pose_samples(pose),
             fit_order=self.settings.fit_order,
+            direction_uncertainty=True,
         )
 
     def _write_exr(self, tag, hdr, pose, geometry, exposures, m, hint) -> None:
