@@ -323,6 +323,10 @@ def acquire(
             _refuse_if_any(first)
         journal = _start_new(run_dir, rig_cfg, spec)
         journal.set_meta({"strict": "1" if strict else "0"})
+        if exposure_planning is not None:  # a resumed run keeps the choice
+            journal.set_meta({"exposure_planning": "1" if exposure_planning else "0"})
+    if resume and exposure_planning is None and journal.get_meta("exposure_planning") is not None:
+        exposure_planning = journal.get_meta("exposure_planning") == "1"
     log = RunLog(run_dir / "log.jsonl")
     log("resume" if resume else "start", rig=rig_cfg.name, plan=plan_obj.name, pid=os.getpid())
     stop = _StopFlag()
