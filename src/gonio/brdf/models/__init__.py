@@ -6,11 +6,15 @@
 
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
+from gonio.brdf.models.ashikhmin_shirley import AshikhminShirley
+from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
 
 __all__ = [
+    "AshikhminShirley",
     "BRDFModel",
     "BRDFSample",
+    "Lafortune",
     "Lambert",
     "Node",
     "Param",
