@@ -46,3 +46,32 @@ def check_chi2_jit(model, theta_o_deg, n_tests: int, drop_delta: bool = False, *
         sample, pdf = jit_sampler(model, wo, drop_delta)
         r = chi2_test(sample, pdf, n_samples=kw.pop("n_samples", 1_000_000), n_tests=n_tests, **kw)
         assert r.passed, f"{model!r} at theta_o={t} deg: {r.message}"
+
+
+def albedo_jit(model, wo, n: int = 128) -> np.ndarray:
+    """``model.directional_albedo(wo, n)`` evaluated under ``jax.jit``."""
+    return np.asarray(jax.jit(lambda m, w: m.directional_albedo(w, n=n))(model, jnp.asarray(wo)))
+
+
+def check_param_gradients_jit(model) -> None:
+    """``model_checks.check_param_gradients`` with the loss and its gradient jitted."""
+    from tests.brdf.model_checks import stress_directions
+
+    d = stress_directions()
+    wi = jnp.asarray(np.repeat(d, len(d), axis=0))
+    wo = jnp.asarray(np.tile(d, (len(d), 1)))
+    u = jnp.asarray(np.random.default_rng(0).random((wi.shape[0], 2)))
+
+    @jax.jit
+    def grads(params):
+        def loss(p):
+            m = model.replace(**p)
+            s = m.sample(wo, u)
+            return (
+                jnp.sum(m.f(wi, wo)) + jnp.sum(m.pdf(wi, wo)) + jnp.sum(s.weight) + jnp.sum(s.pdf)
+            )
+
+        return jax.grad(loss)(params)
+
+    for name, g in grads(model.params()).items():
+        assert np.all(np.isfinite(np.asarray(g))), f"{model!r}: non-finite gradient w.r.t. {name}"

@@ -9,6 +9,7 @@ from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.ashikhmin_shirley import AshikhminShirley
 from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.scaled import Scaled
 
 __all__ = [
     "AshikhminShirley",
@@ -18,6 +19,7 @@ __all__ = [
     "Lambert",
     "Node",
     "Param",
+    "Scaled",
     "Sum",
     "registry",
 ]
