@@ -7,18 +7,24 @@
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.ashikhmin_shirley import AshikhminShirley
+from gonio.brdf.models.blinn_phong import BlinnPhong
 from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.oren_nayar import OrenNayar
+from gonio.brdf.models.phong import Phong
 from gonio.brdf.models.scaled import Scaled
 
 __all__ = [
     "AshikhminShirley",
     "BRDFModel",
     "BRDFSample",
+    "BlinnPhong",
     "Lafortune",
     "Lambert",
     "Node",
+    "OrenNayar",
     "Param",
+    "Phong",
     "Scaled",
     "Sum",
     "registry",

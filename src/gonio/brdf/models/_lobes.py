@@ -1,0 +1,61 @@
+"""Numerics shared by the cosine-power lobes (Phong, Blinn-Phong) and two-lobe mixtures.
+
+Exponents reach 1e5, where ``c**n`` of a float32 cosine loses every digit: a cosine within one
+ulp of 1 already moves ``n log c`` by 6e-3. These helpers therefore work with ``1 - cos``
+computed from differences of vectors (no cancellation) and evaluate powers as
+``exp(n log1p(-(1 - cos)))``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax.numpy as jnp
+
+from gonio.brdf.frames import safe_sqrt
+from gonio.brdf.models._base import choose_lobe
+
+Array = jnp.ndarray
+
+
+def pow_one_minus(x: Array, n: Array) -> Array:
+    """``(1 - x)**n`` for ``x = 1 - cos``; 0 where the cosine is not positive (``x >= 1``).
+
+    Finite with finite gradients in ``x`` and ``n`` everywhere, including ``n = 0``.
+    """
+    pos = x < 1.0
+    xs = jnp.where(pos, x, 0.0)
+    return jnp.where(pos, jnp.exp(n * jnp.log1p(-xs)), 0.0)
+
+
+def power_lobe_local(u: Array, n: Array) -> Array:
+    """Directions about +z with density ``(n + 1)/(2 pi) cos^n theta`` -> ``(..., 3)``.
+
+    Inversion of the marginal CDF: ``cos theta = (1 - u0)^(1/(n+1))``. ``1 - cos theta`` is
+    taken from ``expm1`` so that ``sin theta`` keeps full relative precision for ``n`` up to
+    1e5 in float32 (``warp.square_to_cosine_power_lobe`` forms ``1 - cos**2`` directly, which
+    cancels there).
+    """
+    lg = jnp.log1p(-u[..., 0]) / (n + 1.0)
+    one_minus = -jnp.expm1(lg)
+    cos_t = jnp.exp(lg)
+    sin_t = safe_sqrt(one_minus * (1.0 + cos_t))
+    phi = 2.0 * jnp.pi * u[..., 1]
+    return jnp.stack([sin_t * jnp.cos(phi), sin_t * jnp.sin(phi), cos_t], -1)
+
+
+def frame_about(axis: Array) -> tuple[Array, Array]:
+    """Two unit vectors ``(t, b)`` completing the unit ``axis`` (``(..., 3)``, ``axis_z > -1``)
+    to a right-handed orthonormal frame (Duff et al. 2017, branch for ``axis_z >= 0``; our axes
+    are mirror directions and half vectors, always in the upper hemisphere)."""
+    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
+    a = -1.0 / (1.0 + z)
+    b = x * y * a
+    t = jnp.stack([1.0 + x * x * a, b, -x], -1)
+    bt = jnp.stack([b, 1.0 + y * y * a, -y], -1)
+    return t, bt
+
+
+def lobe_probabilities(shape: tuple[int, ...], dtype, weights: Sequence[Array]) -> list[Array]:
+    """Selection probabilities exactly as :func:`mixture_sample` computes them."""
+    return choose_lobe(jnp.zeros(shape, dtype), weights)[2]
