@@ -136,3 +136,24 @@ def test_parameter_layout_and_serialization():
 def test_bad_parameters_raise(kw):
     with pytest.raises(ParameterError):
         models.Lafortune(**kw)
+
+
+def test_single_lobe_layout_for_generic_fitters():
+    """Scalar lobe parameters and a (C,) rho_s (what a fitter without per-lobe support passes)
+    describe one lobe; a sum of single-lobe models equals the multi-lobe model."""
+    two = models.Lafortune(
+        cx=[-1.0, 0.5], cy=[-1.0, 0.5], cz=[1.0, 0.8], n=[30.0, 4.0],
+        rho_s=[[0.3, 0.2, 0.1], [0.1, 0.2, 0.3]], rho_d=[0.1, 0.1, 0.1],
+    )  # fmt: skip
+    a = models.Lafortune(n=[1.0], rho_s=[[1.0, 1.0, 1.0]]).replace(
+        cx=-1.0, cy=-1.0, cz=1.0, n=30.0, rho_s=[0.3, 0.2, 0.1], rho_d=[0.1, 0.1, 0.1]
+    )
+    b = models.Lafortune(n=[1.0], rho_s=[[1.0, 1.0, 1.0]]).replace(
+        cx=0.5, cy=0.5, cz=0.8, n=4.0, rho_s=[0.1, 0.2, 0.3], rho_d=0.0
+    )
+    assert a.lobe_count == 1 and a.channels == 3
+    wi, wo = mc.random_upper(500, 31), mc.random_upper(500, 32)
+    np.testing.assert_allclose(
+        np.asarray((a + b).f(wi, wo)), np.asarray(two.f(wi, wo)), rtol=1e-12, atol=1e-15
+    )
+    mc.check_sample_weight_consistent(a + b)

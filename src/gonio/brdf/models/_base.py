@@ -42,7 +42,8 @@ class Param:
     per_channel : whether the value may be an array of shape ``(C,)`` (one per channel).
     per_lobe : whether the value is an array with one entry per lobe, shape ``(L,)`` (or
         ``(L, C)`` when also ``per_channel``), for models with a variable number of lobes such
-        as Lafortune's. Bounds apply elementwise. Default False (backward compatible).
+        as Lafortune's; a scalar (or ``(C,)``) means a single lobe. Bounds apply elementwise.
+        Default False (backward compatible).
     scale : reparameterization a fitter should use: ``"linear"``, ``"log"`` (positive, spans
         decades, e.g. roughness) or ``"logit"`` (bounded on both sides, e.g. albedo).
     doc : one-line description.
@@ -135,8 +136,8 @@ class Node:
         except (TypeError, ValueError):
             raise ParameterError(f"{cls}: {p.name} must be a number, got {value!r}") from None
         if p.per_lobe:
-            if arr.ndim < 1 or arr.ndim > 1 + int(p.per_channel):
-                shape = "(L,) or (L, C)" if p.per_channel else "(L,)"
+            if arr.ndim > 1 + int(p.per_channel):
+                shape = "a scalar, (L,) or (L, C)" if p.per_channel else "a scalar or (L,)"
                 raise ParameterError(
                     f"{cls}: {p.name} must have one entry per lobe, shape {shape}, "
                     f"got shape {arr.shape}"

@@ -7,8 +7,13 @@ bracket is negative); ``C = (-1, -1, 1)`` is a Phong lobe about the mirror direc
 
 Parameter layout (``Param.per_lobe``): ``cx``, ``cy``, ``cz`` and ``n`` are arrays of shape
 ``(L,)``, one entry per lobe; ``rho_s`` is ``(L,)`` or ``(L, C)`` (a lobe scale, per channel where
-given); ``rho_d`` is a scalar or ``(C,)``. A 1-D ``rho_s`` is always per lobe: one lobe with RGB
-scales is written ``rho_s=[[r, g, b]]``.
+given); ``rho_d`` is a scalar or ``(C,)``. A 1-D ``rho_s`` of length L is per lobe; one lobe with
+RGB scales is written ``rho_s=[[r, g, b]]`` (``[r, g, b]`` is also accepted when L = 1).
+
+Fitting: a fitter that knows ``Param.per_lobe`` fits all lobes of one node. One that does not
+(it treats non-per-channel parameters as scalars) can fit a single lobe, and several lobes as a
+sum of single-lobe models, ``Lafortune(...) + Lafortune(..., rho_d=0)``: scalar lobe parameters
+and a ``(C,)`` ``rho_s`` are accepted for that case.
 """
 
 from __future__ import annotations
@@ -108,15 +113,27 @@ class Lafortune(BRDFModel):
     @property
     def lobe_count(self) -> int:
         """Number of lobes L."""
-        return int(np.shape(self.cx)[0])
+        return max(int(np.size(getattr(self, k))) for k in ("cx", "cy", "cz", "n"))
 
     # -- pieces ---------------------------------------------------------------------------------
     def _coeffs(self, dtype) -> tuple[Array, Array, Array, Array]:
-        return tuple(getattr(self, k).astype(dtype) for k in ("cx", "cy", "cz", "n"))
+        shape = (self.lobe_count,)
+        return tuple(
+            jnp.broadcast_to(jnp.asarray(getattr(self, k), dtype), shape)
+            for k in ("cx", "cy", "cz", "n")
+        )
 
     def _rho_s(self, dtype) -> Array:
-        r = self.rho_s.astype(dtype)
-        return r[:, None] if r.ndim == 1 else r  # (L, C or 1)
+        """``(L, C or 1)``. A 1-D value is per lobe, except for a single lobe, where a length
+        other than 1 can only mean channels (as a generic fitter without per-lobe support
+        passes it); a scalar applies to every lobe."""
+        r = jnp.asarray(self.rho_s, dtype)
+        count = self.lobe_count
+        if r.ndim == 0:
+            return jnp.broadcast_to(r, (count, 1))
+        if r.ndim == 1:
+            return r[None, :] if count == 1 and r.shape[0] != 1 else r[:, None]
+        return r
 
     def _cmax(self, cx: Array, cy: Array, cz: Array) -> Array:
         m = jnp.maximum(jnp.maximum(jnp.abs(cx), jnp.abs(cy)), jnp.abs(cz))
