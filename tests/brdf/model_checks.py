@@ -131,11 +131,19 @@ def check_sample_weight_consistent(model, n: int = 4000, seed: int = 4) -> None:
     np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-4, atol=1e-10)
 
 
-def check_chi2(model, theta_o_deg, n_tests: int, n_samples: int = 1_000_000, **kw) -> None:
-    """Chi-square test of ``model.sample`` against ``model.pdf`` at each theta_o (phi_o = 0.3)."""
+def check_chi2(
+    model, theta_o_deg, n_tests: int, n_samples: int = 1_000_000, mirror_cap=None, **kw
+) -> None:
+    """Chi-square test of ``model.sample`` against ``model.pdf`` at each theta_o (phi_o = 0.3).
+
+    ``mirror_cap`` (radians): histogram in a frame centred on the mirror direction of ``wo``,
+    over a cap of that angular radius (for sharp lobes; see :func:`chi2_test`'s ``axis``).
+    """
     for t in theta_o_deg:
         wo = np.asarray(frames.spherical_to_direction(np.radians(t), 0.3))
         sample, pdf = model_sampler(model, wo)
+        if mirror_cap is not None:
+            kw = {**kw, "axis": wo * np.array([-1.0, -1.0, 1.0]), "theta_max": mirror_cap}
         r = chi2_test(sample, pdf, n_samples=n_samples, n_tests=n_tests, **kw)
         assert r.passed, f"{model!r} at theta_o={t} deg: {r.message}"
 

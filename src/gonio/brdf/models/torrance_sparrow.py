@@ -1,0 +1,149 @@
+"""Torrance-Sparrow / Cook-Torrance microfacet reflection with an optional diffuse term."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from gonio.brdf import warp
+from gonio.brdf.frames import dot, normalize, reflect, safe_div
+from gonio.brdf.models import microfacet as mf
+from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
+from gonio.brdf.models.fresnel import Fresnel, Schlick
+from gonio.errors import ParameterError
+
+Array = jnp.ndarray
+
+SAMPLINGS = ("auto", "visible", "distribution")
+
+
+class TorranceSparrow(BRDFModel):
+    """Microfacet BRDF ``f = rho_d / pi + D(h) G(wi, wo) F(wi.h) / (4 cos_i cos_o)``.
+
+    Parameters
+    ----------
+    alpha : roughness in [1e-4, 1] (dimensionless; the RMS microfacet slope for Beckmann, the
+        Blinn exponent is ``2 / alpha^2 - 2``). Fitted on a log scale.
+    distribution : ``"blinn"``, ``"beckmann"`` or ``"ggx"`` (static; see :mod:`.microfacet`).
+    shadowing : ``"vcavity"`` (Torrance-Sparrow's ``min(1, ...)``) or ``"smith"``
+        (height-correlated, exact Lambda per distribution; static).
+    fresnel : a :mod:`.fresnel` term, evaluated at ``cos theta_d = wi.h``: ``Conductor(eta, k)``,
+        ``Dielectric(eta)``, ``Schlick(f0)`` or ``NoFresnel()``. Its parameters appear as
+        ``"fresnel.<name>"``. Default ``Schlick(0.04)``: the normal-incidence reflectance of a
+        dielectric of index 1.5 (plastics, paints, coatings — the usual case when fitting a
+        diffuse-plus-specular material); pass ``Conductor`` for metals.
+    rho_d : diffuse (Lambertian) albedo in [0, 1], scalar or per channel; default 0 (pure
+        specular). The two terms are not energy-coupled: ``rho_d`` plus the specular albedo may
+        exceed 1 if the parameters say so.
+    sampling : ``"visible"`` (visible normals, Heitz 2018; GGX only), ``"distribution"``
+        (half vectors with density ``D cos theta_h``) or ``"auto"`` (visible where available).
+        Either way the returned pdf is exact, including the ``1 / (4 wo.h)`` Jacobian.
+
+    Sampling mixes the specular sampler with cosine-weighted sampling in proportion to
+    ``mean(rho_d)`` and ``mean(F(cos theta_o))`` (a cheap specular albedo estimate).
+    """
+
+    PARAMS = (
+        Param("alpha", 0.2, 1e-4, 1.0, "1", scale="log",
+              doc="microfacet roughness (RMS slope for Beckmann)"),
+        Param("rho_d", 0.0, 0.0, 1.0, "1", per_channel=True, scale="logit",
+              doc="Lambertian albedo added to the specular lobe"),
+    )  # fmt: skip
+    CHILDREN = ("fresnel",)
+    STATIC = ("distribution", "shadowing", "sampling")
+
+    def __init__(
+        self,
+        alpha: Array | float = 0.2,
+        distribution: str = "beckmann",
+        shadowing: str = "vcavity",
+        fresnel: Fresnel | None = None,
+        rho_d: Array | float = 0.0,
+        sampling: str = "auto",
+    ) -> None:
+        self._set_params(alpha=alpha, rho_d=rho_d)
+        distribution = mf.check_distribution(distribution)
+        shadowing = mf.check_shadowing(shadowing)
+        if sampling not in SAMPLINGS:
+            raise ParameterError(f"TorranceSparrow: unknown sampling {sampling!r}; use {SAMPLINGS}")
+        if sampling == "auto":
+            sampling = "visible" if distribution in mf.VISIBLE_SAMPLING else "distribution"
+        if sampling == "visible" and distribution not in mf.VISIBLE_SAMPLING:
+            raise ParameterError(
+                f"TorranceSparrow: visible-normal sampling is available for "
+                f"{mf.VISIBLE_SAMPLING}, not {distribution!r}"
+            )
+        if fresnel is None:
+            fresnel = Schlick(0.04)
+        if not isinstance(fresnel, Fresnel):
+            raise ParameterError(
+                f"TorranceSparrow: fresnel must be a Fresnel term, got {fresnel!r}"
+            )
+        object.__setattr__(self, "fresnel", fresnel)
+        object.__setattr__(self, "distribution", distribution)
+        object.__setattr__(self, "shadowing", shadowing)
+        object.__setattr__(self, "sampling", sampling)
+        _ = self.channels  # rho_d and the Fresnel term must agree on the channel count
+
+    # -- evaluation -----------------------------------------------------------------------------
+    def specular(self, wi: Array, wo: Array) -> Array:
+        """The specular term ``D G F / (4 cos_i cos_o)`` alone, ``(..., C)`` (both upper)."""
+        h = normalize(wi + wo)
+        d = mf.ndf(h, self.alpha, self.distribution)
+        v = mf.visibility(wi, wo, h, self.alpha, self.distribution, self.shadowing)
+        f = self.fresnel.eval(dot(wi, h))
+        return (d * v)[..., None] * f
+
+    def _f(self, wi: Array, wo: Array) -> Array:
+        rho = jnp.atleast_1d(self.rho_d).astype(wi.dtype)
+        return rho / jnp.pi + self.specular(wi, wo)
+
+    # -- sampling -------------------------------------------------------------------------------
+    def _weights(self, wo: Array) -> tuple[Array, Array]:
+        w_d = jnp.broadcast_to(channel_mean(self.rho_d).astype(wo.dtype), wo.shape[:-1])
+        w_s = self.fresnel.mean(wo[..., 2]).astype(wo.dtype)
+        return w_d, w_s
+
+    def _probs(self, wo: Array) -> tuple[Array, Array]:
+        # Must match choose_lobe's normalization (uniform where both weights are 0).
+        w_d, w_s = self._weights(wo)
+        w_d, w_s = jnp.maximum(w_d, 0.0), jnp.maximum(w_s, 0.0)
+        total = w_d + w_s
+        return (
+            jnp.where(total > 0, safe_div(w_d, total), 0.5),
+            jnp.where(total > 0, safe_div(w_s, total), 0.5),
+        )
+
+    def sampling_weight(self, wo: Array) -> Array:
+        w_d, w_s = self._weights(wo)
+        return w_d + w_s
+
+    def specular_pdf(self, wi: Array, wo: Array) -> Array:
+        """Density of :meth:`sample_specular` over ``wi`` (both directions above the horizon)."""
+        h = normalize(wi + wo)
+        if self.sampling == "visible":
+            # G1(wo) D(h) (wo.h) / cos_o, times the Jacobian 1 / (4 wo.h).
+            den = 4.0 * (wo[..., 2] + mf.smith_mu(wo, self.alpha, self.distribution))
+            return safe_div(mf.ndf(h, self.alpha, self.distribution), den)
+        oh = jnp.maximum(dot(wo, h), 0.0)  # >= 0 in exact arithmetic; rounding can flip it
+        return safe_div(mf.ndf_pdf(h, self.alpha, self.distribution), 4.0 * oh)
+
+    def sample_specular(self, wo: Array, u: Array) -> Array:
+        """Reflect ``wo`` about a sampled microfacet normal (may fall below the horizon)."""
+        if self.sampling == "visible":
+            h = mf.sample_visible(wo, u, self.alpha, self.distribution)
+        else:
+            h = mf.sample_ndf(u, self.alpha, self.distribution)
+        return reflect(wo, h)
+
+    def _pdf(self, wi: Array, wo: Array) -> Array:
+        p_d, p_s = self._probs(wo)
+        return p_d * warp.cosine_hemisphere_pdf(wi) + p_s * self.specular_pdf(wi, wo)
+
+    def _sample(self, wo: Array, u: Array) -> Array:
+        w_d, w_s = self._weights(wo)
+
+        def diffuse(wo_: Array, uu: Array) -> Array:
+            return warp.square_to_cosine_hemisphere(uu)
+
+        wi, _ = mixture_sample(wo, u, [w_d, w_s], [diffuse, self.sample_specular])
+        return wi
