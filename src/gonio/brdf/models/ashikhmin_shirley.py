@@ -9,13 +9,9 @@ import jax.numpy as jnp
 
 from gonio.brdf import frames, warp
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
+from gonio.brdf.models.fresnel import Schlick
 
 Array = jnp.ndarray
-
-
-def _schlick(f0: Array, cos: Array) -> Array:
-    """Schlick's Fresnel approximation ``f0 + (1 - f0) (1 - cos)^5`` (``cos (...,1)``)."""
-    return f0 + (1.0 - f0) * (1.0 - jnp.clip(cos, 0.0, 1.0)) ** 5
 
 
 def _log_half_power(h: Array, nu: Array, nv: Array) -> Array:
@@ -92,7 +88,8 @@ class AshikhminShirley(BRDFModel):
         spec = (
             self._half_pdf(h) / 4.0 / (kh * jnp.maximum(ci, co))
         )  # sqrt(..)/(8 pi) (n.h)^e / (k.h max(cos))
-        fres = _schlick(rs, kh[..., None])
+        # Schlick's term with F0 = rho_s (built without re-validating a possibly traced rho_s)
+        fres = Schlick._tree_unflatten((), [self.rho_s]).eval(kh).astype(dtype)
         diff = (
             28.0 / (23.0 * jnp.pi) * rd * (1.0 - rs)
             * (1.0 - (1.0 - ci / 2.0) ** 5)[..., None]
