@@ -176,6 +176,13 @@ def _write(rows: list[dict], path: Path) -> None:
     os.replace(tmp, path)
 
 
+def _markdown(rows: list[dict]) -> str:
+    keys = list(rows[0])
+    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(str(r[k]) for k in keys) + " |" for r in rows]
+    return "\n".join(lines)
+
+
 def _plot(rows: list[dict], path: Path) -> None:
     import matplotlib
 
@@ -214,11 +221,14 @@ def main() -> None:
     RESULTS.mkdir(parents=True, exist_ok=True)
     print(f"devices: {jax.devices()}, cpus: {os.cpu_count()}, load: {os.getloadavg()}")
     if not args.skip_throughput:
-        _write(throughput(args.batch, args.repeats), RESULTS / "bench_zoo_throughput.csv")
+        rows = throughput(args.batch, args.repeats)
+        _write(rows, RESULTS / "bench_zoo_throughput.csv")
+        print(_markdown(rows))
     if hasattr(models, "HTSG"):
         rows = htsg_terms(args.htsg_batch, args.repeats)
         _write(rows, RESULTS / "bench_zoo_htsg_terms.csv")
         _plot(rows, RESULTS / "bench_zoo_htsg_terms.png")
+        print(_markdown(rows))
 
 
 if __name__ == "__main__":
