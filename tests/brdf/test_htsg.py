@@ -205,3 +205,8 @@ def test_serialization_and_registration():
 def test_bad_parameters_raise(kw):
     with pytest.raises(ParameterError):
         HTSG(**kw)
+
+
+def test_inside_a_sum_the_smooth_part_stays_consistent():
+    m = models.Lambert(0.1) + HTSG(sigma0=0.1, tau=2.0, rho_ud=0.05, fresnel=ALU)
+    mc.check_sample_weight_consistent(m, n=1000)

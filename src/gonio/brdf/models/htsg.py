@@ -190,8 +190,8 @@ class HTSG(BRDFModel):
     ``f`` and ``pdf`` describe the non-delta part (directional + uniform diffuse); ``sample``
     also returns specular samples (``delta=True``, weight = specular reflectance / selection
     probability), as :class:`~gonio.brdf.models.Sum` does for delta lobes. The model already
-    contains its uniform-diffuse term; adding it to other lobes with ``+`` would sample only
-    its non-delta part, so use it on its own.
+    contains its uniform-diffuse term; inside a ``Sum`` (``a + HTSG(...)``) only its non-delta
+    part is sampled (consistently), and the specular delta is lost, so use it on its own.
 
     Parameters
     ----------
@@ -206,7 +206,8 @@ class HTSG(BRDFModel):
     proposal with ``alpha^2 = (2 sigma0 / tau)^2 + (lambda / (2 pi tau))^2`` (the lobe width of
     the rough (large g) and smooth (m = 1 term) limits of eq. 78, ``lambda`` the mean
     wavelength) whose exact pdf ``D_B(h) cos theta_h / (4 wo.h)`` is used, and the
-    uniform-diffuse term cosine-weighted; lobes are chosen by albedo estimates.
+    uniform-diffuse term cosine-weighted; lobes are chosen by albedo estimates. ``pdf`` is the
+    density of the non-delta samples (it integrates to one minus the delta probability).
     """
 
     PARAMS = (
@@ -374,18 +375,37 @@ class HTSG(BRDFModel):
         h = jnp.stack([sin_h * jnp.cos(phi), sin_h * jnp.sin(phi), cos_h], -1)
         return frames.reflect(wo, h)
 
+    def _smooth_probs(self, wo: Array) -> tuple[Array, Array]:
+        """Selection probabilities of the directional- and uniform-diffuse samplers among the
+        non-delta part (they sum to 1)."""
+        _, w_dd, w_ud = self._weights(wo)
+        total = w_dd + w_ud
+        p_dd = jnp.where(total > 0, safe_div(w_dd, total), 0.5)
+        return p_dd, 1.0 - p_dd
+
     def _pdf(self, wi: Array, wo: Array) -> Array:
-        _, p_dd, p_ud = self._probs(wo)
+        # The non-delta part alone, normalized: what ``_sample`` draws (so HTSG inside a Sum is
+        # consistent there, with its delta lobe never sampled). The public ``pdf`` and
+        # ``sample`` scale it by the probability of not choosing the delta lobe.
+        p_dd, p_ud = self._smooth_probs(wo)
         return p_dd * self._dd_pdf(wi, wo) + p_ud * warp.cosine_hemisphere_pdf(wi)
 
     def _sample(self, wo: Array, u: Array) -> Array:
-        # Used only when HTSG sits inside a Sum: the non-delta part, renormalized.
-        _, p_dd, p_ud = self._probs(wo)
+        p_dd, p_ud = self._smooth_probs(wo)
         index, u0, _ = choose_lobe(u[..., 0], [p_dd, p_ud])
         uu = jnp.stack([u0, u[..., 1]], -1)
         return jnp.where(
             (index == 0)[..., None], self._sample_dd(wo, uu), warp.square_to_cosine_hemisphere(uu)
         )
+
+    def pdf(self, wi: Array, wo: Array) -> Array:
+        """Density of the non-delta samples of :meth:`sample` (integrates to ``1 - P(delta)``),
+        the convention of :class:`~gonio.brdf.models.Sum` for lobes with a delta part."""
+        p = super().pdf(wi, wo)
+        wo_b = jnp.broadcast_to(jnp.asarray(wo, p.dtype), (*p.shape, 3))
+        ok = upper(wo_b)
+        wo_s = jnp.where(ok[..., None], wo_b, jnp.array([0.0, 0.0, 1.0], p.dtype))
+        return p * (1.0 - self._probs(wo_s)[0])
 
     def sampling_weight(self, wo: Array) -> Array:
         return sum(self._weights(wo))
@@ -409,7 +429,7 @@ class HTSG(BRDFModel):
 
         ok = ok_o & upper(wi) & ~is_delta
         wi_s, _ = _safe_pair(wi, wo_s, ok)
-        pdf = probs[1] * self._dd_pdf(wi_s, wo_s) + probs[2] * warp.cosine_hemisphere_pdf(wi_s)
+        pdf = (1.0 - probs[0]) * self._pdf(wi_s, wo_s)
         ok = ok & (pdf > 0)
         val = self._f(wi_s, wo_s)
         weight = jnp.where(ok[..., None], safe_div(val * wi_s[..., 2:3], pdf[..., None]), 0.0)
