@@ -16,6 +16,7 @@ from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
 from gonio.brdf.models.scaled import Scaled
 from gonio.brdf.models.torrance_sparrow import TorranceSparrow
+from gonio.brdf.models.ward import Ward
 
 __all__ = [
     "HTSG",
@@ -37,5 +38,6 @@ __all__ = [
     "Schlick",
     "Sum",
     "TorranceSparrow",
+    "Ward",
     "registry",
 ]
