@@ -126,9 +126,8 @@ def test_unsupported_or_incomplete_models_raise():
 def test_scaled_lobe_properties():
     fit = _read("ngan_cooktorrance.fit")["black-oxidized-steel"]
     m = to_model(fit)
-    mc.check_reciprocity(m)
-    mc.check_nonnegative_and_masked(m)
-    mc.check_sample_weight_consistent(m)
+    mc.check_reciprocity(m, n=500)
+    mc.check_sample_weight_consistent(m, n=500)
     again = models.Node.from_dict(m.to_dict())
     assert repr(again) == repr(m)
     assert "scaled.scale" in m.params() and "scaled.lobe.alpha" in m.params()
