@@ -54,7 +54,7 @@ def test_series_error_bound_holds_and_is_tight():
         d, d_ref = np.asarray(few.distribution(wi, wo)), np.asarray(ref.distribution(wi, wo))
         bound = np.asarray(few.series_error_bound(wi, wo))
         ok = np.isfinite(bound)  # stride-1 windows
-        assert ok.mean() > 0.5
+        assert ok.sum() >= 40
         err = np.abs(d - d_ref)[ok]
         # the rigorous truncation bound, plus the float rounding of the terms themselves
         assert np.all(err <= bound[ok] + 1e-9 * d_ref[ok])
