@@ -51,7 +51,8 @@ def test_series_error_bound_holds_and_is_tight():
     for s0, tau, terms in ((0.03, 2.0, 12), (0.05, 1.0, 10)):
         few = HTSG(sigma0=s0, tau=tau, fresnel=ALU, terms=terms)
         ref = HTSG(sigma0=s0, tau=tau, fresnel=ALU, terms=256)
-        d, d_ref = np.asarray(few.distribution(wi, wo)), np.asarray(ref.distribution(wi, wo))
+        dist = jax.jit(lambda m, a, b: m.distribution(a, b))
+        d, d_ref = np.asarray(dist(few, wi, wo)), np.asarray(dist(ref, wi, wo))
         bound = np.asarray(few.series_error_bound(wi, wo))
         ok = np.isfinite(bound)  # stride-1 windows
         assert ok.sum() >= 40
@@ -146,10 +147,11 @@ def test_energy_bounded_by_fresnel():
 def test_properties():
     m = HTSG(sigma0=0.12, tau=2.5, rho_ud=[0.05, 0.1, 0.02], fresnel=ALU)
     assert m.channels == 3
-    mc.check_reciprocity(m, n=300)
-    mc.check_nonnegative_and_masked(m, n=300)
-    mc.check_isotropy(m, n=200)
-    mc.check_stress(m)
+    j = zc.Jitted(m)
+    mc.check_reciprocity(j, n=300)
+    mc.check_nonnegative_and_masked(j, n=300)
+    mc.check_isotropy(j, n=200)
+    mc.check_stress(j)
     zc.check_param_gradients_jit(m)
 
 
@@ -157,7 +159,8 @@ def test_sample_weights_consistent_and_delta_mass():
     m = HTSG(sigma0=0.05, tau=3.0, rho_ud=0.1, fresnel=ALU)
     wo = mc.random_upper(3000, 26, max_theta=np.radians(85))
     u = np.random.default_rng(1).random((3000, 2))
-    s = m.sample(wo, u)
+    j = zc.Jitted(m)
+    s = j.sample(wo, u)
     delta = np.asarray(s.delta)
     assert 0 < delta.mean() < 1
     mirror = np.asarray(frames.reflect(wo))
@@ -169,8 +172,8 @@ def test_sample_weights_consistent_and_delta_mass():
     )
     ok = ~delta & (np.asarray(s.pdf) > 0)
     wi = np.asarray(s.wi)[ok]
-    np.testing.assert_allclose(np.asarray(s.pdf)[ok], np.asarray(m.pdf(wi, wo[ok])), rtol=1e-6)
-    expect = np.asarray(m.f(wi, wo[ok])) * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
+    np.testing.assert_allclose(np.asarray(s.pdf)[ok], np.asarray(j.pdf(wi, wo[ok])), rtol=1e-6)
+    expect = np.asarray(j.f(wi, wo[ok])) * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
     np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-6)
 
 
@@ -209,4 +212,4 @@ def test_bad_parameters_raise(kw):
 
 def test_inside_a_sum_the_smooth_part_stays_consistent():
     m = models.Lambert(0.1) + HTSG(sigma0=0.1, tau=2.0, rho_ud=0.05, fresnel=ALU)
-    mc.check_sample_weight_consistent(m, n=1000)
+    mc.check_sample_weight_consistent(zc.Jitted(m), n=1000)

@@ -75,3 +75,27 @@ def check_param_gradients_jit(model) -> None:
 
     for name, g in grads(model.params()).items():
         assert np.all(np.isfinite(np.asarray(g))), f"{model!r}: non-finite gradient w.r.t. {name}"
+
+
+class Jitted:
+    """A model whose ``f``, ``pdf`` and ``sample`` run under ``jax.jit`` (one compile per input
+    shape instead of op-by-op dispatch), for the ``model_checks`` property checks."""
+
+    def __init__(self, model) -> None:
+        self.model = model
+        self.channels = model.channels
+        self._f = jax.jit(lambda m, wi, wo: m.f(wi, wo))
+        self._pdf = jax.jit(lambda m, wi, wo: m.pdf(wi, wo))
+        self._sample = jax.jit(lambda m, wo, u: m.sample(wo, u))
+
+    def f(self, wi, wo):
+        return self._f(self.model, jnp.asarray(wi), jnp.asarray(wo))
+
+    def pdf(self, wi, wo):
+        return self._pdf(self.model, jnp.asarray(wi), jnp.asarray(wo))
+
+    def sample(self, wo, u):
+        return self._sample(self.model, jnp.asarray(wo), jnp.asarray(u))
+
+    def __repr__(self) -> str:
+        return repr(self.model)
