@@ -17,7 +17,11 @@ from gonio import __version__
 from gonio.errors import GonioError
 
 #: Modules that contribute subcommands, in the order they appear in ``--help``.
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = (
+    "gonio.io.cli",
+    "gonio.rigs.cli",
+    "gonio.acquire.cli",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

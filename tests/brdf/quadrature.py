@@ -59,6 +59,7 @@ class jitted:
     _sample = staticmethod(jax.jit(lambda m, wo, u: m.sample(wo, u)))
     _pdf = staticmethod(jax.jit(lambda m, wi, wo: m.pdf(wi, wo)))
     _f = staticmethod(jax.jit(lambda m, wi, wo: m.f(wi, wo)))
+    _albedo = staticmethod(jax.jit(lambda m, wo, n: m.directional_albedo(wo, n), static_argnums=2))
 
     def __init__(self, model) -> None:
         self.model = model
@@ -74,7 +75,7 @@ class jitted:
         return self._f(self.model, jnp.asarray(wi), jnp.asarray(wo))
 
     def directional_albedo(self, wo, n: int = 128):
-        return self.model.directional_albedo(wo, n)
+        return self._albedo(self.model, jnp.asarray(wo), n)
 
     def __repr__(self) -> str:
         return repr(self.model)

@@ -1,3 +1,4 @@
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -104,11 +105,13 @@ def test_chi2_detects_a_missing_jacobian():
     class Wrong(models.BlinnPhong):
         def _pdf(self, wi, wo):  # the half-vector density without the 1/(4 wo.h) Jacobian
             h = wi + wo
-            c = h[..., 2] / np.sqrt((h * h).sum(-1))
+            c = h[..., 2] / jnp.sqrt((h * h).sum(-1))
             return (self.n + 1) / (2 * np.pi) * c**self.n
 
     with pytest.raises(AssertionError, match=r"p =|integrates"):
-        mc.check_chi2(Wrong(0.0, 0.6, 200.0), theta_o_deg=(30,), n_tests=1, n_samples=200_000)
+        mc.check_chi2(
+            jitted(Wrong(0.0, 0.6, 200.0)), theta_o_deg=(30,), n_tests=1, n_samples=200_000
+        )
 
 
 def test_pdf_integrates_to_at_most_one():

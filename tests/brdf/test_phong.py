@@ -91,7 +91,9 @@ def test_chi2_detects_a_wrong_exponent():
             return models.Phong(0.0, 1.0, self.n / 4)._sample_lobe(wo, u)
 
     with pytest.raises(AssertionError, match=r"p ="):
-        mc.check_chi2(Wrong(0.0, 0.6, 200.0), theta_o_deg=(30,), n_tests=1, n_samples=200_000)
+        mc.check_chi2(
+            jitted(Wrong(0.0, 0.6, 200.0)), theta_o_deg=(30,), n_tests=1, n_samples=200_000
+        )
 
 
 def test_pdf_integrates_to_at_most_one():

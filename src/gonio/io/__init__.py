@@ -1,1 +1,101 @@
-"""gonio.io"""
+"""File formats: native ``*.brdf.h5`` tables, MERL, RGL tensor files, Cornell, ALTA, EXR.
+
+>>> from gonio import io
+>>> t = io.load("material.binary")          # format detected from the content
+>>> io.save(t, "material.brdf.h5")          # format chosen by the extension
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from gonio.errors import ParameterError
+from gonio.io._common import PathLike, fail
+from gonio.io.detect import FORMATS, detect_format
+
+__all__ = ["FORMATS", "detect_format", "load", "save"]
+
+
+def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -> Any:
+    """Load a BRDF file, detecting its format from its content.
+
+    Parameters
+    ----------
+    path : path-like
+        A native ``*.brdf.h5`` file, MERL ``.binary``, RGL ``.bsdf``, Cornell ``.brdf`` or ALTA
+        text file.
+    color : {"rgb", "spectral", "keep"}, optional
+        For spectral sources (Cornell): ``"rgb"`` converts to linear sRGB through CIE 1931 XYZ
+        under ``illuminant``; default keeps the spectrum. For single-channel ALTA data ``"rgb"``
+        replicates the channel.
+    illuminant : {"D65", "E"}
+
+    Returns
+    -------
+    TabulatedBRDF or MeasuredSamples
+        Gridded formats (native gridded, MERL, RGL) give a :class:`TabulatedBRDF`; RGL files are
+        tabulated on MERL's half/diff grid (use :func:`gonio.io.rgl.read_rgl` for the exact
+        evaluator). Scattered formats (native scattered, Cornell, ALTA) give
+        :class:`MeasuredSamples`.
+
+    Raises
+    ------
+    FormatError
+        Malformed, truncated, unknown-version or unrecognized files; one line naming the file.
+    """
+    fmt = detect_format(path)
+    if fmt == "native":
+        from gonio.io.native import read_native
+
+        return read_native(path)
+    if fmt == "merl":
+        from gonio.io.merl import read_merl
+
+        return read_merl(path)
+    if fmt == "rgl":
+        from gonio.io.rgl import read_rgl
+
+        return read_rgl(path).to_table()
+    if fmt == "cornell":
+        from gonio.io.cornell import read_cornell
+
+        return read_cornell(
+            path, color="rgb" if color == "rgb" else "spectral", illuminant=illuminant
+        )
+    if fmt == "alta":
+        from gonio.io.alta import read_alta
+
+        return read_alta(path, color="rgb" if color == "rgb" else "keep")
+    raise fail(path, f"{fmt} files hold images, not BRDF data (see gonio.io.exr)")
+
+
+def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
+    """Save ``obj`` in the format named by the extension of ``path``, atomically.
+
+    An object with ``to_table()`` (e.g. :class:`gonio.io.rgl.RGLBSDF`) is tabulated first.
+    ``.brdf.h5`` (or ``.h5``): native (``lossy``: guaranteed relative precision, e.g. 0.005);
+    ``.binary``: MERL (RGB half/diff tables; others are resampled); ``.exr``: one image per
+    ``phi_d`` slice of a half/diff table (multi-part EXR).
+    """
+    name = os.fspath(path).lower()
+    if hasattr(obj, "to_table") and not hasattr(obj, "axes"):
+        obj = obj.to_table()  # an exact evaluator (RGL BSDF): store its MERL-grid tabulation
+    if lossy is not None and not name.endswith((".h5", ".hdf5")):
+        raise ParameterError("lossy encoding is only available for .brdf.h5 output")
+    if name.endswith((".h5", ".hdf5")):
+        from gonio.io.native import write_native
+
+        write_native(obj, path, lossy=lossy)
+    elif name.endswith(".binary"):
+        from gonio.io.merl import write_merl
+
+        write_merl(obj, path)
+    elif name.endswith(".exr"):
+        from gonio.io.exr import write_table_slices
+
+        write_table_slices(obj, path)
+    else:
+        raise ParameterError(
+            f"{os.fspath(path)}: unknown output extension (use .brdf.h5, .binary or .exr)"
+        )

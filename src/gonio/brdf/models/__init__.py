@@ -15,6 +15,7 @@ from gonio.brdf.models.lambert import Lambert
 from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
 from gonio.brdf.models.scaled import Scaled
+from gonio.brdf.models.specular import SpecularReflection, SpecularTransmission
 from gonio.brdf.models.torrance_sparrow import TorranceSparrow
 from gonio.brdf.models.ward import Ward
 
@@ -36,6 +37,8 @@ __all__ = [
     "Phong",
     "Scaled",
     "Schlick",
+    "SpecularReflection",
+    "SpecularTransmission",
     "Sum",
     "TorranceSparrow",
     "Ward",

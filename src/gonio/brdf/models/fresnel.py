@@ -112,16 +112,25 @@ class Dielectric(Fresnel):
 
     def eval(self, cos_theta: Array) -> Array:
         cos_theta = jnp.asarray(cos_theta)
-        c = jnp.clip(jnp.abs(cos_theta), 0.0, 1.0)[..., None]
-        e = _per_channel(self.eta, c)
-        e = jnp.where(cos_theta[..., None] < 0, 1.0 / e, e)
-        sin2_t = (1.0 - c * c) / (e * e)
-        tir = sin2_t >= 1.0
-        ct = safe_sqrt(1.0 - sin2_t)
-        rs = safe_div(c - e * ct, c + e * ct)
-        rp = safe_div(e * c - ct, e * c + ct)
-        f = 0.5 * (rs * rs + rp * rp)
-        return jnp.clip(jnp.where(tir, 1.0, f), 0.0, 1.0)
+        return dielectric_reflectance(cos_theta[..., None], _per_channel(self.eta, cos_theta))
+
+
+def dielectric_reflectance(cos_theta: Array, eta: Array) -> Array:
+    """Exact unpolarized reflectance of a dielectric interface (see :class:`Dielectric`).
+
+    ``cos_theta`` and ``eta`` broadcast together; ``cos_theta < 0`` means from inside.
+    """
+    cos_theta = jnp.asarray(cos_theta)
+    c = jnp.clip(jnp.abs(cos_theta), 0.0, 1.0)
+    e = jnp.asarray(eta).astype(c.dtype)
+    e = jnp.where(cos_theta < 0, 1.0 / e, e)
+    sin2_t = (1.0 - c * c) / (e * e)
+    tir = sin2_t >= 1.0
+    ct = safe_sqrt(1.0 - sin2_t)
+    rs = safe_div(c - e * ct, c + e * ct)
+    rp = safe_div(e * c - ct, e * c + ct)
+    f = 0.5 * (rs * rs + rp * rp)
+    return jnp.clip(jnp.where(tir, 1.0, f), 0.0, 1.0)
 
 
 class Schlick(Fresnel):

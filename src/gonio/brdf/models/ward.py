@@ -54,17 +54,21 @@ class Ward(BRDFModel):
     Numerics: values are formed as ``exp(log N - T)`` (clipped below the largest float), so
     ``alpha`` down to 1e-4 and grazing directions neither overflow nor produce ``inf * 0``.
 
-    Energy (directional albedo of the specular lobe with ``rho_s = 1``, measured by quadrature
-    in ``tests/brdf/test_ward.py``):
+    Energy (directional albedo of the specular lobe with ``rho_s = 1``, measured in
+    ``tests/brdf/test_ward.py`` by importance sampling and by quadrature):
 
-    * ``"original"`` conserves energy for small ``alpha`` (albedo <= 1 at every ``theta_o`` up
-      to 85 deg for ``alpha <= 0.1``), but not for rough lobes at grazing: e.g. ``alpha = 0.5``
-      reaches about 1.2 at ``theta_o = 85`` deg (and more closer to 90 deg).
-    * ``"duer"`` exceeds 1 at grazing for every ``alpha``: the ``1/cos_o`` factor makes the
-      albedo grow without bound as ``theta_o -> 90`` deg (about 1.7 at 85 deg for
-      ``alpha = 0.1``, more for larger ``alpha``).
-    * ``"balanced"`` stays <= 1 everywhere (the property it was designed for), for every
-      ``alpha`` in the bounds.
+    * ``"original"`` loses energy towards grazing for smooth lobes (the albedo tends to
+      ``cos(theta_o)`` as ``alpha -> 0``) and stays <= 1 up to ``theta_o = 89`` deg for every
+      ``alpha`` tested (1e-3 to 1), but for rough lobes its ``1/sqrt(cos_o)`` factor makes the
+      albedo grow within the last degree: ``alpha = 0.5`` gives 0.50 at 89 deg, 1.48 at
+      89.9 deg and about 4.7 at 89.99 deg.
+    * ``"duer"`` keeps the albedo near ``1 - O(alpha^2)`` up to about 85 deg for
+      ``alpha <= 0.1``, then exceeds 1 at grazing for every ``alpha`` tested (0.01 to 1):
+      ``alpha = 0.3`` gives
+      1.25 at 85 deg, ``alpha = 0.1`` gives 1.12 at 87 deg and 2.1 at 89 deg,
+      ``alpha = 0.01`` gives 2.2 at 89.9 deg.
+    * ``"balanced"`` stays <= 1 at every ``theta_o`` (checked up to 89.99 deg) for ``alpha``
+      from 1e-3 to 1, the property it was designed for.
 
     With the diffuse term the totals add; ``rho_d + rho_s <= 1`` is not imposed by the bounds.
 

@@ -1,0 +1,224 @@
+"""``gonio plan`` (dry run of an acquisition plan) and ``gonio acquire`` (run or resume one)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import numpy as np
+
+from gonio.errors import ParameterError
+
+_PLAN_HELP = (
+    "built-in plan name ({names}) or path to a plan TOML file. Plan files: kind = 'grid4d' |"
+    " 'isotropic' | 'halfdiff' | 'adaptive'; angle keys in degrees as a list or"
+    " {{start, stop, step}} (inclusive): grid4d needs theta_i_deg, phi_i_deg, theta_o_deg,"
+    " phi_o_deg; isotropic and adaptive need theta_i_deg, theta_o_deg, dphi_deg (adaptive adds"
+    " [refine] window_deg, step_deg, peak_ratio); halfdiff needs theta_h_deg, theta_d_deg,"
+    " phi_d_deg"
+)
+
+
+def _plan_help() -> str:
+    from gonio.acquire.plans import builtin_plans
+
+    return _PLAN_HELP.format(names=", ".join(builtin_plans()))
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "plan",
+        help="dry-run an acquisition plan: count, predicted motion and time, refused poses",
+        description=(
+            "Plan an acquisition without touching hardware: inverse kinematics for every target,"
+            " refusals (joint limits, keep-out sectors, light/camera too close, grazing angles)"
+            " with their reasons, travel-time ordering (nearest neighbour + 2-opt; a move costs its"
+            " slowest joint under the trapezoidal profile). Times are rig time in seconds."
+        ),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--rig", default="sim", help="rig name or rig TOML path (default: sim)")
+    p.add_argument("--plan", required=True, help=_plan_help())
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        default=True,
+        help="only plan (always the case: 'gonio plan' never moves anything)",
+    )
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument(
+        "--list-refused",
+        type=int,
+        default=20,
+        metavar="N",
+        help="show at most N refused poses in the text output (default 20; --json lists all)",
+    )
+    p.set_defaults(func=_plan)
+
+    a = sub.add_parser(
+        "acquire",
+        help="run (or resume) an acquisition on a rig",
+        description=(
+            "Execute a plan on a rig: move, settle, capture, record. Every configuration is"
+            " journaled in RUN/journal.sqlite; after a crash or Ctrl-C, --resume RUN continues"
+            " with no lost and no duplicated sample. Ctrl-C (or SIGTERM) finishes the current"
+            " configuration and parks the rig per its rig file. RUN/log.jsonl is a structured"
+            " log; RUN/table.brdf.h5 is written when the run completes (needs gonio.io)."
+        ),
+    )
+    a.add_argument("--rig", default="sim", help="rig name or rig TOML path (default: sim)")
+    a.add_argument("--plan", help=_plan_help() + " (required unless --resume)")
+    a.add_argument("--out", help="new run directory (must not exist or be empty)")
+    a.add_argument(
+        "--resume",
+        metavar="RUN",
+        help="continue the run in directory RUN (its journal's rig and plan are used)",
+    )
+    a.add_argument(
+        "--sim-faults",
+        metavar="SPEC",
+        help=(
+            "simulated rig only: inject bus faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,"
+            "overload=0.005,seed=1' (probabilities per packet; overload per move)"
+        ),
+    )
+    a.add_argument(
+        "--time-scale",
+        type=float,
+        help="simulated rig only: simulated seconds per wall second (default: rig file)",
+    )
+    a.add_argument(
+        "--strict",
+        action="store_true",
+        help=(
+            "refuse the whole plan before any motion if any pose is refused (default: skip"
+            " refused poses, journal and log them with the reason)"
+        ),
+    )
+    a.add_argument("--no-progress", action="store_true", help="no progress bar")
+    a.add_argument("--json", action="store_true", help="print the run summary as JSON")
+    a.set_defaults(func=_acquire)
+
+
+def _plan(args: argparse.Namespace) -> int:
+    from gonio.acquire.engine import dry_run
+    from gonio.acquire.plans import load_plan
+    from gonio.rigs.config import load_rig
+
+    rig = load_rig(args.rig)
+    plan, _ = load_plan(args.plan)
+    stages = dry_run(rig, plan)
+    per_cfg = float(rig.camera.get("capture_time_s", 0.0)) + float(
+        rig.camera.get("exposure_s", 0.0)
+    )
+    accepted = sum(len(s.accepted) for s in stages)
+    refused = [c for s in stages for c in s.refused]
+    motion = float(sum(np.sum(s.move_s) for s in stages))
+    lex = float(sum(s.lexicographic_s for s in stages))
+    total = motion + accepted * per_cfg
+    out = {
+        "rig": rig.name,
+        "plan": plan.name,
+        "kind": plan.kind,
+        "stages": len(stages),
+        "targets": accepted + len(refused),
+        "accepted": accepted,
+        "refused": len(refused),
+        "predicted_motion_s": round(motion, 3),
+        "plan_order_motion_s": round(lex, 3),
+        "predicted_total_s": round(total, 3),
+        "refusals": [
+            {
+                "index": c.idx,
+                "theta_i_deg": round(math.degrees(math.acos(c.wi[2])), 3),
+                "phi_i_deg": round(math.degrees(math.atan2(c.wi[1], c.wi[0])) % 360, 3),
+                "theta_o_deg": round(math.degrees(math.acos(c.wo[2])), 3),
+                "phi_o_deg": round(math.degrees(math.atan2(c.wo[1], c.wo[0])) % 360, 3),
+                "reason": c.reason,
+            }
+            for c in refused
+        ],
+    }
+    if plan.n_stages > 1:
+        out["note"] = "later stages depend on measurements; predicted around the mirror direction"
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"plan {plan.name} ({plan.kind}) on rig {rig.name}: {out['targets']} targets")
+    print(f"  accepted {accepted}, refused {len(refused)}")
+    print(
+        f"  predicted motion {motion:.1f} s (plan order: {lex:.1f} s),"
+        f" total {total:.1f} s incl. {per_cfg:.3f} s capture per configuration"
+    )
+    if "note" in out:
+        print(f"  note: {out['note']}")
+    for r in out["refusals"][: args.list_refused]:
+        print(
+            f"  refused #{r['index']}: theta_i {r['theta_i_deg']:.1f} phi_i {r['phi_i_deg']:.1f}"
+            f" theta_o {r['theta_o_deg']:.1f} phi_o {r['phi_o_deg']:.1f}: {r['reason']}"
+        )
+    if len(refused) > args.list_refused:
+        print(f"  ... and {len(refused) - args.list_refused} more (--json lists all)")
+    return 0
+
+
+def _acquire(args: argparse.Namespace) -> int:
+    from gonio.acquire.engine import acquire
+    from gonio.rigs.sim.bus import parse_faults
+
+    faults = parse_faults(args.sim_faults) if args.sim_faults else None
+    if args.time_scale is not None and not args.time_scale > 0:
+        raise ParameterError("--time-scale must be > 0")
+    if args.resume:
+        if args.out and args.out != args.resume:
+            raise ParameterError("give either --out (new run) or --resume RUN, not both")
+        summary = acquire(
+            args.resume,
+            resume=True,
+            faults=faults,
+            progress=not args.no_progress,
+            time_scale=args.time_scale,
+        )
+    else:
+        if not args.out or not args.plan:
+            raise ParameterError("a new run needs --plan and --out (or --resume RUN)")
+        summary = acquire(
+            args.out,
+            args.rig,
+            args.plan,
+            faults=faults,
+            progress=not args.no_progress,
+            time_scale=args.time_scale,
+            strict=args.strict,
+        )
+    out = {
+        "run": summary.run_dir,
+        "planned": summary.planned,
+        "refused": summary.refused,
+        "done": summary.done,
+        "measured_now": summary.measured_now,
+        "complete": summary.complete,
+        "table": summary.table,
+        "table_note": summary.table_note,
+        "bus": summary.bus,
+        "wall_s": round(summary.wall_s, 3),
+    }
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        print(
+            f"run {summary.run_dir}: {summary.done}/{summary.planned} samples"
+            f" ({summary.measured_now} now), {summary.refused} refused,"
+            f" {'complete' if summary.complete else 'incomplete'} in {summary.wall_s:.1f} s"
+        )
+        print(
+            f"  bus: {summary.bus.get('transactions', 0)} transactions,"
+            f" {summary.bus.get('retries', 0)} retries, {summary.bus.get('recoveries', 0)}"
+            " recoveries"
+        )
+        if summary.table:
+            print(f"  table: {summary.table}")
+        elif summary.table_note:
+            print(f"  {summary.table_note}")
+    return 0

@@ -1,0 +1,553 @@
+"""The run engine: plan -> (move, settle, capture, record) for every configuration, resumable.
+
+``acquire(...)`` executes a plan on a rig and keeps the books in ``RUN/``:
+
+* ``journal.sqlite`` — the journal (:mod:`gonio.acquire.journal`); resuming continues from it
+  with no lost and no duplicated sample;
+* ``log.jsonl`` — a structured log, one JSON object per line (events, per-configuration timings,
+  faults and recoveries);
+* ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received;
+* ``table.brdf.h5`` — the samples as a table through :mod:`gonio.io` when the run completes.
+
+Each stage of the plan is planned once (inverse kinematics, refusals with reasons, travel-time
+ordering) and journaled atomically before any motion; later stages see earlier stages' samples.
+SIGINT/SIGTERM finish the configuration in progress, park the rig per its rig file and stop.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gonio.acquire.journal import Journal, PlannedConfig
+from gonio.acquire.ordering import move_times, path_time, plan_route
+from gonio.acquire.plans import Plan, Result, load_plan, plan_from_spec
+from gonio.errors import DeviceError, FormatError, PlanError
+from gonio.rigs.config import RigConfig, load_rig, parse_rig
+from gonio.rigs.devices import Geometry
+from gonio.rigs.kinematics import Kinematics, Pose
+
+# --- planning (shared with `gonio plan --dry-run`) -----------------------------------------
+
+
+@dataclass
+class StagePlan:
+    """One planned stage: configurations in execution order, refusals, predicted motion."""
+
+    stage: int
+    configs: list[PlannedConfig]
+    move_s: np.ndarray  # predicted time of each accepted move, in order (rig time, s)
+    lexicographic_s: float  # predicted motion time in the plan's own order
+
+    @property
+    def accepted(self) -> list[PlannedConfig]:
+        return [c for c in self.configs if c.status == "planned"]
+
+    @property
+    def refused(self) -> list[PlannedConfig]:
+        return [c for c in self.configs if c.status == "refused"]
+
+
+def _joint_order(kin: Kinematics, rig: RigConfig):
+    names = [kin.joint_names[r] for r in kin.ROLES]
+    return names, [rig.joint(n) for n in names]
+
+
+def plan_stage(
+    rig: RigConfig,
+    plan: Plan,
+    stage: int,
+    results: list[Result],
+    start_deg: dict[str, float],
+    first_index: int,
+    time_budget_s: float = 10.0,
+) -> StagePlan:
+    """Inverse kinematics, safety refusals and travel-time ordering for one stage.
+
+    ``start_deg`` is the pose the stage starts from (joint name -> deg). Configuration indices
+    are assigned in the plan's own order from ``first_index``; ``seq`` is the execution order.
+    """
+    kin = Kinematics(rig)
+    names, joints = _joint_order(kin, rig)
+    start = np.array([start_deg[n] for n in names])
+    near = kin.joints_deg_to_pose(start_deg)
+    targets = list(plan.stage(stage, results))
+    cands: list[np.ndarray] = []
+    accepted: list[int] = []
+    base: list[np.ndarray] = []
+    refused: list[tuple[int, str]] = []
+    for i, t in enumerate(targets):
+        poses = [
+            c
+            for c in kin.candidates(t.wi, t.wo, t.isotropic, near.rot if t.isotropic else 0.0)
+            if kin.refusal(c) is None
+        ]
+        if not poses:
+            _, why = kin.inverse(t.wi, t.wo, t.isotropic, near)
+            refused.append((i, why or "no pose"))
+            continue
+        accepted.append(i)
+        best, _ = kin.inverse(t.wi, t.wo, t.isotropic, near)
+        base.append(np.degrees(best.as_tuple()))
+        cands.append(np.degrees(np.array([c.as_tuple() for c in poses])))
+    order, choice = plan_route(start, cands, joints, time_budget_s=time_budget_s)
+    if len(cands):
+        # keep the plan's own order (with the reference-nearest poses) if the heuristic lost
+        base_arr = np.array(base)
+        routed = np.array([cands[k][choice[k]] for k in range(len(cands))])
+        if path_time(start, base_arr, np.arange(len(base)), joints) < path_time(
+            start, routed, order, joints
+        ):
+            order = np.arange(len(base))
+            choice = np.array(
+                [
+                    int(np.argmin(np.abs(cands[k] - base_arr[k]).sum(axis=1)))
+                    for k in range(len(cands))
+                ]
+            )
+    configs: list[PlannedConfig] = []
+    seq_of = {int(o): s for s, o in enumerate(order)}
+    for k, i in enumerate(accepted):
+        t = targets[i]
+        pose = cands[k][choice[k]]
+        configs.append(
+            PlannedConfig(
+                idx=first_index + i,
+                stage=stage,
+                seq=seq_of[k],
+                wi=tuple(map(float, t.wi)),
+                wo=tuple(map(float, t.wo)),
+                isotropic=t.isotropic,
+                joints_deg={n: float(v) for n, v in zip(names, pose, strict=True)},
+                status="planned",
+                reason=None,
+            )
+        )
+    n_acc = len(accepted)
+    for j, (i, why) in enumerate(refused):
+        t = targets[i]
+        configs.append(
+            PlannedConfig(
+                first_index + i,
+                stage,
+                n_acc + j,
+                tuple(map(float, t.wi)),
+                tuple(map(float, t.wo)),
+                t.isotropic,
+                None,
+                "refused",
+                why,
+            )
+        )
+    configs.sort(key=lambda c: c.seq)
+    if n_acc:
+        poses = np.array([cands[k][choice[k]] for k in range(n_acc)])
+        mt = move_times(start, poses, order, joints)
+        lex = float(np.sum(move_times(start, np.array(base), np.arange(n_acc), joints)))
+    else:
+        mt, lex = np.zeros(0), 0.0
+    return StagePlan(stage, configs, mt, lex)
+
+
+def dry_run(rig: RigConfig, plan: Plan, time_budget_s: float = 10.0) -> list[StagePlan]:
+    """Plan every stage without hardware; later stages see no measurements (the adaptive plan
+    then refines around the mirror direction)."""
+    out = []
+    start = dict(rig.park_deg)
+    for j in rig.joints:
+        start.setdefault(j.name, j.zero_offset_deg)
+    idx = 0
+    for s in range(plan.n_stages):
+        sp = plan_stage(rig, plan, s, [], start, idx, time_budget_s)
+        out.append(sp)
+        idx += len(sp.configs)
+        if sp.accepted:
+            start = dict(sp.accepted[-1].joints_deg)
+    return out
+
+
+# --- the run ------------------------------------------------------------------------------
+
+
+class RunLog:
+    """Append-only JSON-lines log (one flushed line per event)."""
+
+    def __init__(self, path: Path) -> None:
+        self._fh = open(path, "a", encoding="utf-8")
+
+    def __call__(self, event: str, **fields) -> None:
+        rec = {"t": round(time.time(), 6), "event": event, **fields}
+        self._fh.write(json.dumps(rec, default=_jsonable) + "\n")
+        self._fh.flush()
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def _jsonable(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    return str(o)
+
+
+@dataclass
+class RunSummary:
+    """What a run (or a resumed part of it) did."""
+
+    run_dir: str
+    planned: int
+    refused: int
+    done: int
+    measured_now: int
+    complete: bool
+    table: str | None
+    table_note: str
+    bus: dict = field(default_factory=dict)
+    wall_s: float = 0.0
+
+
+class _StopFlag:
+    def __init__(self) -> None:
+        self.stop = False
+        self.signum = 0
+        self._old: dict = {}
+
+    def install(self) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[sig] = signal.signal(sig, self._handler)
+            except ValueError:  # not the main thread
+                pass
+
+    def restore(self) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+    def _handler(self, signum, frame) -> None:
+        if self.stop:  # second Ctrl-C: give up immediately
+            raise KeyboardInterrupt
+        self.stop = True
+        self.signum = signum
+
+
+def _start_new(run_dir: Path, rig: RigConfig, plan_spec: dict) -> Journal:
+    if run_dir.exists() and any(run_dir.iterdir()):
+        raise PlanError(f"{run_dir} exists and is not empty (use --resume to continue a run)")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    j = Journal(run_dir, create=True)
+    from gonio import __version__
+
+    j.set_meta(
+        {
+            "schema_version": "1",
+            "gonio_version": __version__,
+            "rig_text": rig.text,
+            "rig_source": rig.source,
+            "plan_spec": json.dumps(plan_spec),
+            "created": str(time.time()),
+        }
+    )
+    return j
+
+
+def open_run(run_dir: Path) -> tuple[Journal, RigConfig, Plan]:
+    """Open an existing run: its journal, and the rig and plan recorded in it."""
+    j = Journal(run_dir)
+    text = j.get_meta("rig_text")
+    spec = j.get_meta("plan_spec")
+    if text is None or spec is None:
+        j.close()
+        raise FormatError(f"{run_dir}: journal lacks the rig or the plan")
+    rig = parse_rig(text, j.get_meta("rig_source") or "rig")
+    plan = plan_from_spec(json.loads(spec))
+    return j, rig, plan
+
+
+def acquire(
+    out: str | Path,
+    rig: str | Path | RigConfig | None = None,
+    plan: str | Path | None = None,
+    resume: bool = False,
+    faults=None,
+    progress: bool = True,
+    time_scale: float | None = None,
+    on_sample: Callable[[int, object], None] | None = None,
+    write_table: bool = True,
+    strict: bool = False,
+) -> RunSummary:
+    """Run (or resume) an acquisition; see the module docstring.
+
+    Parameters
+    ----------
+    out : run directory (created; must be empty unless ``resume``).
+    rig, plan : rig name/path/config and plan name/path (ignored when resuming: the journal's
+        copies are used so a resumed run is the same run).
+    faults : :class:`gonio.rigs.sim.FaultConfig` for the simulated bus (overrides the rig file).
+    progress : show a rich progress bar with ETA.
+    strict : refuse the whole plan (PlanError, nothing moved, no run directory) if any of its
+        poses is refused; later stages of an adaptive plan are checked before their motion.
+    time_scale : simulated-rig speed-up (overrides ``[sim] time_scale``).
+    on_sample : called as ``on_sample(n, session)`` after each sample, with the number measured
+        so far in this process and the open :class:`gonio.rigs.session.RigSession` (tests use
+        it to inject faults into the emulator mid-run).
+    """
+    from gonio.rigs.devices import open_camera
+    from gonio.rigs.session import open_rig
+
+    t_start = time.monotonic()
+    run_dir = Path(out)
+    if resume:
+        journal, rig_cfg, plan_obj = open_run(run_dir)
+    else:
+        if rig is None or plan is None:
+            raise PlanError("a new run needs --rig and --plan")
+        rig_cfg = rig if isinstance(rig, RigConfig) else load_rig(rig)
+        plan_obj, spec = load_plan(plan)
+        if strict:
+            # plan the first stage before creating anything or opening the bus
+            first = dry_run(rig_cfg, plan_obj)[0]
+            _refuse_if_any(first)
+        journal = _start_new(run_dir, rig_cfg, spec)
+        journal.set_meta({"strict": "1" if strict else "0"})
+    log = RunLog(run_dir / "log.jsonl")
+    log("resume" if resume else "start", rig=rig_cfg.name, plan=plan_obj.name, pid=os.getpid())
+    stop = _StopFlag()
+    stop.install()
+    measured_now = 0
+    kin = Kinematics(rig_cfg)
+    goal_log = run_dir / "sim_goals.jsonl" if rig_cfg.is_sim else None
+    try:
+        with open_rig(rig_cfg, faults=faults, goal_log_path=goal_log, time_scale=time_scale) as ses:
+            chain = ses.chain
+            camera = open_camera(rig_cfg)
+            bar = _Progress(progress)
+            with bar:
+                start_deg = dict(rig_cfg.park_deg)
+                for j in rig_cfg.joints:
+                    start_deg.setdefault(j.name, j.zero_offset_deg)
+                for stage in range(plan_obj.n_stages):
+                    if not journal.stage_planned(stage):
+                        results = [
+                            Result(tuple(s.wi), tuple(s.wo), float(np.mean(s.value)))
+                            for s in journal.samples()
+                        ]
+                        sp = plan_stage(
+                            rig_cfg, plan_obj, stage, results, start_deg, journal.next_index()
+                        )
+                        if journal.get_meta("strict") == "1":
+                            _refuse_if_any(sp)
+                        journal.plan_stage(stage, sp.configs)
+                        log(
+                            "stage_planned",
+                            stage=stage,
+                            accepted=len(sp.accepted),
+                            refused=len(sp.refused),
+                            predicted_motion_s=float(np.sum(sp.move_s)),
+                        )
+                        for c in sp.refused:
+                            log("refused", idx=c.idx, reason=c.reason)
+                    stage_cfgs = [c for c in journal.configs(stage) if c.status == "planned"]
+                    if stage_cfgs:
+                        # the next stage starts where this one ends (deterministic on resume)
+                        start_deg = dict(stage_cfgs[-1].joints_deg)
+                    counts = journal.counts()
+                    bar.set(counts["planned"], counts["done"])
+                    for cfg in journal.pending(stage):
+                        if stop.stop:
+                            break
+                        _measure(chain, camera, kin, journal, log, cfg)
+                        measured_now += 1
+                        bar.advance()
+                        if on_sample is not None:
+                            on_sample(measured_now, ses)
+                    if stop.stop:
+                        break
+            if stop.stop:
+                log("interrupted", signal=stop.signum)
+                chain.park()
+                log("parked", pose=rig_cfg.park_deg)
+            else:
+                chain.park()
+                log("parked", pose=rig_cfg.park_deg)
+            bus = dict(vars(chain.bus.stats))
+    except BaseException as exc:
+        if isinstance(exc, DeviceError):
+            log("device_error", message=str(exc))
+        else:
+            log("aborted", error=type(exc).__name__, message=str(exc))
+        log.close()
+        journal.close()
+        raise
+    finally:
+        stop.restore()
+    counts = journal.counts()
+    complete = (
+        not stop.stop
+        and all(journal.stage_planned(s) for s in range(plan_obj.n_stages))
+        and counts["done"] == counts["planned"]
+    )
+    table, note = None, ""
+    if complete and write_table:
+        table, note = write_run_table(journal, rig_cfg, camera_channels(rig_cfg))
+        log("table", path=table, note=note)
+    log("end", complete=complete, **counts, measured_now=measured_now, bus=bus)
+    log.close()
+    journal.close()
+    if stop.stop:
+        raise KeyboardInterrupt
+    return RunSummary(
+        str(run_dir),
+        counts["planned"],
+        counts["refused"],
+        counts["done"],
+        measured_now,
+        complete,
+        table,
+        note,
+        bus,
+        time.monotonic() - t_start,
+    )
+
+
+def _refuse_if_any(sp: StagePlan) -> None:
+    if sp.refused:
+        c = sp.refused[0]
+        raise PlanError(
+            f"plan refused before any motion: {len(sp.refused)} pose(s) refused in stage"
+            f" {sp.stage}, first #{c.idx}: {c.reason}"
+        )
+
+
+def camera_channels(rig: RigConfig) -> tuple[str, ...]:
+    from gonio.rigs.devices import open_camera
+
+    return tuple(open_camera(rig).channels)
+
+
+def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig):
+    t0 = time.monotonic()
+    res = chain.move(cfg.joints_deg)
+    t1 = time.monotonic()
+    pose = kin.joints_deg_to_pose(res.reached_deg)
+    wi, wo = kin.forward(pose)
+    lay = kin.rig.layout
+    geom = Geometry(
+        cfg.idx,
+        dict(res.reached_deg),
+        wi,
+        wo,
+        light_pos_m=wi * lay.light_distance_m,
+        camera_pos_m=wo * lay.camera_distance_m,
+    )
+    cap = camera.capture(geom)
+    t2 = time.monotonic()
+    timings = {"motion": res.motion_s, "settle": res.settle_s, "capture": t2 - t1}
+    tb = time.monotonic()
+    timings["book"] = tb - t2
+    journal.record(cfg.idx, res.reached_deg, wi, wo, cap.value, cap.sigma, timings, res.recoveries)
+    timings["book"] = time.monotonic() - t2
+    log(
+        "sample",
+        idx=cfg.idx,
+        stage=cfg.stage,
+        seq=cfg.seq,
+        recoveries=res.recoveries,
+        polls=res.polls,
+        move_wall_s=t1 - t0,
+        **{f"t_{k}": v for k, v in timings.items()},
+    )
+
+
+def write_run_table(journal: Journal, rig: RigConfig, channels) -> tuple[str | None, str]:
+    """Write ``RUN/table.brdf.h5`` through gonio.io; returns (path or None, note)."""
+    try:
+        from gonio import io as gio
+        from gonio.brdf.tabulated import Channels, MeasuredSamples
+    except ImportError as exc:
+        return None, f"table not written: gonio.io / MeasuredSamples not available ({exc})"
+    if not hasattr(gio, "save"):
+        return None, "table not written: gonio.io.save not available"
+    rows = journal.samples()
+    if not rows:
+        return None, "table not written: no samples"
+    wi = np.array([r.wi for r in rows])
+    wo = np.array([r.wo for r in rows])
+    val = np.array([r.value for r in rows])
+    sig = np.array([r.sigma for r in rows])
+    ch = Channels.rgb() if tuple(channels) == ("R", "G", "B") else Channels.mono()
+    samples = MeasuredSamples(
+        wi=wi,
+        wo=wo,
+        values=val,
+        sigma=sig,
+        channels=ch,
+        weights=None,
+        meta={"source": "gonio acquire", "rig": rig.name, "run": str(journal.run_dir)},
+    )
+    path = journal.run_dir / "table.brdf.h5"
+    gio.save(samples, path)
+    return str(path), f"{len(rows)} samples"
+
+
+class _Progress:
+    """rich progress bar with ETA (no-op when disabled or not on a terminal)."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self._p = None
+        self._task = None
+
+    def __enter__(self):
+        if self.enabled:
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            self._p = Progress(
+                TextColumn("acquire"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                transient=False,
+            )
+            self._p.__enter__()
+            self._task = self._p.add_task("acquire", total=None)
+        return self
+
+    def __exit__(self, *exc):
+        if self._p is not None:
+            self._p.__exit__(*exc)
+
+    def set(self, total: int, done: int) -> None:
+        if self._p is not None:
+            self._p.update(self._task, total=total, completed=done)
+
+    def advance(self) -> None:
+        if self._p is not None:
+            self._p.advance(self._task)
+
+
+def pose_deg_of(kin: Kinematics, pose: Pose) -> dict[str, float]:
+    return kin.pose_to_joints_deg(pose)
+
+
+def to_deg(x: float) -> float:
+    return math.degrees(x)

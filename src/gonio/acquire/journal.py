@@ -1,0 +1,276 @@
+"""The run journal: every planned configuration and every measured sample, in SQLite.
+
+The journal lives in ``RUN/journal.sqlite`` (WAL mode, ``synchronous=FULL``: a committed sample
+survives SIGKILL and power loss). A sample is recorded by one ``INSERT`` into ``samples``,
+whose primary key is the configuration index, so a configuration is either fully recorded or not
+at all and can never be recorded twice. Resuming means: execute, in planned order, the
+configurations of the current stage that have no sample and were not refused.
+
+Tables
+------
+``meta(key, value)``            run metadata (rig file text, plan spec JSON, versions).
+``stages(stage, n, planned_at)`` a row per planned stage (planning is one transaction).
+``configs(idx, stage, seq, wi_*, wo_*, isotropic, joints, status, reason)``
+                                targets (sample frame) and planned joint angles (deg, JSON).
+``samples(idx, joints, wi_*, wo_*, value, sigma, t_*, recoveries, captured_at)``
+                                what was measured: read-back angles and directions.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gonio.errors import FormatError
+
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS stages(stage INTEGER PRIMARY KEY, n INTEGER NOT NULL,
+                                  planned_at REAL NOT NULL);
+CREATE TABLE IF NOT EXISTS configs(
+    idx INTEGER PRIMARY KEY, stage INTEGER NOT NULL, seq INTEGER NOT NULL,
+    wi_x REAL, wi_y REAL, wi_z REAL, wo_x REAL, wo_y REAL, wo_z REAL,
+    isotropic INTEGER NOT NULL, joints TEXT, status TEXT NOT NULL, reason TEXT);
+CREATE INDEX IF NOT EXISTS configs_stage_seq ON configs(stage, seq);
+CREATE TABLE IF NOT EXISTS samples(
+    idx INTEGER PRIMARY KEY REFERENCES configs(idx),
+    joints TEXT NOT NULL,
+    wi_x REAL, wi_y REAL, wi_z REAL, wo_x REAL, wo_y REAL, wo_z REAL,
+    value TEXT NOT NULL, sigma TEXT NOT NULL,
+    t_motion REAL, t_settle REAL, t_capture REAL, t_book REAL,
+    recoveries INTEGER NOT NULL DEFAULT 0, captured_at REAL NOT NULL);
+"""
+
+
+@dataclass(frozen=True)
+class PlannedConfig:
+    idx: int
+    stage: int
+    seq: int
+    wi: tuple[float, float, float]
+    wo: tuple[float, float, float]
+    isotropic: bool
+    joints_deg: dict[str, float] | None
+    status: str
+    reason: str | None
+
+
+@dataclass(frozen=True)
+class SampleRow:
+    idx: int
+    joints_deg: dict[str, float]
+    wi: np.ndarray
+    wo: np.ndarray
+    value: np.ndarray
+    sigma: np.ndarray
+    timings: dict[str, float]
+    recoveries: int
+
+
+class Journal:
+    """SQLite journal of one run directory."""
+
+    FILENAME = "journal.sqlite"
+
+    def __init__(self, run_dir: str | Path, create: bool = False) -> None:
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / self.FILENAME
+        if not create and not self.path.is_file():
+            raise FormatError(f"{self.run_dir} is not a gonio run (no {self.FILENAME})")
+        self.db = sqlite3.connect(self.path, isolation_level=None, timeout=30.0)
+        try:
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=FULL")
+            self.db.execute("PRAGMA foreign_keys=ON")
+            if create:
+                self.db.executescript(_SCHEMA)
+            else:
+                ver = self.get_meta("schema_version")
+                if ver != str(SCHEMA_VERSION):
+                    raise FormatError(f"{self.path}: unknown journal schema version {ver!r}")
+        except sqlite3.DatabaseError as exc:
+            self.db.close()
+            raise FormatError(f"{self.path}: not a usable journal ({exc})") from None
+
+    def close(self) -> None:
+        self.db.close()
+
+    # --- meta ---------------------------------------------------------------------------------
+    def set_meta(self, items: dict[str, str]) -> None:
+        with self._tx():
+            self.db.executemany(
+                "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", list(items.items())
+            )
+
+    def get_meta(self, key: str) -> str | None:
+        try:
+            row = self.db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        except sqlite3.DatabaseError:
+            return None
+        return row[0] if row else None
+
+    def _tx(self):
+        db = self.db
+
+        class _T:
+            def __enter__(self):
+                db.execute("BEGIN IMMEDIATE")
+
+            def __exit__(self, et, ev, tb):
+                db.execute("COMMIT" if et is None else "ROLLBACK")
+
+        return _T()
+
+    # --- planning -----------------------------------------------------------------------------
+    def stage_planned(self, stage: int) -> bool:
+        return (
+            self.db.execute("SELECT 1 FROM stages WHERE stage = ?", (stage,)).fetchone() is not None
+        )
+
+    def next_index(self) -> int:
+        row = self.db.execute("SELECT COALESCE(MAX(idx), -1) + 1 FROM configs").fetchone()
+        return int(row[0])
+
+    def plan_stage(self, stage: int, configs: Sequence[PlannedConfig]) -> None:
+        """Record a whole stage atomically (configs already carry idx and seq)."""
+        with self._tx():
+            self.db.executemany(
+                "INSERT INTO configs(idx, stage, seq, wi_x, wi_y, wi_z, wo_x, wo_y, wo_z,"
+                " isotropic, joints, status, reason) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                [
+                    (
+                        c.idx,
+                        c.stage,
+                        c.seq,
+                        *c.wi,
+                        *c.wo,
+                        int(c.isotropic),
+                        json.dumps(c.joints_deg) if c.joints_deg is not None else None,
+                        c.status,
+                        c.reason,
+                    )
+                    for c in configs
+                ],
+            )
+            self.db.execute(
+                "INSERT INTO stages(stage, n, planned_at) VALUES (?, ?, ?)",
+                (stage, len(configs), time.time()),
+            )
+
+    def configs(self, stage: int | None = None) -> list[PlannedConfig]:
+        q = (
+            "SELECT idx, stage, seq, wi_x, wi_y, wi_z, wo_x, wo_y, wo_z, isotropic, joints,"
+            " status, reason FROM configs"
+        )
+        args: tuple = ()
+        if stage is not None:
+            q += " WHERE stage = ?"
+            args = (stage,)
+        q += " ORDER BY stage, seq"
+        return [_planned(r) for r in self.db.execute(q, args)]
+
+    def pending(self, stage: int) -> list[PlannedConfig]:
+        """Planned, not refused, not yet measured configurations of ``stage``, in order."""
+        rows = self.db.execute(
+            "SELECT c.idx, c.stage, c.seq, c.wi_x, c.wi_y, c.wi_z, c.wo_x, c.wo_y, c.wo_z,"
+            " c.isotropic, c.joints, c.status, c.reason FROM configs c"
+            " LEFT JOIN samples s ON s.idx = c.idx"
+            " WHERE c.stage = ? AND c.status = 'planned' AND s.idx IS NULL ORDER BY c.seq",
+            (stage,),
+        )
+        return [_planned(r) for r in rows]
+
+    # --- samples ------------------------------------------------------------------------------
+    def record(
+        self,
+        idx: int,
+        joints_deg: dict[str, float],
+        wi: Iterable[float],
+        wo: Iterable[float],
+        value: Iterable[float],
+        sigma: Iterable[float],
+        timings: dict[str, float],
+        recoveries: int = 0,
+    ) -> None:
+        """Record one sample (single atomic INSERT; a second record of ``idx`` fails)."""
+        self.db.execute(
+            "INSERT INTO samples(idx, joints, wi_x, wi_y, wi_z, wo_x, wo_y, wo_z, value, sigma,"
+            " t_motion, t_settle, t_capture, t_book, recoveries, captured_at)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            (
+                idx,
+                json.dumps(joints_deg),
+                *map(float, wi),
+                *map(float, wo),
+                json.dumps([float(v) for v in value]),
+                json.dumps([float(v) for v in sigma]),
+                timings.get("motion", 0.0),
+                timings.get("settle", 0.0),
+                timings.get("capture", 0.0),
+                timings.get("book", 0.0),
+                recoveries,
+                time.time(),
+            ),
+        )
+
+    def set_book_time(self, idx: int, t_book: float) -> None:
+        self.db.execute("UPDATE samples SET t_book = ? WHERE idx = ?", (t_book, idx))
+
+    def samples(self, stage: int | None = None) -> list[SampleRow]:
+        q = (
+            "SELECT s.idx, s.joints, s.wi_x, s.wi_y, s.wi_z, s.wo_x, s.wo_y, s.wo_z, s.value,"
+            " s.sigma, s.t_motion, s.t_settle, s.t_capture, s.t_book, s.recoveries"
+            " FROM samples s JOIN configs c ON c.idx = s.idx"
+        )
+        args: tuple = ()
+        if stage is not None:
+            q += " WHERE c.stage = ?"
+            args = (stage,)
+        q += " ORDER BY s.idx"
+        out = []
+        for r in self.db.execute(q, args):
+            out.append(
+                SampleRow(
+                    idx=r[0],
+                    joints_deg=json.loads(r[1]),
+                    wi=np.array(r[2:5]),
+                    wo=np.array(r[5:8]),
+                    value=np.array(json.loads(r[8])),
+                    sigma=np.array(json.loads(r[9])),
+                    timings={"motion": r[10], "settle": r[11], "capture": r[12], "book": r[13]},
+                    recoveries=r[14],
+                )
+            )
+        return out
+
+    def counts(self) -> dict[str, int]:
+        planned = self.db.execute(
+            "SELECT COUNT(*) FROM configs WHERE status = 'planned'"
+        ).fetchone()[0]
+        refused = self.db.execute(
+            "SELECT COUNT(*) FROM configs WHERE status = 'refused'"
+        ).fetchone()[0]
+        done = self.db.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
+        return {"planned": planned, "refused": refused, "done": done}
+
+
+def _planned(r) -> PlannedConfig:
+    return PlannedConfig(
+        idx=r[0],
+        stage=r[1],
+        seq=r[2],
+        wi=(r[3], r[4], r[5]),
+        wo=(r[6], r[7], r[8]),
+        isotropic=bool(r[9]),
+        joints_deg=json.loads(r[10]) if r[10] else None,
+        status=r[11],
+        reason=r[12],
+    )

@@ -1,0 +1,94 @@
+"""Helpers shared by the format modules: input checks, clean failures and atomic writes."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from gonio.errors import FormatError
+
+PathLike = str | os.PathLike[str]
+
+
+def fail(path: PathLike, problem: str) -> FormatError:
+    """Build the one-line :class:`FormatError` for ``path`` (callers ``raise fail(...)``)."""
+    problem = " ".join(str(problem).split())  # one line, whatever the cause said
+    return FormatError(f"{os.fspath(path)}: {problem}")
+
+
+def check_input_file(path: PathLike) -> Path:
+    """Return ``path`` as a :class:`Path` after checking that it is a readable regular file.
+
+    Raises
+    ------
+    FormatError
+        When the path does not exist, is a directory or cannot be opened.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise fail(p, "is a directory, expected a file")
+    if not p.exists():
+        raise fail(p, "no such file")
+    if not p.is_file():
+        raise fail(p, "not a regular file")
+    if not os.access(p, os.R_OK):
+        raise fail(p, "permission denied")
+    return p
+
+
+def read_bytes(path: PathLike) -> bytes:
+    """Read a whole input file, turning OS errors into :class:`FormatError`."""
+    p = check_input_file(path)
+    try:
+        return p.read_bytes()
+    except OSError as exc:
+        raise fail(p, f"cannot read: {exc.strerror or exc}") from None
+
+
+def read_text(path: PathLike) -> str:
+    """Read a text file as UTF-8 (undecodable bytes are an error, not silently replaced)."""
+    data = read_bytes(path)
+    if b"\x00" in data:
+        raise fail(path, "binary content in a text file (NUL byte)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise fail(path, f"not a UTF-8 text file (byte offset {exc.start})") from None
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_output(path: PathLike, suffix: str = ".tmp") -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success rename it onto ``path``.
+
+    The temporary file lives in the destination folder so that :func:`os.replace` is an atomic
+    rename on the same file system. If the body raises (including ``KeyboardInterrupt``), the
+    temporary file is removed and ``path`` is left as it was: a crash never leaves a half-written
+    file under the final name, nor a stale temporary file.
+    """
+    dest = Path(path)
+    folder = dest.parent if str(dest.parent) else Path(".")
+    if dest.is_dir():
+        raise fail(dest, "is a directory, cannot write a file there")
+    if not folder.is_dir():
+        raise fail(dest, f"output folder {folder} does not exist")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=suffix, dir=folder)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        # mkstemp creates 0600; give the result the permissions a plain open() would
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, dest)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise

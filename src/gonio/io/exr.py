@@ -1,0 +1,197 @@
+"""OpenEXR helpers: linear float images, and half/diff table slices viewable in any EXR viewer.
+
+A table slice file is a multi-part EXR with one part per ``phi_d`` node, named
+``phi_d=<degrees>``; each part is a ``theta_h`` (rows, top = 0) x ``theta_d`` (columns, left = 0)
+image with one FLOAT channel per table channel (R, G, B for RGB tables) plus ``A`` = 1 at valid
+cells, 0 at invalid ones (whose colour is 0). Part attributes ``gonio_phi_d_rad``,
+``gonio_units`` = "1/sr", ``gonio_axes`` and ``gonio_channels`` (JSON, channel order) record the
+mapping.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from gonio.errors import ParameterError
+from gonio.io._common import PathLike, atomic_output, check_input_file, fail
+
+
+def _openexr() -> Any:
+    import OpenEXR
+
+    return OpenEXR
+
+
+def _channel_names(n: int, names: tuple[str, ...] | list[str] | None) -> list[str]:
+    if names is not None:
+        if len(names) != n:
+            raise ParameterError(f"{len(names)} channel names for {n} channels")
+        return [str(x) for x in names]
+    return {1: ["Y"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}.get(
+        n, [f"c{i}" for i in range(n)]
+    )
+
+
+def _standard_order(names: list[str]) -> list[str]:
+    """R, G, B, A first (EXR stores channels alphabetically), then the rest in stored order."""
+    first = [n for n in ("R", "G", "B", "A", "Y") if n in names]
+    return first + [n for n in names if n not in first]
+
+
+def _header(extra: dict | None = None) -> dict:
+    ox = _openexr()
+    h: dict[str, Any] = {"compression": ox.ZIP_COMPRESSION, "type": ox.scanlineimage}
+    for k, v in (extra or {}).items():
+        h[k] = v
+    return h
+
+
+def write_exr(
+    path: PathLike,
+    image: np.ndarray,
+    channel_names: tuple[str, ...] | list[str] | None = None,
+    attributes: dict[str, str] | None = None,
+) -> None:
+    """Write a linear float image ``(H, W)`` or ``(H, W, C)`` as a single-part EXR, atomically.
+
+    Channels are stored as 32-bit FLOAT, ZIP-compressed. Default names: Y (1), R G B (3),
+    R G B A (4), else c0, c1, ...
+    """
+    ox = _openexr()
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.ndim != 3 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ParameterError(f"image must be (H, W) or (H, W, C), got {img.shape}")
+    names = _channel_names(img.shape[2], channel_names)
+    channels = {n: np.ascontiguousarray(img[..., i]) for i, n in enumerate(names)}
+    with atomic_output(path, suffix=".exr") as tmp:
+        with ox.File(_header(attributes), channels) as f:
+            f.write(str(tmp))
+
+
+def read_exr(path: PathLike, part: int = 0) -> tuple[np.ndarray, list[str]]:
+    """Read one part of an EXR file: float32 ``(H, W, C)`` and the channel names (sorted)."""
+    ox = _openexr()
+    p = check_input_file(path)
+    try:
+        with ox.File(str(p), separate_channels=True) as f:
+            parts = f.parts
+            if not (0 <= part < len(parts)):
+                raise fail(p, f"EXR has {len(parts)} part(s), no part {part}")
+            chans = parts[part].channels
+            names = _standard_order(list(chans))
+            img = np.stack([np.asarray(chans[n].pixels, dtype=np.float32) for n in names], -1)
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise fail(p, f"cannot read EXR ({exc})") from None
+    return img, names
+
+
+def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
+    """Write an isotropic half/diff table as a multi-part EXR, one part per ``phi_d`` node.
+
+    Parameters
+    ----------
+    table : TabulatedBRDF
+        ``half_diff_iso`` table with axes (theta_h, theta_d, phi_d).
+    every : int
+        Keep every ``every``-th ``phi_d`` slice (1 = all).
+
+    Returns
+    -------
+    int
+        Number of parts written.
+    """
+    ox = _openexr()
+    if getattr(table, "parameterization", None) != "half_diff_iso":
+        raise ParameterError(
+            "EXR slices need an isotropic half/diff table (theta_h, theta_d, phi_d)"
+        )
+    if every < 1:
+        raise ParameterError("every must be >= 1")
+    values = np.asarray(table.values, dtype=np.float32)
+    mask = (
+        np.ones(values.shape[:-1], bool)
+        if table.mask is None
+        else np.asarray(table.mask, dtype=bool)
+    )
+    names = list(table.channels.names)
+    if len(names) == 3:
+        names = ["R", "G", "B"]
+    if "A" in names:
+        raise ParameterError("a table channel named 'A' clashes with the validity channel")
+    axes_json = json.dumps(
+        [
+            {
+                "name": a.name,
+                "size": a.size,
+                "lo": a.lo,
+                "hi": a.hi,
+                "warp": a.warp,
+                "node_offset": a.node_offset,
+            }
+            for a in table.axes
+        ]
+    )
+    phi = np.asarray(table.axes[2].nodes(), dtype=np.float64)
+    parts = []
+    for k in range(0, values.shape[2], every):
+        channels = {
+            n: np.ascontiguousarray(np.where(mask[:, :, k], values[:, :, k, i], 0))
+            for i, n in enumerate(names)
+        }
+        channels["A"] = mask[:, :, k].astype(np.float32)
+        header = _header(
+            {
+                "gonio_phi_d_rad": f"{phi[k]:.9g}",
+                "gonio_units": "1/sr",
+                "gonio_axes": axes_json,
+                "gonio_channels": json.dumps(names),
+            }
+        )
+        parts.append(ox.Part(header, channels, f"phi_d={math.degrees(phi[k]):.3f}"))
+    with atomic_output(path, suffix=".exr") as tmp:
+        with ox.File(parts) as f:
+            f.write(str(tmp))
+    return len(parts)
+
+
+def read_table_slices(path: PathLike) -> dict[str, Any]:
+    """Read a file written by :func:`write_table_slices`.
+
+    Returns
+    -------
+    dict
+        ``values`` (n_theta_h, n_theta_d, n_parts, C) float32, ``mask`` (…, n_parts) bool,
+        ``phi_d`` (n_parts,) radians, ``channels`` (names), ``axes`` (list of dicts).
+    """
+    ox = _openexr()
+    p = check_input_file(path)
+    try:
+        with ox.File(str(p), separate_channels=True) as f:
+            vals, masks, phis = [], [], []
+            names: list[str] = []
+            axes = None
+            for part in f.parts:
+                hdr = part.header
+                if "gonio_phi_d_rad" not in hdr:
+                    raise fail(p, "EXR part without gonio_phi_d_rad: not a gonio table slice")
+                phis.append(float(hdr["gonio_phi_d_rad"]))
+                axes = json.loads(hdr["gonio_axes"])
+                chans = part.channels
+                names = json.loads(hdr["gonio_channels"])
+                vals.append(np.stack([np.asarray(chans[n].pixels, np.float32) for n in names], -1))
+                masks.append(np.asarray(chans["A"].pixels) > 0.5)
+    except (RuntimeError, OSError, ValueError, KeyError) as exc:
+        raise fail(p, f"cannot read EXR table slices ({exc})") from None
+    return {
+        "values": np.stack(vals, axis=2),
+        "mask": np.stack(masks, axis=2),
+        "phi_d": np.asarray(phis),
+        "channels": names,
+        "axes": axes,
+    }

@@ -1,0 +1,176 @@
+"""MERL ``.binary`` isotropic BRDF tables (Matusik et al. 2003): exact read and write.
+
+Layout (little-endian): three int32 dimensions ``(n_theta_h, n_theta_d, n_phi_d)`` = (90, 90, 180),
+then three blocks of ``n`` float64 values (all red, then all green, then all blue), cell index
+``i_phi_d + n_phi_d * (i_theta_d + n_theta_d * i_theta_h)``. The stored numbers are scaled: the
+BRDF in 1/sr is ``stored * scale`` with scales (1/1500, 1.15/1500, 1.66/1500) for (R, G, B).
+Negative values mark cells that were not measured (below the horizon); they become invalid cells.
+
+Cell ``i`` of each axis starts at the node of :meth:`TabulatedBRDF.merl_axes` (node offset 0):
+``theta_h = (i / 90)^2 * pi/2``, ``theta_d = i / 90 * pi/2``, ``phi_d = i / 180 * pi`` where
+``phi_d`` is folded to ``[0, pi)`` by reciprocity.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from gonio.io._common import PathLike, atomic_output, fail, read_bytes
+
+if TYPE_CHECKING:
+    from gonio.brdf.tabulated import TabulatedBRDF
+
+#: Per-channel factors: BRDF (1/sr) = stored value * scale.
+MERL_SCALES = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
+#: MERL's resolution (theta_h, theta_d, phi_d).
+MERL_DIMS = (90, 90, 180)
+_HEADER = 12
+#: Largest dimension accepted when reading (guards against absurd headers before allocating).
+_MAX_DIM = 1 << 16
+
+
+@dataclass(frozen=True)
+class MerlArrays:
+    """A parsed MERL file as plain arrays.
+
+    Attributes
+    ----------
+    values : ndarray, float64, shape (n_theta_h, n_theta_d, n_phi_d, 3)
+        BRDF in 1/sr (already multiplied by the channel scales); 0 where invalid.
+    mask : ndarray, bool, shape (n_theta_h, n_theta_d, n_phi_d)
+        True where all three channels were stored non-negative.
+    """
+
+    values: np.ndarray
+    mask: np.ndarray
+
+
+def parse_merl_bytes(data: bytes, path: PathLike = "<bytes>") -> MerlArrays:
+    """Parse the bytes of a MERL ``.binary`` file (see the module docstring for the layout)."""
+    if len(data) < _HEADER:
+        raise fail(path, f"truncated MERL file: {len(data)} bytes, header needs {_HEADER}")
+    dims = np.frombuffer(data, dtype="<i4", count=3)
+    if np.any(dims <= 0) or np.any(dims > _MAX_DIM):
+        raise fail(path, f"impossible MERL dimensions {tuple(int(d) for d in dims)}")
+    n = int(np.prod(dims.astype(np.int64)))
+    expected = _HEADER + 3 * 8 * n
+    if len(data) != expected:
+        what = "truncated" if len(data) < expected else "trailing bytes in"
+        raise fail(
+            path,
+            f"{what} MERL file: {len(data)} bytes, dimensions {tuple(int(d) for d in dims)} "
+            f"need {expected}",
+        )
+    raw = np.frombuffer(data, dtype="<f8", offset=_HEADER, count=3 * n).reshape(3, *dims)
+    if not np.all(np.isfinite(raw)):
+        bad = int(np.count_nonzero(~np.isfinite(raw)))
+        raise fail(path, f"{bad} non-finite (NaN/Inf) values in MERL data")
+    values = np.moveaxis(raw, 0, -1) * MERL_SCALES
+    mask = np.all(raw >= 0.0, axis=0)
+    values = np.where(mask[..., None], values, 0.0)
+    return MerlArrays(values=values, mask=mask)
+
+
+def read_merl_arrays(path: PathLike) -> MerlArrays:
+    """Read a MERL ``.binary`` file into plain arrays (no table object)."""
+    return parse_merl_bytes(read_bytes(path), path)
+
+
+def merl_axes(dims: tuple[int, int, int] = MERL_DIMS) -> tuple[Any, Any, Any]:
+    """The ``(theta_h, theta_d, phi_d)`` axes of a MERL file of resolution ``dims``."""
+    from gonio.brdf.tabulated import Axis
+
+    half_pi = math.pi / 2
+    return (
+        Axis("theta_h", int(dims[0]), 0.0, half_pi, "sqrt", False, 0.0),
+        Axis("theta_d", int(dims[1]), 0.0, half_pi, "linear", False, 0.0),
+        Axis("phi_d", int(dims[2]), 0.0, math.pi, "linear", True, 0.0),
+    )
+
+
+def read_merl(path: PathLike) -> TabulatedBRDF:
+    """Read a MERL ``.binary`` file as a ``half_diff_iso`` :class:`TabulatedBRDF` (RGB, 1/sr)."""
+    from gonio.brdf.tabulated import Channels, TabulatedBRDF
+
+    arrays = read_merl_arrays(path)
+    return TabulatedBRDF(
+        values=arrays.values.astype(np.float32),
+        axes=merl_axes(arrays.mask.shape),
+        parameterization="half_diff_iso",
+        mask=arrays.mask,
+        sigma=None,
+        counts=None,
+        channels=Channels.rgb(),
+        meta={"source": {"format": "merl", "file": str(path)}},
+        interpolation="nearest",
+    )
+
+
+def merl_bytes(values: np.ndarray, mask: np.ndarray | None = None) -> bytes:
+    """Encode a ``(n_theta_h, n_theta_d, n_phi_d, 3)`` RGB array in 1/sr as MERL file bytes.
+
+    Invalid cells (``mask`` False) and non-finite values are written as -1 (MERL's marker).
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 4 or values.shape[-1] != 3:
+        raise ValueError(f"MERL needs an RGB half/diff grid (n1, n2, n3, 3), got {values.shape}")
+    stored = values / MERL_SCALES
+    bad = ~np.all(np.isfinite(stored), axis=-1)
+    if mask is not None:
+        bad |= ~np.asarray(mask, dtype=bool)
+    stored = np.where(bad[..., None], -1.0, stored)
+    header = np.asarray(values.shape[:3], dtype="<i4").tobytes()
+    return header + np.ascontiguousarray(np.moveaxis(stored, -1, 0), dtype="<f8").tobytes()
+
+
+def _on_merl_grid(table: TabulatedBRDF) -> bool:
+    if table.parameterization != "half_diff_iso" or len(table.axes) != 3:
+        return False
+    want = merl_axes(tuple(a.size for a in table.axes))
+    for a, b in zip(table.axes, want, strict=True):
+        same = (a.size, a.warp, a.periodic) == (b.size, b.warp, b.periodic)
+        close = np.allclose([a.lo, a.hi, a.node_offset], [b.lo, b.hi, b.node_offset])
+        if not (same and close):
+            return False
+    return True
+
+
+def write_merl(table: Any, path: PathLike) -> None:
+    """Write an RGB table as a MERL ``.binary`` file, atomically.
+
+    A table already on a MERL-like half/diff grid is written cell for cell; anything else (another
+    grid, an anisotropic table, an analytic model with ``f``) is resampled by evaluating
+    ``table.f`` at the MERL nodes. Invalid cells are written as -1.
+    """
+    from gonio.brdf import frames
+
+    channels = getattr(table, "channels", None)  # Channels for tables, an int for models
+    n_channels = channels if isinstance(channels, int) else len(channels or ())
+    if n_channels not in (0, 1, 3):
+        raise fail(path, f"MERL stores RGB only; this table has {n_channels} channels")
+    if not hasattr(table, "f"):
+        from gonio.errors import ParameterError
+
+        raise ParameterError(
+            f"{os.fspath(path)}: scattered samples cannot be written as MERL (grid them first)"
+        )
+    if hasattr(table, "axes") and _on_merl_grid(table):
+        values = np.asarray(table.values, dtype=np.float64)
+        mask = None if table.mask is None else np.asarray(table.mask, dtype=bool)
+    else:
+        th, td, pd = (np.asarray(a.nodes(), dtype=np.float64) for a in merl_axes())
+        grid = np.meshgrid(th, td, pd, indexing="ij")
+        wi, wo = frames.half_diff_to_directions(grid[0], np.zeros_like(grid[0]), grid[1], grid[2])
+        wi, wo = np.asarray(wi), np.asarray(wo)
+        values = np.asarray(table.f(wi, wo), dtype=np.float64)
+        mask = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    if values.shape[-1] == 1:
+        values = np.repeat(values, 3, axis=-1)
+    data = merl_bytes(values, mask)
+    with atomic_output(path) as tmp:
+        tmp.write_bytes(data)

@@ -1,0 +1,581 @@
+"""Rig files: TOML descriptions of a gonioreflectometer, validated against a JSON schema.
+
+The schema (``data-schema/rig.schema.json``) is generated from :data:`SPEC` below, the single
+definition of every key, its type, unit and range; ``python -m gonio.rigs.config --schema``
+prints it. :func:`load_rig` parses a rig file with :mod:`tomllib`, validates it with
+:mod:`jsonschema` and returns a :class:`RigConfig`; every error is one line naming the key and
+the line of the file it is on.
+
+Rig names: ``load_rig("sim")`` finds the rig shipped as package data (``gonio/rigs/sim.toml``);
+anything containing a path separator or ending in ``.toml`` is a path.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+
+from gonio.errors import RigConfigError
+from gonio.rigs import control_table as ct
+
+# --- the definition -------------------------------------------------------------------------
+# Each leaf: (json type, description, extra schema keywords). Tables are dicts; arrays of tables
+# are one-element lists. ``required`` lists are attached under the "__required__" key.
+
+
+def _num(desc: str, **kw: Any) -> dict:
+    return {"type": "number", "description": desc, **kw}
+
+
+def _int(desc: str, **kw: Any) -> dict:
+    return {"type": "integer", "description": desc, **kw}
+
+
+def _str(desc: str, **kw: Any) -> dict:
+    return {"type": "string", "description": desc, **kw}
+
+
+def _bool(desc: str) -> dict:
+    return {"type": "boolean", "description": desc}
+
+
+_JOINT = {
+    "__doc__": "One servo-driven joint.",
+    "__required__": ["name", "id", "model", "min_deg", "max_deg"],
+    "name": _str(
+        "Joint name, referenced by [layout], [park] and [safety].",
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
+    ),
+    "id": _int("Servo id on the bus.", minimum=0, maximum=252),
+    "model": _str(
+        "Servo model (checked against the Model Number the servo reports).", enum=sorted(ct.MODELS)
+    ),
+    "operating_mode": _str("Servo operating mode.", enum=sorted(ct.OPERATING_MODES)),
+    "gear_ratio": _num("Servo turns per joint turn (> 0).", exclusiveMinimum=0),
+    "zero_offset_deg": _num("Joint angle (deg) when the servo reads its centre tick 2048."),
+    "direction": _int("+1 or -1: sign of joint angle per servo angle.", enum=[-1, 1]),
+    "min_deg": _num("Lower software limit of the joint (deg)."),
+    "max_deg": _num("Upper software limit of the joint (deg)."),
+    "profile_velocity_deg_s": _num(
+        "Joint speed of the trapezoidal profile (deg/s).", exclusiveMinimum=0
+    ),
+    "profile_acceleration_deg_s2": _num(
+        "Joint acceleration of the profile (deg/s^2).", exclusiveMinimum=0
+    ),
+    "settle_tolerance_deg": _num(
+        "Settled when |present - goal| <= this (deg).", exclusiveMinimum=0
+    ),
+}
+
+SPEC: dict = {
+    "__doc__": "A gonioreflectometer: servo bus, joints, kinematic layout, devices, safety.",
+    "__required__": ["name", "bus", "joints", "layout", "park", "safety"],
+    "name": _str("Rig name."),
+    "description": _str("Free text."),
+    "bus": {
+        "__doc__": "The Dynamixel bus.",
+        "__required__": ["port"],
+        "port": _str(
+            "Serial device (/dev/ttyUSB0, COM3), a pyserial URL (socket://host:port, rfc2217://...),"
+            " or 'sim' for the built-in emulator on a pseudo-terminal."
+        ),
+        "baudrate": _int(
+            "Baud rate.",
+            enum=[9600, 57600, 115200, 1000000, 2000000, 3000000, 4000000, 4500000],
+        ),
+        "protocol": _num("Dynamixel protocol version; only 2.0 is supported.", enum=[2.0]),
+        "retries": _int(
+            "Retries of a transaction after a timeout or CRC error.", minimum=0, maximum=50
+        ),
+        "backoff_ms": _num("First retry delay (ms); doubles at every retry.", minimum=0),
+        "timeout_margin_ms": _num(
+            "Added to dynamixel-sdk's reply timeout (2 x 16 ms USB latency + 2 ms + transfer),"
+            " for slow links or a loaded host (ms).",
+            minimum=0,
+        ),
+        "motion_timeout_s": _num(
+            "Margin (s) added to the predicted move time before a move is declared stuck.",
+            exclusiveMinimum=0,
+        ),
+        "poll_interval_ms": _num("Delay between position polls while settling (ms).", minimum=0),
+        "max_recoveries": _int(
+            "Reboot-and-re-home attempts per move after a hardware error.", minimum=0, maximum=10
+        ),
+    },
+    "joints": [_JOINT],
+    "layout": {
+        "__doc__": "Kinematic layout (see gonio.rigs.kinematics for the frames).",
+        "__required__": ["light", "camera", "tilt", "rotation"],
+        "light": _str("Joint carrying the light arm (rotates in the measurement plane)."),
+        "camera": _str("Joint carrying the camera arm (same axis as the light arm)."),
+        "tilt": _str("Joint tilting the sample out of the measurement plane."),
+        "rotation": _str("Joint rotating the sample about its normal (turntable)."),
+        "light_distance_m": _num("Light to sample centre (m).", exclusiveMinimum=0),
+        "camera_distance_m": _num("Camera to sample centre (m).", exclusiveMinimum=0),
+    },
+    "camera": {
+        "__doc__": "The camera.",
+        "kind": _str("Camera backend: 'sim' (simulated sample measurement).", enum=["sim"]),
+        "exposure_s": _num("Default exposure (s).", exclusiveMinimum=0),
+        "capture_time_s": _num("Simulated capture duration (s, wall clock).", minimum=0),
+    },
+    "light": {
+        "__doc__": "The light source.",
+        "kind": _str("Light backend: 'sim'.", enum=["sim"]),
+        "irradiance_w_m2": _num(
+            "Irradiance on a surface facing the light (W/m^2).", exclusiveMinimum=0
+        ),
+    },
+    "park": {
+        "__doc__": "Park pose: joint name -> angle (deg). Joints not named keep their angle.",
+        "__additional__": _num("Park angle of that joint (deg)."),
+    },
+    "safety": {
+        "__doc__": "Safety margins.",
+        "__required__": ["min_light_camera_deg"],
+        "min_light_camera_deg": _num(
+            "Minimum angle between the light and camera arms, so neither shadows the other or"
+            " hits it (deg).",
+            minimum=0,
+            maximum=180,
+        ),
+        "arms_can_pass": _bool(
+            "Whether the light and camera arms can pass each other (different heights/radii);"
+            " if not (default), they keep the order they have in the park pose."
+        ),
+        "max_theta_deg": _num(
+            "Largest incident or outgoing polar angle allowed (deg).",
+            exclusiveMinimum=0,
+            maximum=90,
+        ),
+        "keepout": [
+            {
+                "__doc__": (
+                    "A sector a joint must never enter or cross (e.g. an arm would hit the"
+                    " column): the joint stays on the park angle's side of it."
+                ),
+                "__required__": ["joint", "min_deg", "max_deg"],
+                "joint": _str("Joint name."),
+                "min_deg": _num("Sector start (deg)."),
+                "max_deg": _num("Sector end (deg)."),
+                "reason": _str("Why (shown when a pose is refused)."),
+            }
+        ],
+    },
+    "sim": {
+        "__doc__": "The simulated rig (used when bus.port = 'sim').",
+        "time_scale": _num("Simulated seconds per wall-clock second.", exclusiveMinimum=0),
+        "settle_ticks": _int(
+            "Max settling error of a servo (encoder ticks, 0.088 deg).", minimum=0, maximum=50
+        ),
+        "seed": _int("Seed of settling errors and measurement noise.", minimum=0),
+        "firmware": _int("Firmware version the emulated servos report.", minimum=0, maximum=255),
+        "noise_rel": _num("Relative measurement noise (1 sigma).", minimum=0),
+        "noise_abs": _num("Absolute measurement noise floor (1/sr, 1 sigma).", minimum=0),
+        "sample": {
+            "__doc__": "Ground-truth BRDF of the simulated sample (Node.to_dict() form).",
+            "__additional__": {},
+        },
+        "faults": {
+            "__doc__": "Injected bus faults (probabilities per packet / per move).",
+            "drop": _num("Lost instruction packets.", minimum=0, maximum=1),
+            "garble": _num("Corrupted status packets.", minimum=0, maximum=1),
+            "crc": _num("Instructions arriving with a CRC error.", minimum=0, maximum=1),
+            "overload": _num(
+                "Moves ending in an overload (torque shutdown).", minimum=0, maximum=1
+            ),
+            "seed": _int("Fault seed.", minimum=0),
+        },
+    },
+}
+
+
+def _to_schema(node: Any) -> dict:
+    if isinstance(node, list):
+        return {"type": "array", "minItems": 1, "items": _to_schema(node[0])}
+    if isinstance(node, dict) and ("type" in node or node == {}):
+        return dict(node)
+    out: dict = {"type": "object", "description": node.get("__doc__", "")}
+    props = {k: _to_schema(v) for k, v in node.items() if not k.startswith("__")}
+    if props:
+        out["properties"] = props
+    if "__required__" in node:
+        out["required"] = list(node["__required__"])
+    if "__additional__" in node:
+        out["additionalProperties"] = _to_schema(node["__additional__"])
+    else:
+        out["additionalProperties"] = False
+    return out
+
+
+def rig_schema() -> dict:
+    """The JSON schema (draft 2020-12) of rig files, generated from :data:`SPEC`."""
+    schema = _to_schema(SPEC)
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": "https://gonio.invalid/schema/rig.schema.json",
+        "title": "gonio rig file",
+        **schema,
+    }
+
+
+# --- typed configuration ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    port: str
+    baudrate: int = 1_000_000
+    protocol: float = 2.0
+    retries: int = 5
+    backoff_ms: float = 2.0
+    timeout_margin_ms: float = 0.0
+    motion_timeout_s: float = 5.0
+    poll_interval_ms: float = 2.0
+    max_recoveries: int = 2
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    """A joint. Angles in degrees as typed in the rig file (converted to radians at use)."""
+
+    name: str
+    id: int
+    model: str
+    min_deg: float
+    max_deg: float
+    operating_mode: str = "position"
+    gear_ratio: float = 1.0
+    zero_offset_deg: float = 0.0
+    direction: int = 1
+    profile_velocity_deg_s: float = 60.0
+    profile_acceleration_deg_s2: float = 120.0
+    settle_tolerance_deg: float = 0.5
+
+    def to_ticks(self, angle_deg: float) -> int:
+        """Joint angle (deg) -> Goal Position ticks."""
+        servo_deg = (angle_deg - self.zero_offset_deg) * self.gear_ratio * self.direction
+        return ct.CENTER_TICK + round(servo_deg * ct.TICKS_PER_REV / 360.0)
+
+    def from_ticks(self, ticks: int) -> float:
+        """Present Position ticks -> joint angle (deg)."""
+        servo_deg = (ticks - ct.CENTER_TICK) * 360.0 / ct.TICKS_PER_REV
+        return self.zero_offset_deg + servo_deg / (self.gear_ratio * self.direction)
+
+    @property
+    def tolerance_ticks(self) -> int:
+        return max(
+            1, math.floor(self.settle_tolerance_deg * self.gear_ratio * ct.TICKS_PER_REV / 360.0)
+        )
+
+    def move_time(self, delta_deg):
+        """Rest-to-rest time (s) of a move of ``delta_deg`` under this joint's profile."""
+        import numpy as np
+
+        d = np.abs(np.asarray(delta_deg, dtype=float))
+        v, a = self.profile_velocity_deg_s, self.profile_acceleration_deg_s2
+        d_ramp = v * v / a
+        return np.where(d >= d_ramp, d / v + v / a, 2.0 * np.sqrt(d / a))
+
+
+@dataclass(frozen=True)
+class Keepout:
+    joint: str
+    min_deg: float
+    max_deg: float
+    reason: str = "keep-out sector"
+
+
+@dataclass(frozen=True)
+class LayoutConfig:
+    light: str
+    camera: str
+    tilt: str
+    rotation: str
+    light_distance_m: float = 0.5
+    camera_distance_m: float = 0.5
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    min_light_camera_deg: float
+    max_theta_deg: float = 85.0
+    arms_can_pass: bool = False
+    keepout: tuple[Keepout, ...] = ()
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    time_scale: float = 50.0
+    settle_ticks: int = 2
+    seed: int = 0
+    firmware: int = 52
+    noise_rel: float = 0.01
+    noise_abs: float = 1e-4
+    sample: dict = field(default_factory=lambda: {"type": "Lambert", "params": {"albedo": [0.5]}})
+    faults: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """A validated rig file."""
+
+    name: str
+    bus: BusConfig
+    joints: tuple[JointConfig, ...]
+    layout: LayoutConfig
+    park_deg: dict[str, float]
+    safety: SafetyConfig
+    camera: dict = field(default_factory=dict)
+    light: dict = field(default_factory=dict)
+    sim: SimConfig = field(default_factory=SimConfig)
+    description: str = ""
+    source: str = ""
+    text: str = ""
+
+    def joint(self, name: str) -> JointConfig:
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(name)
+
+    @property
+    def is_sim(self) -> bool:
+        return self.bus.port == "sim"
+
+
+# --- loading ------------------------------------------------------------------------------
+
+
+def _key_line(text: str, path: tuple) -> int | None:
+    """Best-effort line number (1-based) of the key at ``path`` in TOML ``text``.
+
+    tomllib reports no positions, so we scan: the line of the deepest key of ``path`` that
+    appears after its enclosing table header (``[a.b]`` or the n-th ``[[a]]``).
+    """
+    lines = text.splitlines()
+    keys = [k for k in path if isinstance(k, str)]
+    if not keys:
+        return None
+    # locate the enclosing table header
+    start, end = 0, len(lines)
+    idx_in_array = None
+    table_keys: list[str] = []
+    for i, k in enumerate(path):
+        if isinstance(k, int):
+            idx_in_array = k
+            table_keys = [x for x in path[:i] if isinstance(x, str)]
+            break
+    header_re = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]\]?")
+    if idx_in_array is not None:
+        name = ".".join(table_keys)
+        count = -1
+        for n, line in enumerate(lines):
+            m = re.match(r"^\s*\[\[\s*" + re.escape(name) + r"\s*\]\]", line)
+            if m:
+                count += 1
+                if count == idx_in_array:
+                    start = n
+                    break
+        # end at the next header
+        for n in range(start + 1, len(lines)):
+            if header_re.match(lines[n]):
+                end = n
+                break
+        rest = [x for x in path[path.index(idx_in_array) + 1 :] if isinstance(x, str)]
+        target = rest[-1] if rest else None
+        if target is None:
+            return start + 1
+    else:
+        target = keys[-1]
+        parents = keys[:-1]
+        for depth in range(len(parents), 0, -1):
+            name = ".".join(parents[:depth])
+            for n, line in enumerate(lines):
+                if re.match(r"^\s*\[\s*" + re.escape(name) + r"\s*\]", line):
+                    start = n
+                    for m2 in range(n + 1, len(lines)):
+                        if header_re.match(lines[m2]):
+                            end = m2
+                            break
+                    break
+            else:
+                continue
+            break
+    pat = re.compile(r"^\s*(?:[A-Za-z0-9_.\"-]*\.)?\"?" + re.escape(str(target)) + r"\"?\s*=")
+    for n in range(start, end):
+        if pat.match(lines[n]) or re.search(
+            r"[{,]\s*" + re.escape(str(target)) + r"\s*=", lines[n]
+        ):
+            return n + 1
+    hdr = re.compile(r"^\s*\[\[?\s*" + re.escape(".".join(keys)) + r"\s*\]\]?")
+    for n, line in enumerate(lines):
+        if hdr.match(line):
+            return n + 1
+    return start + 1 if start else None
+
+
+def _where(source: str, text: str, path: tuple) -> str:
+    dotted = ".".join(f"[{k}]" if isinstance(k, int) else str(k) for k in path).replace(".[", "[")
+    line = _key_line(text, path)
+    loc = f"{source}:{line}" if line else source
+    return f"{loc}: {dotted or '(top level)'}"
+
+
+def _schema_error_message(err: jsonschema.ValidationError, source: str, text: str) -> str:
+    path = tuple(err.absolute_path)
+    if err.validator == "required":
+        missing = re.findall(r"'([^']+)' is a required property", err.message)
+        key = missing[0] if missing else "?"
+        full = (*path, key)
+        dotted = ".".join(f"[{k}]" if isinstance(k, int) else str(k) for k in full).replace(
+            ".[", "["
+        )
+        line = _key_line(text, path) if path else None
+        loc = f"{source}:{line}" if line else source
+        return f"{loc}: missing required key {dotted}"
+    if err.validator == "additionalProperties":
+        extra = re.findall(r"'([^']+)' was unexpected", err.message)
+        key = extra[0] if extra else "?"
+        return f"{_where(source, text, (*path, key))}: unknown key"
+    return f"{_where(source, text, path)}: {err.message}"
+
+
+def _find(name_or_path: str | Path) -> tuple[str, str]:
+    s = str(name_or_path)
+    if "/" in s or "\\" in s or s.endswith(".toml"):
+        p = Path(s)
+        try:
+            return p.read_text(encoding="utf-8"), str(p)
+        except FileNotFoundError:
+            raise RigConfigError(f"rig file {s} not found") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise RigConfigError(f"cannot read rig file {s}: {exc}") from None
+    res = resources.files("gonio.rigs").joinpath(f"{s}.toml")
+    if not res.is_file():
+        names = ", ".join(shipped_rigs())
+        raise RigConfigError(f"unknown rig {s!r} (shipped rigs: {names}; or give a path)")
+    return res.read_text(encoding="utf-8"), f"{s}.toml"
+
+
+def shipped_rigs() -> list[str]:
+    """Names of the rigs shipped as package data."""
+    return sorted(
+        r.name[:-5] for r in resources.files("gonio.rigs").iterdir() if r.name.endswith(".toml")
+    )
+
+
+def load_rig(name_or_path: str | Path) -> RigConfig:
+    """Load and validate a rig file (a shipped rig name or a path); raise RigConfigError."""
+    text, source = _find(name_or_path)
+    return parse_rig(text, source)
+
+
+def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
+    """Parse and validate rig-file ``text``; ``source`` names it in error messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RigConfigError(f"{source}: invalid TOML: {exc}") from None
+    validator = jsonschema.Draft202012Validator(rig_schema())
+    errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
+    if errors:
+        raise RigConfigError(_schema_error_message(errors[0], source, text))
+    return _build(data, text, source)
+
+
+def _build(data: dict, text: str, source: str) -> RigConfig:
+    def fail(path: tuple, msg: str) -> RigConfigError:
+        return RigConfigError(f"{_where(source, text, path)}: {msg}")
+
+    joints = tuple(JointConfig(**j) for j in data["joints"])
+    names: set[str] = set()
+    ids: set[int] = set()
+    for i, j in enumerate(joints):
+        if j.name in names:
+            raise fail(("joints", i, "name"), f"duplicate joint name {j.name!r}")
+        if j.id in ids:
+            raise fail(("joints", i, "id"), f"duplicate servo id {j.id}")
+        names.add(j.name)
+        ids.add(j.id)
+        if j.min_deg >= j.max_deg:
+            raise fail(
+                ("joints", i, "min_deg"), f"min_deg {j.min_deg} must be < max_deg {j.max_deg}"
+            )
+        mode = ct.OPERATING_MODES[j.operating_mode]
+        lo, hi = ct.POSITION_RANGE[mode]
+        for key in ("min_deg", "max_deg"):
+            t = j.to_ticks(getattr(j, key))
+            if not lo <= t <= hi:
+                raise fail(
+                    ("joints", i, key),
+                    f"{getattr(j, key)} deg is servo tick {t}, outside {lo}..{hi} of"
+                    f" {j.operating_mode} mode (check gear_ratio/zero_offset_deg)",
+                )
+    layout = LayoutConfig(**data["layout"])
+    for key in ("light", "camera", "tilt", "rotation"):
+        if getattr(layout, key) not in names:
+            raise fail(("layout", key), f"names no joint ({getattr(layout, key)!r})")
+    if len({layout.light, layout.camera, layout.tilt, layout.rotation}) != 4:
+        raise fail(
+            ("layout", "light"), "light, camera, tilt and rotation must be four different joints"
+        )
+    park = {k: float(v) for k, v in data["park"].items()}
+    for k, v in park.items():
+        if k not in names:
+            raise fail(("park", k), "names no joint")
+        j = next(x for x in joints if x.name == k)
+        if not j.min_deg <= v <= j.max_deg:
+            raise fail(("park", k), f"{v} deg outside the joint limits [{j.min_deg}, {j.max_deg}]")
+    s = dict(data["safety"])
+    keep = []
+    for i, k in enumerate(s.pop("keepout", [])):
+        if k["joint"] not in names:
+            raise fail(("safety", "keepout", i, "joint"), f"names no joint ({k['joint']!r})")
+        if k["min_deg"] >= k["max_deg"]:
+            raise fail(("safety", "keepout", i, "min_deg"), "min_deg must be < max_deg")
+        keep.append(Keepout(**k))
+    safety = SafetyConfig(keepout=tuple(keep), **s)
+    sim = SimConfig(**data.get("sim", {}))
+    if "sample" in data.get("sim", {}):
+        from gonio.brdf import models
+
+        Node = models.Node
+        try:
+            Node.from_dict(sim.sample)
+        except Exception as exc:
+            raise fail(("sim", "sample"), f"not a gonio model: {exc}") from None
+    return RigConfig(
+        name=data["name"],
+        description=data.get("description", ""),
+        bus=BusConfig(**data["bus"]),
+        joints=joints,
+        layout=layout,
+        park_deg=park,
+        safety=safety,
+        camera=dict(data.get("camera", {})),
+        light=dict(data.get("light", {})),
+        sim=sim,
+        source=source,
+        text=text,
+    )
+
+
+def schema_json() -> str:
+    """The schema as the text committed in ``data-schema/rig.schema.json``."""
+    return json.dumps(rig_schema(), indent=2) + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+
+    if "--schema" in sys.argv:
+        sys.stdout.write(schema_json())

@@ -1,0 +1,676 @@
+"""Dynamixel X-series servo driver over the real ``dynamixel_sdk`` (Protocol 2.0).
+
+Two layers:
+
+* :class:`DynamixelBus` — transactions (ping, read, write, sync write, sync read, reboot) through
+  ``dynamixel_sdk.PortHandler`` / ``PacketHandler(2.0)``, each retried with exponential backoff
+  after a timeout, a corrupt reply or a CRC error reported by the servo.
+* :class:`ServoChain` — joints from a rig file: identify models, configure operating mode and
+  motion profile, check software limits **before** sending anything, sync-write all goals at
+  once, poll (sync read) until every joint has settled, reboot and re-home after a hardware
+  error, and return the positions actually reached as read back from the servos.
+
+Angles at this interface are joint angles in **degrees** keyed by joint name (the rig file's
+unit); the kinematics layer converts to radians.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import dynamixel_sdk as sdk
+import numpy as np
+import serial
+
+from gonio.errors import DeviceError, PlanError
+from gonio.rigs import control_table as ct
+from gonio.rigs.config import BusConfig, JointConfig, RigConfig
+
+log = logging.getLogger("gonio.rigs.dynamixel")
+
+_RETRY_COMM = {sdk.COMM_RX_TIMEOUT, sdk.COMM_RX_CORRUPT, sdk.COMM_RX_FAIL, sdk.COMM_TX_FAIL}
+
+
+class HardwareFault(DeviceError):
+    """A servo reports a hardware error (Hardware Error Status != 0); torque is off."""
+
+    def __init__(self, faults: Mapping[str, int]) -> None:
+        self.faults = dict(faults)
+        text = "; ".join(f"{j}: {ct.hardware_error_text(b)}" for j, b in self.faults.items())
+        super().__init__(f"servo hardware error ({text})")
+
+
+class _PortHandler(sdk.PortHandler):
+    """The SDK's PortHandler with an extra reply-timeout margin (``bus.timeout_margin_ms``).
+
+    The SDK waits ``2 x 16 ms + 2 ms`` (USB latency timer) plus the transfer time for a reply;
+    slow links (serial servers, a loaded host running the emulator) need more.
+    """
+
+    extra_timeout_ms: float = 0.0
+
+    def setPacketTimeout(self, packet_length):
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout += self.extra_timeout_ms
+
+    def setPacketTimeoutMillis(self, msec):
+        super().setPacketTimeoutMillis(msec + self.extra_timeout_ms)
+
+
+class _URLPortHandler(_PortHandler):
+    """PortHandler that opens pyserial URLs (``socket://``, ``rfc2217://``, ``loop://``)."""
+
+    def setupPort(self, cflag_baud):
+        if self.is_open:
+            self.closePort()
+        self.ser = serial.serial_for_url(
+            self.port_name, baudrate=self.baudrate, bytesize=serial.EIGHTBITS, timeout=0
+        )
+        self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+        return True
+
+
+@dataclass
+class BusStats:
+    """Counters of one bus session."""
+
+    transactions: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    corrupt: int = 0
+    crc_errors: int = 0
+    resent_goals: int = 0
+    recoveries: int = 0
+
+
+class DynamixelBus:
+    """Protocol 2.0 transactions with retries.
+
+    Parameters
+    ----------
+    port : str
+        Serial device path or pyserial URL.
+    baudrate : int
+        Bits per second.
+    retries : int
+        Extra attempts after a timeout / corrupt reply / servo-reported CRC error.
+    backoff_s : float
+        Delay before the first retry; doubles each retry (capped at 0.2 s).
+    timeout_margin_s : float
+        Added to the SDK's reply timeout (about 34 ms plus transfer time).
+    """
+
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = 1_000_000,
+        retries: int = 5,
+        backoff_s: float = 0.002,
+        timeout_margin_s: float = 0.0,
+    ):
+        self.port_name = port
+        self.baudrate = baudrate
+        self.retries = retries
+        self.backoff_s = backoff_s
+        self.timeout_margin_s = timeout_margin_s
+        self.stats = BusStats()
+        self._port: sdk.PortHandler | None = None
+        self._ph = sdk.PacketHandler(2.0)
+        #: ids whose last status packet carried the alert bit (hardware error pending)
+        self.alerts: set[int] = set()
+
+    @classmethod
+    def from_config(cls, cfg: BusConfig, port: str | None = None) -> DynamixelBus:
+        return cls(
+            port or cfg.port,
+            cfg.baudrate,
+            cfg.retries,
+            cfg.backoff_ms / 1000.0,
+            cfg.timeout_margin_ms / 1000.0,
+        )
+
+    # --- port ---------------------------------------------------------------------------------
+    def open(self) -> None:
+        url = "://" in self.port_name
+        port = (_URLPortHandler if url else _PortHandler)(self.port_name)
+        port.extra_timeout_ms = self.timeout_margin_s * 1000.0
+        try:
+            ok = port.openPort() and port.setBaudRate(self.baudrate)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise DeviceError(f"cannot open servo bus {self.port_name}: {exc}") from None
+        if not ok:
+            raise DeviceError(f"cannot open servo bus {self.port_name} at {self.baudrate} baud")
+        self._port = port
+
+    def close(self) -> None:
+        if self._port is not None and self._port.is_open:
+            self._port.closePort()
+        self._port = None
+
+    def __enter__(self) -> DynamixelBus:
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def port(self) -> sdk.PortHandler:
+        if self._port is None:
+            raise DeviceError("servo bus is not open")
+        return self._port
+
+    # --- retry core ---------------------------------------------------------------------------
+    def _transact(self, what: str, fn: Callable[[], tuple], who: Callable[[], str] | None = None):
+        """Run ``fn() -> (value, comm_result, error_byte)`` with retries; return value, error.
+
+        ``who()`` names the servo at fault in the final error (for multi-servo transactions).
+        """
+        delay = self.backoff_s
+        last = ""
+        for attempt in range(self.retries + 1):
+            if attempt:
+                self.stats.retries += 1
+                time.sleep(delay)
+                delay = min(delay * 2.0, 0.2)
+            self.stats.transactions += 1
+            value, comm, error = fn()
+            if comm in _RETRY_COMM:
+                if comm == sdk.COMM_RX_TIMEOUT:
+                    self.stats.timeouts += 1
+                else:
+                    self.stats.corrupt += 1
+                last = self._ph.getTxRxResult(comm)
+                continue
+            if comm != sdk.COMM_SUCCESS:
+                raise DeviceError(f"{what}: {self._ph.getTxRxResult(comm)}")
+            num = error & 0x7F
+            if num == sdk.ERRNUM_CRC:
+                self.stats.crc_errors += 1
+                last = "servo reported a CRC error"
+                continue
+            if num:
+                raise DeviceError(f"{what}: {self._ph.getRxPacketError(num)}")
+            return value, error
+        culprit = who() if who is not None else ""
+        raise DeviceError(
+            f"{what}: {culprit + ' ' if culprit else ''}no valid reply after"
+            f" {self.retries + 1} attempts ({last})"
+        )
+
+    def _note_alert(self, servo_id: int, error: int) -> None:
+        if error & sdk.ERRBIT_ALERT:
+            self.alerts.add(servo_id)
+        else:
+            self.alerts.discard(servo_id)
+
+    # --- transactions -------------------------------------------------------------------------
+    def ping(self, servo_id: int) -> int:
+        """Model Number of servo ``servo_id`` (raises DeviceError if it does not answer)."""
+        model, error = self._transact(
+            f"ping servo {servo_id}", lambda: self._ph.ping(self.port, servo_id)
+        )
+        self._note_alert(servo_id, error)
+        return int(model)
+
+    def read(self, servo_id: int, reg: tuple[int, int], signed: bool = False) -> int:
+        """Read a 1, 2 or 4-byte register."""
+        addr, n = reg
+
+        def call():
+            data, comm, err = self._ph.readTxRx(self.port, servo_id, addr, n)
+            return data, comm, err
+
+        data, error = self._transact(f"read servo {servo_id} @{addr}", call)
+        self._note_alert(servo_id, error)
+        return int.from_bytes(bytes(data[:n]), "little", signed=signed)
+
+    def write(self, servo_id: int, reg: tuple[int, int], value: int) -> None:
+        """Write a 1, 2 or 4-byte register and wait for the servo's acknowledgement."""
+        addr, n = reg
+        data = list(int(value & ((1 << (8 * n)) - 1)).to_bytes(n, "little"))
+
+        def call():
+            comm, err = self._ph.writeTxRx(self.port, servo_id, addr, n, data)
+            return None, comm, err
+
+        _, error = self._transact(f"write servo {servo_id} @{addr}={value}", call)
+        self._note_alert(servo_id, error)
+
+    def sync_write(self, reg: tuple[int, int], values: Mapping[int, int]) -> None:
+        """One Sync Write packet setting ``reg`` on every servo in ``values`` (no reply)."""
+        addr, n = reg
+        group = sdk.GroupSyncWrite(self.port, self._ph, addr, n)
+        for sid, v in values.items():
+            group.addParam(sid, list(int(v & ((1 << (8 * n)) - 1)).to_bytes(n, "little")))
+
+        def call():
+            return None, group.txPacket(), 0
+
+        self._transact("sync write", call)
+
+    def sync_read(self, addr: int, n: int, ids: list[int]) -> dict[int, bytes]:
+        """One Sync Read of ``n`` bytes at ``addr`` from every servo in ``ids``.
+
+        Uses the SDK's ``syncReadTx`` and per-servo ``readRx`` (rather than GroupSyncRead) so the
+        error byte of every status packet is seen: its alert bit flags a hardware error.
+        """
+
+        failed: list[int] = []
+
+        def call():
+            failed.clear()
+            comm = self._ph.syncReadTx(self.port, addr, n, list(ids), len(ids), False)
+            if comm != sdk.COMM_SUCCESS:
+                return None, comm, 0
+            out: dict[int, bytes] = {}
+            worst = 0
+            for sid in ids:
+                data, comm, err = self._ph.readRx(self.port, sid, n)
+                if comm != sdk.COMM_SUCCESS:
+                    self.port.is_using = False
+                    failed.append(sid)
+                    return None, comm, 0
+                if len(data) != n:
+                    failed.append(sid)
+                    return None, sdk.COMM_RX_CORRUPT, 0
+                self._note_alert(sid, err)
+                if err & 0x7F:
+                    worst = err
+                out[sid] = bytes(data)
+            return out, sdk.COMM_SUCCESS, worst
+
+        value, _ = self._transact(
+            f"sync read @{addr} from {ids}",
+            call,
+            lambda: f"servo {failed[0]} gave" if failed else "",
+        )
+        return value
+
+    def reboot(self, servo_id: int) -> None:
+        """Reboot a servo (clears a hardware error; RAM registers return to defaults)."""
+
+        def call():
+            comm, err = self._ph.reboot(self.port, servo_id)
+            return None, comm, err
+
+        self._transact(f"reboot servo {servo_id}", call)
+        self.alerts.discard(servo_id)
+
+
+@dataclass(frozen=True)
+class ServoInfo:
+    """What ``rig check`` reports for one joint."""
+
+    joint: str
+    id: int
+    model_number: int
+    model: str
+    firmware: int
+    hardware_error: int
+    torque: bool
+    position_deg: float
+    min_deg: float
+    max_deg: float
+    expected_model: str
+
+    @property
+    def ok(self) -> bool:
+        return self.model == self.expected_model and self.hardware_error == 0
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """Outcome of one move: joint angles read back (deg) and timings (s)."""
+
+    reached_deg: dict[str, float]
+    motion_s: float
+    settle_s: float
+    polls: int
+    recoveries: int
+
+
+class ServoChain:
+    """The joints of a rig on one Dynamixel bus.
+
+    Parameters
+    ----------
+    rig : RigConfig
+        Validated rig file.
+    port : str, optional
+        Overrides ``rig.bus.port`` (the simulated rig passes the emulator's pty path).
+    """
+
+    def __init__(self, rig: RigConfig, port: str | None = None) -> None:
+        self.rig = rig
+        self.joints: tuple[JointConfig, ...] = rig.joints
+        self.bus = DynamixelBus.from_config(rig.bus, port)
+        self.ids = [j.id for j in self.joints]
+        self._by_id = {j.id: j for j in self.joints}
+        self.last_goal_ticks: dict[int, int] = {}
+        #: moves split in two because the arms would have come too close on the way
+        self.two_phase_moves = 0
+
+    # --- setup --------------------------------------------------------------------------------
+    def open(self) -> None:
+        self.bus.open()
+
+    def close(self) -> None:
+        self.bus.close()
+
+    def __enter__(self) -> ServoChain:
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def check(self) -> list[ServoInfo]:
+        """Ping every servo and read model, firmware, hardware error, torque and position."""
+        out = []
+        for j in self.joints:
+            model = self.bus.ping(j.id)
+            fw = self.bus.read(j.id, ct.FIRMWARE_VERSION)
+            hw = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
+            tq = self.bus.read(j.id, ct.TORQUE_ENABLE)
+            pos = self.bus.read(j.id, ct.PRESENT_POSITION, signed=True)
+            out.append(
+                ServoInfo(
+                    j.name,
+                    j.id,
+                    model,
+                    ct.MODEL_NAMES.get(model, f"unknown ({model})"),
+                    fw,
+                    hw,
+                    bool(tq),
+                    j.from_ticks(pos),
+                    j.min_deg,
+                    j.max_deg,
+                    j.model,
+                )
+            )
+        return out
+
+    def _configure(self, j: JointConfig) -> None:
+        mode = ct.OPERATING_MODES[j.operating_mode]
+        self.bus.write(j.id, ct.TORQUE_ENABLE, 0)
+        if self.bus.read(j.id, ct.OPERATING_MODE) != mode:
+            self.bus.write(j.id, ct.OPERATING_MODE, mode)
+        v = ct.deg_s_to_velocity_raw(j.profile_velocity_deg_s * j.gear_ratio)
+        a = ct.deg_s2_to_acceleration_raw(j.profile_acceleration_deg_s2 * j.gear_ratio)
+        self.bus.write(j.id, ct.PROFILE_ACCELERATION, a)
+        self.bus.write(j.id, ct.PROFILE_VELOCITY, v)
+        self.bus.write(j.id, ct.TORQUE_ENABLE, 1)
+
+    def initialize(self) -> None:
+        """Identify every servo, clear hardware errors (reboot), set mode/profile, torque on."""
+        for j in self.joints:
+            model = self.bus.ping(j.id)
+            if model != ct.MODELS[j.model]:
+                name = ct.MODEL_NAMES.get(model, f"model number {model}")
+                raise DeviceError(
+                    f"joint {j.name}: servo {j.id} is {name}, rig file says {j.model}"
+                )
+            if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
+                self._reboot(j)
+            self._configure(j)
+
+    def _reboot(self, j: JointConfig) -> None:
+        bits = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
+        log.warning("rebooting servo %d (%s): %s", j.id, j.name, ct.hardware_error_text(bits))
+        self.bus.reboot(j.id)
+        deadline = time.monotonic() + 2.0
+        while True:
+            try:
+                self.bus.ping(j.id)
+                break
+            except DeviceError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)  # a real servo takes a few hundred ms to boot
+        if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
+            raise DeviceError(f"joint {j.name}: hardware error persists after reboot")
+
+    # --- limits -------------------------------------------------------------------------------
+    def check_limits(self, targets_deg: Mapping[str, float]) -> dict[int, int]:
+        """Validate a full pose against the software limits; return goal ticks per servo id.
+
+        Raises PlanError (nothing is sent) if a joint is unknown, missing, or out of limits.
+        """
+        names = {j.name for j in self.joints}
+        unknown = set(targets_deg) - names
+        if unknown:
+            raise PlanError(f"unknown joint(s) {sorted(unknown)}")
+        goals: dict[int, int] = {}
+        for j in self.joints:
+            if j.name not in targets_deg:
+                raise PlanError(f"pose gives no angle for joint {j.name}")
+            a = float(targets_deg[j.name])
+            if not (j.min_deg - 1e-9 <= a <= j.max_deg + 1e-9) or a != a:
+                raise PlanError(
+                    f"joint {j.name}: {a:.3f} deg outside its limits [{j.min_deg}, {j.max_deg}]"
+                )
+            for k in self.rig.safety.keepout:
+                if k.joint != j.name:
+                    continue
+                park = self.rig.park_deg.get(j.name, j.zero_offset_deg)
+                if k.min_deg <= a <= k.max_deg or (a > k.max_deg) != (park > k.max_deg):
+                    raise PlanError(
+                        f"joint {j.name}: {a:.3f} deg in or across the keep-out sector"
+                        f" [{k.min_deg}, {k.max_deg}] ({k.reason})"
+                    )
+            t = j.to_ticks(a)
+            lo, hi = ct.POSITION_RANGE[ct.OPERATING_MODES[j.operating_mode]]
+            if not lo <= t <= hi:
+                raise PlanError(f"joint {j.name}: tick {t} outside the servo range {lo}..{hi}")
+            goals[j.id] = t
+        return goals
+
+    # --- motion -------------------------------------------------------------------------------
+    def read_positions(self) -> dict[str, float]:
+        """Present joint angles (deg), one sync read."""
+        a, n = ct.PRESENT_POSITION
+        data = self.bus.sync_read(a, n, self.ids)
+        return {
+            self._by_id[i].name: self._by_id[i].from_ticks(int.from_bytes(d, "little", signed=True))
+            for i, d in data.items()
+        }
+
+    def predicted_time(
+        self, start_deg: Mapping[str, float], goal_deg: Mapping[str, float]
+    ) -> float:
+        """Predicted rest-to-rest time (s): the slowest joint under its trapezoidal profile."""
+        return max(
+            float(j.move_time(goal_deg[j.name] - start_deg.get(j.name, goal_deg[j.name])))
+            for j in self.joints
+        )
+
+    def move(
+        self,
+        targets_deg: Mapping[str, float],
+        timeout_s: float | None = None,
+        recover: bool = True,
+        poll_s: float | None = None,
+    ) -> MoveResult:
+        """Move every joint at once and wait until all have settled.
+
+        Limits are checked first (PlanError, nothing sent). Goals go out in one Sync Write;
+        a Sync Read block (Goal .. Present Position) is polled: a goal that did not arrive is
+        re-sent, the alert bit triggers reboot + re-home + retry (up to
+        ``rig.bus.max_recoveries``), and the move ends when every joint has stopped within its
+        settle tolerance. Returns the angles read back.
+        """
+        goals = self.check_limits(targets_deg)
+        recoveries = 0
+        rehome = False
+        while True:
+            try:
+                if rehome:
+                    self._move_once(self.check_limits(self.park_pose()), None, None)
+                    rehome = False
+                res = self._move_once(goals, timeout_s, poll_s)
+                return MoveResult(res[0], res[1], res[2], res[3], recoveries)
+            except HardwareFault as fault:
+                if not recover or recoveries >= self.rig.bus.max_recoveries:
+                    raise
+                recoveries += 1
+                self.bus.stats.recoveries += 1
+                log.warning("%s; rebooting and re-homing", fault)
+                self.recover(fault)
+                rehome = True
+
+    def recover(self, fault: HardwareFault) -> None:
+        """Reboot the faulted servos and restore their configuration (torque back on)."""
+        for name in fault.faults:
+            j = next(x for x in self.joints if x.name == name)
+            self._reboot(j)
+            self._configure(j)
+
+    def park_pose(self) -> dict[str, float]:
+        """The rig file's park pose; joints it does not name keep their present angle."""
+        present = self.read_positions()
+        return {j.name: self.rig.park_deg.get(j.name, present[j.name]) for j in self.joints}
+
+    def park(self) -> MoveResult:
+        """Move to the park pose."""
+        return self.move(self.park_pose())
+
+    def torque_off(self) -> None:
+        self.bus.sync_write(ct.TORQUE_ENABLE, dict.fromkeys(self.ids, 0))
+
+    def arm_transit_hold(
+        self, start_deg: Mapping[str, float], goal_deg: Mapping[str, float]
+    ) -> str | None:
+        """If moving the light and camera arms together would bring them closer than the safety
+        margin on the way (or across each other), the arm to hold still while the other moves
+        first; None when the simultaneous move is safe.
+
+        Both arms follow their trapezoidal profiles from the same start time; the predicted
+        separation is sampled along the move. Holding one arm makes the separation change
+        monotonically, so a two-phase move is safe whenever both end poses are.
+        """
+        lay = self.rig.layout
+        jl, jc = self.rig.joint(lay.light), self.rig.joint(lay.camera)
+        l0, l1 = start_deg[jl.name], goal_deg[jl.name]
+        c0, c1 = start_deg[jc.name], goal_deg[jc.name]
+        if l0 == l1 or c0 == c1:
+            return None
+        t_end = max(float(jl.move_time(l1 - l0)), float(jc.move_time(c1 - c0)))
+        ts = np.linspace(0.0, t_end, 65)
+
+        def path(j, a0, a1):
+            return np.array(
+                [
+                    a0
+                    + ct.trapezoid_position(
+                        a1 - a0, j.profile_velocity_deg_s, j.profile_acceleration_deg_s2, t
+                    )
+                    for t in ts
+                ]
+            )
+
+        order = 1.0 if l0 - c0 >= 0 else -1.0
+        d = order * (path(jl, l0, l1) - path(jc, c0, c1))
+        floor = min(self.rig.safety.min_light_camera_deg, order * (l0 - c0), order * (l1 - c1))
+        if float(np.min(d)) >= floor - 1e-6:
+            return None
+        # move first the arm whose move alone keeps the arms apart
+        if order * (l1 - c0) >= floor:
+            return jc.name
+        return jl.name
+
+    def _move_once(self, goals: dict[int, int], timeout_s, poll_s, split: bool = True):
+        a, n = ct.POLL_BLOCK
+        t0 = time.monotonic()
+        start = self.bus.sync_read(a, n, self.ids)
+        start_deg = {
+            self._by_id[i].name: self._by_id[i].from_ticks(_field(d, ct.PRESENT_POSITION))
+            for i, d in start.items()
+        }
+        goal_deg = {self._by_id[i].name: self._by_id[i].from_ticks(t) for i, t in goals.items()}
+        hold = self.arm_transit_hold(start_deg, goal_deg) if split else None
+        if hold is not None:
+            j = self.rig.joint(hold)
+            first = dict(goals)
+            first[j.id] = _field(start[j.id], ct.PRESENT_POSITION)
+            log.info("two-phase move: %s waits for the other arm", hold)
+            self.two_phase_moves += 1
+            self._move_once(first, None, poll_s, split=False)
+            reached, _, settle, polls = self._move_once(goals, timeout_s, poll_s, split=False)
+            t_end = time.monotonic()
+            return reached, t_end - t0 - settle, settle, polls
+        if timeout_s is None:
+            timeout_s = self.predicted_time(start_deg, goal_deg) + self.rig.bus.motion_timeout_s
+        if poll_s is None:
+            poll_s = self.rig.bus.poll_interval_ms / 1000.0
+        self.bus.sync_write(ct.GOAL_POSITION, goals)
+        self.last_goal_ticks = dict(goals)
+        t_sent = time.monotonic()
+        t_stopped: float | None = None
+        polls = 0
+        deadline = t_sent + timeout_s
+        while True:
+            data = self.bus.sync_read(a, n, self.ids)
+            polls += 1
+            if self.bus.alerts & set(self.ids):
+                faults = {}
+                for sid in sorted(self.bus.alerts & set(self.ids)):
+                    bits = self.bus.read(sid, ct.HARDWARE_ERROR_STATUS)
+                    faults[self._by_id[sid].name] = bits
+                if any(faults.values()):
+                    raise HardwareFault({k: v for k, v in faults.items() if v})
+            lost = {
+                sid: goals[sid]
+                for sid, d in data.items()
+                if _field(d, ct.GOAL_POSITION) != goals[sid]
+            }
+            if lost:
+                # the Sync Write (no reply by design) was lost or corrupted for these servos
+                self.bus.stats.resent_goals += 1
+                self.bus.sync_write(ct.GOAL_POSITION, lost)
+            else:
+                moving = any(_field(d, ct.MOVING) for d in data.values())
+                profile = any(_field(d, ct.MOVING_STATUS) & 0x02 for d in data.values())
+                if not profile and t_stopped is None:
+                    # motion = until every profile has ended; settle = from then until settled
+                    t_stopped = time.monotonic()
+                settled = not moving and all(
+                    abs(_field(d, ct.PRESENT_POSITION) - goals[sid])
+                    <= self._by_id[sid].tolerance_ticks
+                    for sid, d in data.items()
+                )
+                if settled:
+                    t_end = time.monotonic()
+                    reached = {
+                        self._by_id[sid].name: self._by_id[sid].from_ticks(
+                            _field(d, ct.PRESENT_POSITION)
+                        )
+                        for sid, d in data.items()
+                    }
+                    t_stop = t_stopped if t_stopped is not None else t_end
+                    return reached, t_stop - t0, t_end - t_stop, polls
+                if profile:
+                    t_stopped = None
+            if time.monotonic() > deadline:
+                far = [
+                    f"{self._by_id[sid].name} at tick {_field(d, ct.PRESENT_POSITION)}"
+                    f" (goal {goals[sid]})"
+                    for sid, d in data.items()
+                    if abs(_field(d, ct.PRESENT_POSITION) - goals[sid])
+                    > self._by_id[sid].tolerance_ticks
+                ]
+                raise DeviceError(
+                    f"move did not settle within {timeout_s:.2f} s: {', '.join(far) or 'moving'}"
+                )
+            if poll_s:
+                time.sleep(poll_s)
+
+
+def _field(block: bytes, reg: tuple[int, int]) -> int:
+    off = reg[0] - ct.POLL_BLOCK[0]
+    return int.from_bytes(block[off : off + reg[1]], "little", signed=reg[1] == 4)
