@@ -6,28 +6,36 @@
 
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
+from gonio.brdf.models.ashikhmin_shirley import AshikhminShirley
 from gonio.brdf.models.blinn_phong import BlinnPhong
 from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
+from gonio.brdf.models.htsg import HTSG
+from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
 from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
+from gonio.brdf.models.scaled import Scaled
 from gonio.brdf.models.specular import SpecularReflection, SpecularTransmission
 from gonio.brdf.models.torrance_sparrow import TorranceSparrow
 from gonio.brdf.models.ward import Ward
 
 __all__ = [
+    "HTSG",
+    "AshikhminShirley",
     "BRDFModel",
     "BRDFSample",
     "BlinnPhong",
     "Conductor",
     "Dielectric",
     "Fresnel",
+    "Lafortune",
     "Lambert",
     "NoFresnel",
     "Node",
     "OrenNayar",
     "Param",
     "Phong",
+    "Scaled",
     "Schlick",
     "SpecularReflection",
     "SpecularTransmission",

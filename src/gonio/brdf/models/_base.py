@@ -40,6 +40,10 @@ class Param:
     lower, upper : inclusive physical bounds; construction outside them raises ParameterError.
     unit : unit of the value, e.g. ``"1"`` (dimensionless), ``"rad"``.
     per_channel : whether the value may be an array of shape ``(C,)`` (one per channel).
+    per_lobe : whether the value is an array with one entry per lobe, shape ``(L,)`` (or
+        ``(L, C)`` when also ``per_channel``), for models with a variable number of lobes such
+        as Lafortune's; a scalar (or ``(C,)``) means a single lobe. Bounds apply elementwise.
+        Default False (backward compatible).
     scale : reparameterization a fitter should use: ``"linear"``, ``"log"`` (positive, spans
         decades, e.g. roughness) or ``"logit"`` (bounded on both sides, e.g. albedo).
     doc : one-line description.
@@ -53,6 +57,7 @@ class Param:
     per_channel: bool = False
     scale: Literal["linear", "log", "logit"] = "linear"
     doc: str = ""
+    per_lobe: bool = False
 
 
 class BRDFSample(NamedTuple):
@@ -130,7 +135,14 @@ class Node:
             arr = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
             raise ParameterError(f"{cls}: {p.name} must be a number, got {value!r}") from None
-        if arr.ndim > 1 or (arr.ndim == 1 and not p.per_channel):
+        if p.per_lobe:
+            if arr.ndim > 1 + int(p.per_channel):
+                shape = "a scalar, (L,) or (L, C)" if p.per_channel else "a scalar or (L,)"
+                raise ParameterError(
+                    f"{cls}: {p.name} must have one entry per lobe, shape {shape}, "
+                    f"got shape {arr.shape}"
+                )
+        elif arr.ndim > 1 or (arr.ndim == 1 and not p.per_channel):
             shape = "a scalar or one value per channel" if p.per_channel else "a scalar"
             raise ParameterError(f"{cls}: {p.name} must be {shape}, got shape {arr.shape}")
         if arr.size == 0:
@@ -147,7 +159,7 @@ class Node:
         return tuple(getattr(self, p.name) for p in self.PARAMS)
 
     def _own_channels(self) -> int:
-        sizes = {int(np.size(getattr(self, p.name))) for p in self.PARAMS if p.per_channel}
+        sizes = {_channel_size(p, getattr(self, p.name)) for p in self.PARAMS if p.per_channel}
         sizes.discard(1)
         if len(sizes) > 1:
             raise ParameterError(
@@ -258,6 +270,14 @@ class Node:
         parts += [f"{c}={getattr(self, c)!r}" for c in self.CHILDREN]
         parts += [f"{s}={getattr(self, s)!r}" for s in self.STATIC]
         return f"{type(self).__name__}({', '.join(parts)})"
+
+
+def _channel_size(p: Param, value: Any) -> int:
+    """Channel count implied by one per-channel parameter value (lobe axis excluded)."""
+    if p.per_lobe:
+        shape = np.shape(value)
+        return int(shape[-1]) if len(shape) == 2 else 1
+    return int(np.size(value))
 
 
 def _child_to_json(child: Any) -> Any:
