@@ -156,7 +156,7 @@ def bench_time_split(plan):
     with tempfile.TemporaryDirectory() as d:
         run = Path(d) / "run"
         t0 = time.perf_counter()
-        acquire(run, "sim", plan, progress=False, write_table=False)
+        acquire(run, "sim_sample", plan, progress=False, write_table=False)
         wall = time.perf_counter() - t0
         events = [json.loads(x) for x in (run / "log.jsonl").read_text().splitlines()]
     rows = [e for e in events if e["event"] == "sample"]

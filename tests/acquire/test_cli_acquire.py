@@ -65,12 +65,27 @@ def test_acquire_argument_errors(tmp_path, capsys):
 
 def test_acquire_tiny_run_text_output(tmp_path, capsys):
     assert (
-        main(["acquire", "--plan", "iso-tiny", "--out", str(tmp_path / "r"), "--no-progress"]) == 0
+        main(
+            [
+                "acquire",
+                "--rig",
+                "sim_sample",
+                "--plan",
+                "iso-tiny",
+                "--out",
+                str(tmp_path / "r"),
+                "--no-progress",
+            ]
+        )
+        == 0
     )
     out = capsys.readouterr().out
     assert "complete" in out
     # a second run into the same directory is refused
-    assert main(["acquire", "--plan", "iso-tiny", "--out", str(tmp_path / "r")]) == 2
+    assert (
+        main(["acquire", "--rig", "sim_sample", "--plan", "iso-tiny", "--out", str(tmp_path / "r")])
+        == 2
+    )
 
 
 def test_resume_of_a_corrupt_journal_is_one_line(tmp_path, capsys):

@@ -68,7 +68,7 @@ def reference(tmp_path_factory):
     """An uninterrupted, fault-free run of PLAN."""
     d = tmp_path_factory.mktemp("ref")
     (d / "plan.toml").write_text(PLAN)
-    s = acquire(d / "run", "sim", d / "plan.toml", progress=False)
+    s = acquire(d / "run", "sim_sample", d / "plan.toml", progress=False)
     assert s.complete
     return samples_of(d / "run")
 
@@ -92,7 +92,7 @@ def test_complete_run_measures_truth_within_noise(reference, tmp_path):
 
 def test_read_back_directions_match_targets(tmp_path, plan_file):
     run = tmp_path / "run"
-    acquire(run, "sim", plan_file, progress=False)
+    acquire(run, "sim_sample", plan_file, progress=False)
     j = Journal(run)
     cfg = {c.idx: c for c in j.configs()}
     for s in j.samples():
@@ -114,7 +114,7 @@ def test_read_back_directions_match_targets(tmp_path, plan_file):
 def test_faulty_bus_still_gives_every_sample_identically(reference, tmp_path, plan_file):
     ref, _ = reference
     faults = FaultConfig(drop=0.03, garble=0.03, crc=0.03, overload=0.01, seed=11)
-    s = acquire(tmp_path / "run", "sim", plan_file, progress=False, faults=faults)
+    s = acquire(tmp_path / "run", "sim_sample", plan_file, progress=False, faults=faults)
     assert s.complete and s.bus["retries"] > 0
     got, counts = samples_of(tmp_path / "run")
     assert set(got) == set(ref) and counts["done"] == len(ref)
@@ -130,10 +130,10 @@ def test_out_of_limit_plan_refused_before_any_motion(tmp_path):
     )
     run = tmp_path / "run"
     with pytest.raises(PlanError, match=r"before any motion.*too grazing"):
-        acquire(run, "sim", plan, progress=False, strict=True)
+        acquire(run, "sim_sample", plan, progress=False, strict=True)
     assert not run.exists()  # nothing created, the bus never opened
     # without --strict the pose is skipped, journaled with its reason, and never commanded
-    s = acquire(run, "sim", plan, progress=False)
+    s = acquire(run, "sim_sample", plan, progress=False)
     assert s.complete and s.refused == 1 and s.done == 1
     j = Journal(run)
     (ref,) = [c for c in j.configs() if c.status == "refused"]
@@ -192,7 +192,7 @@ def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int, extr
     first = True
     for n in points:
         cmd = (
-            _acquire_cmd("--rig", "sim", "--plan", plan_file, "--out", run, *extra)
+            _acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run, *extra)
             if first
             else (_acquire_cmd("--resume", run, *extra))
         )
@@ -231,7 +231,10 @@ def test_ctrl_c_parks_the_rig_then_resume_completes(reference, tmp_path, plan_fi
     ref, _ = reference
     run = tmp_path / "run"
     rc = _run_until(
-        _acquire_cmd("--rig", "sim", "--plan", plan_file, "--out", run), run, 5, signal.SIGINT
+        _acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run),
+        run,
+        5,
+        signal.SIGINT,
     )
     assert rc == 130
     events = [json.loads(x) for x in (run / "log.jsonl").read_text().splitlines()]
@@ -257,7 +260,7 @@ def test_servo_silent_briefly_is_ridden_out(reference, tmp_path, plan_file):
         if n == 4:
             ses.emulator.kill(2, 0.05)  # silent for 50 ms: retries with backoff cover it
 
-    s = acquire(tmp_path / "run", "sim", plan_file, progress=False, on_sample=hook)
+    s = acquire(tmp_path / "run", "sim_sample", plan_file, progress=False, on_sample=hook)
     assert s.complete and s.done == len(ref) and s.bus["timeouts"] > 0
 
 
@@ -272,7 +275,7 @@ def test_dead_servo_stops_run_cleanly_and_resume_finishes(reference, tmp_path, p
 
     run = tmp_path / "run"
     with pytest.raises(DeviceError, match=r"servo 3 gave no valid reply"):
-        acquire(run, "sim", plan_file, progress=False, on_sample=hook)
+        acquire(run, "sim_sample", plan_file, progress=False, on_sample=hook)
     got, counts = samples_of(run)
     assert counts["done"] == 6
     events = [json.loads(x)["event"] for x in (run / "log.jsonl").read_text().splitlines()]
@@ -288,7 +291,7 @@ def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file, capsys)
     from gonio import io as gio
 
     run = tmp_path / "run"
-    s = acquire(run, "sim", plan_file, progress=False)
+    s = acquire(run, "sim_sample", plan_file, progress=False)
     assert s.table == str(run / "table.brdf.h5")
     t = gio.load(run / "table.brdf.h5")
     assert t.wi.shape == (s.done, 3)
@@ -317,7 +320,7 @@ def test_adaptive_plan_refines_around_the_measured_specular_peak(tmp_path):
         "[refine]\nwindow_deg = 4.0\nstep_deg = 2.0\n"
     )
     run = tmp_path / "run"
-    s = acquire(run, "sim", plan, progress=False)
+    s = acquire(run, "sim_sample", plan, progress=False)
     assert s.complete
     j = Journal(run)
     coarse = j.samples(stage=0)

@@ -14,7 +14,9 @@ _PLAN_HELP = (
     "built-in plan name ({names}) or path to a plan TOML file. Plan files: kind = 'grid4d' |"
     " 'isotropic' | 'halfdiff' | 'adaptive'; angle keys in degrees as a list or"
     " {{start, stop, step}} (inclusive): grid4d needs theta_i_deg, phi_i_deg, theta_o_deg,"
-    " phi_o_deg; isotropic and adaptive need theta_i_deg, theta_o_deg, dphi_deg (adaptive adds"
+    " phi_o_deg; isotropic and adaptive need theta_i_deg, theta_o_deg, dphi_deg (isotropic may"
+    " add reciprocal = true to also measure every pair swapped, a reciprocity check; adaptive"
+    " adds"
     " [refine] window_deg, step_deg, peak_ratio); halfdiff needs theta_h_deg, theta_d_deg,"
     " phi_d_deg"
 )
@@ -94,6 +96,15 @@ def register(sub) -> None:
         help=(
             "refuse the whole plan before any motion if any pose is refused (default: skip"
             " refused poses, journal and log them with the reason)"
+        ),
+    )
+    a.add_argument(
+        "--no-exposure-planning",
+        action="store_true",
+        help=(
+            "RAW cameras: use the rig file's fixed brackets (camera.fixed_brackets x"
+            " camera.exposure_s) for every configuration instead of planning each one's"
+            " exposures from the previous frame"
         ),
     )
     a.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -191,6 +202,7 @@ def _acquire(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             time_scale=args.time_scale,
             strict=args.strict,
+            exposure_planning=False if args.no_exposure_planning else None,
         )
     out = {
         "run": summary.run_dir,

@@ -285,6 +285,7 @@ def acquire(
     on_sample: Callable[[int, object], None] | None = None,
     write_table: bool = True,
     strict: bool = False,
+    exposure_planning: bool | None = None,
 ) -> RunSummary:
     """Run (or resume) an acquisition; see the module docstring.
 
@@ -301,8 +302,10 @@ def acquire(
     on_sample : called as ``on_sample(n, session)`` after each sample, with the number measured
         so far in this process and the open :class:`gonio.rigs.session.RigSession` (tests use
         it to inject faults into the emulator mid-run).
+    exposure_planning : RAW cameras only: plan each configuration's exposures from the previous
+        frame (default: the rig file's ``camera.planning``, true) or use fixed brackets.
     """
-    from gonio.rigs.devices import open_camera
+    from gonio.acquire.imaging import open_run_camera
     from gonio.rigs.session import open_rig
 
     t_start = time.monotonic()
@@ -320,6 +323,10 @@ def acquire(
             _refuse_if_any(first)
         journal = _start_new(run_dir, rig_cfg, spec)
         journal.set_meta({"strict": "1" if strict else "0"})
+        if exposure_planning is not None:  # a resumed run keeps the choice
+            journal.set_meta({"exposure_planning": "1" if exposure_planning else "0"})
+    if resume and exposure_planning is None and journal.get_meta("exposure_planning") is not None:
+        exposure_planning = journal.get_meta("exposure_planning") == "1"
     log = RunLog(run_dir / "log.jsonl")
     log("resume" if resume else "start", rig=rig_cfg.name, plan=plan_obj.name, pid=os.getpid())
     stop = _StopFlag()
@@ -330,7 +337,7 @@ def acquire(
     try:
         with open_rig(rig_cfg, faults=faults, goal_log_path=goal_log, time_scale=time_scale) as ses:
             chain = ses.chain
-            camera = open_camera(rig_cfg)
+            camera = open_run_camera(rig_cfg, run_dir, exposure_planning)
             bar = _Progress(progress)
             with bar:
                 start_deg = dict(rig_cfg.park_deg)
@@ -381,6 +388,8 @@ def acquire(
                 chain.park()
                 log("parked", pose=rig_cfg.park_deg)
             bus = dict(vars(chain.bus.stats))
+            if hasattr(camera, "close"):
+                camera.close()
     except BaseException as exc:
         if isinstance(exc, DeviceError):
             log("device_error", message=str(exc))
@@ -430,8 +439,11 @@ def _refuse_if_any(sp: StagePlan) -> None:
 
 
 def camera_channels(rig: RigConfig) -> tuple[str, ...]:
+    from gonio.acquire.imaging import RAW_KINDS
     from gonio.rigs.devices import open_camera
 
+    if rig.camera.get("kind", "sim") in RAW_KINDS:
+        return ("R", "G", "B")
     return tuple(open_camera(rig).channels)
 
 
@@ -452,6 +464,11 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
     )
     cap = camera.capture(geom)
     t2 = time.monotonic()
+    # imaging cameras measure the directions from the holder pose and the light position
+    wi = np.asarray(cap.meta.get("wi", wi), dtype=float)
+    wo = np.asarray(cap.meta.get("wo", wo), dtype=float)
+    keys = ("t_exposure", "t_camera", "t_processing", "t_camera_cpu", "t_processing_cpu")
+    extra = {k: cap.meta[k] for k in keys if k in cap.meta}
     timings = {"motion": res.motion_s, "settle": res.settle_s, "capture": t2 - t1}
     tb = time.monotonic()
     timings["book"] = tb - t2
@@ -466,38 +483,20 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
         polls=res.polls,
         move_wall_s=t1 - t0,
         **{f"t_{k}": v for k, v in timings.items()},
+        **extra,
     )
 
 
 def write_run_table(journal: Journal, rig: RigConfig, channels) -> tuple[str | None, str]:
-    """Write ``RUN/table.brdf.h5`` through gonio.io; returns (path or None, note)."""
-    try:
-        from gonio import io as gio
-        from gonio.brdf.tabulated import Channels, MeasuredSamples
-    except ImportError as exc:
-        return None, f"table not written: gonio.io / MeasuredSamples not available ({exc})"
-    if not hasattr(gio, "save"):
-        return None, "table not written: gonio.io.save not available"
-    rows = journal.samples()
-    if not rows:
-        return None, "table not written: no samples"
-    wi = np.array([r.wi for r in rows])
-    wo = np.array([r.wo for r in rows])
-    val = np.array([r.value for r in rows])
-    sig = np.array([r.sigma for r in rows])
-    ch = Channels.rgb() if tuple(channels) == ("R", "G", "B") else Channels.mono()
-    samples = MeasuredSamples(
-        wi=wi,
-        wo=wo,
-        values=val,
-        sigma=sig,
-        channels=ch,
-        weights=None,
-        meta={"source": "gonio acquire", "rig": rig.name, "run": str(journal.run_dir)},
-    )
-    path = journal.run_dir / "table.brdf.h5"
-    gio.save(samples, path)
-    return str(path), f"{len(rows)} samples"
+    """Write ``RUN/table.brdf.h5`` through gonio.io; returns (path or None, note).
+
+    The scattered samples sit at the root, the gridded half/diff table resampled from them in
+    ``/gridded``; reciprocal pairs of the plan are compared (see :mod:`gonio.acquire.table`).
+    """
+    from gonio.acquire.table import write_run_tables
+
+    path, note, _ = write_run_tables(journal, rig, channels)
+    return path, note
 
 
 class _Progress:

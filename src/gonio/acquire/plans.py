@@ -28,6 +28,7 @@ Plan files (TOML)
     theta_i_deg = [10, 30, 50]                      # a list ...
     theta_o_deg = { start = 0, stop = 70, step = 10 }   # ... or an inclusive range
     dphi_deg = { start = 0, stop = 180, step = 30 }
+    reciprocal = false       # isotropic: also measure (theta_o, theta_i) to check reciprocity
     # grid4d: theta_i_deg, phi_i_deg, theta_o_deg, phi_o_deg
     # halfdiff: theta_h_deg, theta_d_deg, phi_d_deg
     # adaptive: the isotropic keys for the coarse pass, plus
@@ -137,11 +138,13 @@ class Isotropic3D(Plan):
     kind = "isotropic"
     isotropic = True
 
-    def __init__(self, theta_i, theta_o, dphi, name: str = "") -> None:
+    def __init__(self, theta_i, theta_o, dphi, name: str = "", reciprocal: bool = False) -> None:
         super().__init__(name)
         self.theta_i = np.asarray(theta_i, dtype=float)
         self.theta_o = np.asarray(theta_o, dtype=float)
         self.dphi = np.asarray(dphi, dtype=float)
+        # also measure the swapped pair (theta_o, theta_i) to check reciprocity
+        self.reciprocal = bool(reciprocal)
 
     def stage(self, k: int = 0, results: Sequence[Result] = ()) -> Iterator[Target]:
         seen = set()
@@ -157,6 +160,8 @@ class Isotropic3D(Plan):
                 continue
             seen.add(key)
             yield Target(_dir(ti, 0.0), _dir(to, dp), True, k)
+            if self.reciprocal and to - ti > 1e-9:
+                yield Target(_dir(to, 0.0), _dir(ti, dp), True, k)
 
 
 class HalfDiff(Plan):
@@ -283,6 +288,14 @@ BUILTIN: dict[str, dict] = {
         "theta_o_deg": [20, 50],
         "dphi_deg": [90, 180],
     },
+    "iso-reciprocal": {
+        # small, and with every theta_i != theta_o pair also measured swapped (reciprocity check)
+        "kind": "isotropic",
+        "theta_i_deg": [20, 45],
+        "theta_o_deg": [20, 45, 60],
+        "dphi_deg": [90, 180],
+        "reciprocal": True,
+    },
     "iso-small": {
         "kind": "isotropic",
         "theta_i_deg": {"start": 10, "stop": 70, "step": 20},
@@ -332,6 +345,9 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if kind not in _KEYS:
         raise PlanError(f"plan key kind: {kind!r} is not one of {sorted(_KEYS)}")
     allowed = {"kind", "name", *_KEYS[kind]} | ({"refine"} if kind == "adaptive" else set())
+    allowed |= {"reciprocal"} if kind == "isotropic" else set()
+    if not isinstance(spec.get("reciprocal", False), bool):
+        raise PlanError("plan key reciprocal: must be true or false")
     extra = sorted(set(spec) - allowed)
     if extra:
         raise PlanError(f"plan key {extra[0]}: unknown for kind {kind!r}")
@@ -348,7 +364,7 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if kind == "grid4d":
         return Grid4D(*axes, name=name)
     if kind == "isotropic":
-        return Isotropic3D(*axes, name=name)
+        return Isotropic3D(*axes, name=name, reciprocal=spec.get("reciprocal", False))
     if kind == "halfdiff":
         return HalfDiff(*axes, name=name)
     ref = spec.get("refine", {})

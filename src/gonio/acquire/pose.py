@@ -70,15 +70,36 @@ def mosaic_to_gray(rate: np.ndarray, cfa: str = "RGGB") -> np.ndarray:
     return cv2.cvtColor(img16, codes[cfa]).astype(np.float32) * (scale / 65535)
 
 
+def opencv_camera_matrix(camera_matrix: np.ndarray) -> np.ndarray:
+    """K in OpenCV's pixel convention from K in gonio's.
+
+    gonio's intrinsics (:class:`gonio.rigs.sim.camera.PinholeCamera`, and the pixel rays of
+    :mod:`gonio.acquire.radiometry`) put pixel ``i`` on ``[i, i + 1)``, its centre at ``i + 0.5``;
+    OpenCV's detectors report coordinates with pixel centres at integers. Feeding PnP the
+    unshifted K biases every corner by half a pixel, which tilts and shifts the recovered pose.
+    """
+    k = np.array(camera_matrix, dtype=np.float64, copy=True)
+    k[0, 2] -= 0.5
+    k[1, 2] -= 0.5
+    return k
+
+
 def estimate_pose(
     gray8: np.ndarray, layout: Any, camera_matrix: np.ndarray, min_corners: int = 6
 ) -> BoardPose:
     """Detect the board in an 8-bit grey image and solve for the holder pose.
 
+    ``camera_matrix`` is K in gonio's pixel convention (pixel ``i`` spans ``[i, i + 1)``, as in
+    :class:`gonio.rigs.sim.camera.PinholeCamera` and :mod:`gonio.acquire.radiometry`); it is
+    shifted to OpenCV's (:func:`opencv_camera_matrix`) for detection and PnP, so the pose is
+    consistent with gonio's pixel rays.
+
     Raises DeviceError when fewer than ``min_corners`` corners are found (a camera problem
     that retrying the frame may fix, not bad user input).
     """
     import cv2
+
+    camera_matrix = opencv_camera_matrix(camera_matrix)
 
     detector = cv2.aruco.CharucoDetector(layout.board)
     corners, ids, _, _ = detector.detectBoard(gray8)

@@ -81,6 +81,8 @@ def measure_brdf(
     frame_fraction: np.ndarray | None = None,
     log_time_cov: np.ndarray | None = None,
     pose_sigma_points: list[tuple[np.ndarray, np.ndarray]] | None = None,
+    fit_order: int = 1,
+    direction_uncertainty: bool = False,
 ) -> RegionMeasurement:
     """Measure the sample's BRDF in one merged frame.
 
@@ -110,6 +112,17 @@ def measure_brdf(
         (covariance ``C_xy`` on the holder), and the spot's own spatial gradient of the signal
         ``g`` (from the plane fit) turns that into ``var(S) += g^T C_xy g``. On a steep specular
         lobe this dominates the sensor noise; on a diffuse sample it vanishes.
+    direction_uncertainty : with ``pose_sigma_points``, also propagate the uncertainty of the
+        reported outgoing direction (the camera position from the pose) into sigma, so that
+        sigma describes f *at the reported directions*: each sigma point's change of ``wo``
+        times the lobe's directional slope. The slope is estimated from the spot's spatial
+        gradient ``g``: moving on the holder by ``dp`` turns ``wi`` and ``wo`` by
+        ``-P_i dp / D_l`` and ``-P_o dp / D_c`` (``P`` projectors, ``D`` distances), so for a
+        lobe that varies with ``wi + wo`` (microfacet, Phong-like) ``g = -s M`` with
+        ``M = P_o / D_c + P_i / D_l``; ``s`` is taken as the minimum-norm solution.
+    fit_order : 1 fits a plane through the spot's pixels, 2 a quadratic surface, whose
+        intercept is free of the lobe's curvature averaged over the spot (a bias growing with
+        the spot's area on sharp lobes); it needs more pixels per colour plane (>= 12).
     """
     h, w = rate.shape
     pts, hit = pixel_rays_to_plane((h, w), camera_matrix, rotation, translation)
@@ -142,6 +155,9 @@ def measure_brdf(
             camera_matrix, rotation, translation, pose_sigma_points, sample_center
         )
     in_r = region(reference_center, 0.8 * reference_radius)
+    dir_jac = None
+    if pose_sigma_points and direction_uncertainty:
+        dir_jac = _direction_jacobian(cam_pos, light_pos, sample_center, pose_sigma_points)
     f = np.zeros(3)
     sig = np.zeros(3)
     n_px = np.zeros(3, dtype=np.int64)
@@ -152,9 +168,15 @@ def measure_brdf(
             raise DeviceError(
                 f"sample or reference not visible in the frame (plane {c}: {ns} / {nr} pixels)"
             )
-        S, vS, grad = _value_at_centre(norm_rate[ms], norm_var[ms], pts[ms], sample_center)
+        S, vS, grad = _value_at_centre(
+            norm_rate[ms], norm_var[ms], pts[ms], sample_center, fit_order
+        )
         if spot_cov is not None:
             vS += float(grad @ spot_cov @ grad)
+        if dir_jac is not None:
+            m_mat, dwo = dir_jac
+            slope = np.linalg.pinv(m_mat.T) @ grad  # (3,): dS per unit change of wi + wo
+            vS += float(np.mean((dwo @ slope) ** 2))  # unscented, as in _spot_covariance
         R, vR = norm_rate[mr].mean(), norm_var[mr].sum() / nr**2
         if not R > 0:
             raise DeviceError("white reference gives no signal: is the light on?")
@@ -172,21 +194,54 @@ def measure_brdf(
 
 
 def _value_at_centre(
-    values: np.ndarray, variances: np.ndarray, points: np.ndarray, centre: tuple[float, float]
+    values: np.ndarray,
+    variances: np.ndarray,
+    points: np.ndarray,
+    centre: tuple[float, float],
+    order: int = 1,
 ) -> tuple[float, float, np.ndarray]:
-    """Weighted least-squares plane ``a + b dx + c dy`` through pixel values.
+    """Weighted least-squares plane ``a + b dx + c dy`` (``order`` 2: plus ``dx^2, dx dy,
+    dy^2``) through pixel values.
 
-    Returns ``(a, var(a), (b, c))``; falls back to the weighted mean with a zero gradient when
-    the pixels cannot support a plane (fewer than 6).
+    Returns ``(a, var(a), (b, c))``; falls back to a plane below 12 pixels and to the weighted
+    mean with a zero gradient below 6.
     """
     w = 1.0 / np.maximum(variances, 1e-300)
     if values.size < 6:
         return float(np.sum(w * values) / np.sum(w)), float(1.0 / np.sum(w)), np.zeros(2)
-    X = np.stack([np.ones_like(values), points[:, 0] - centre[0], points[:, 1] - centre[1]], -1)
+    dx, dy = points[:, 0] - centre[0], points[:, 1] - centre[1]
+    cols = [np.ones_like(values), dx, dy]
+    if order >= 2 and values.size >= 12:
+        cols += [dx * dx, dx * dy, dy * dy]
+    X = np.stack(cols, -1)
     A = X.T @ (w[:, None] * X)
     coef = np.linalg.solve(A, X.T @ (w * values))
     cov = np.linalg.inv(A)
-    return float(coef[0]), float(cov[0, 0]), coef[1:]
+    return float(coef[0]), float(cov[0, 0]), coef[1:3]
+
+
+def _direction_jacobian(
+    cam_pos: np.ndarray,
+    light_pos: np.ndarray,
+    centre: tuple[float, float],
+    sigma_points: list[tuple[np.ndarray, np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray]:
+    """``M`` (3, 2): change of ``wi + wo`` per metre moved on the holder (x, y), and the change
+    of the reported ``wo`` at each pose sigma point (K, 3)."""
+    p = np.array([centre[0], centre[1], 0.0])
+    out = []
+    for pos in (cam_pos, light_pos):
+        d = pos - p
+        dist = float(np.linalg.norm(d))
+        w = d / dist
+        out.append((np.eye(3) - np.outer(w, w)) / dist)
+    m_mat = -(out[0] + out[1])[:, :2]
+    wo = (cam_pos - p) / np.linalg.norm(cam_pos - p)
+    dwo = []
+    for R, t in sigma_points:
+        c = -R.T @ t
+        dwo.append((c - p) / np.linalg.norm(c - p) - wo)
+    return m_mat, np.asarray(dwo)
 
 
 def _spot_covariance(

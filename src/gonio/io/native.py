@@ -233,6 +233,7 @@ def write_native(
     lossy: float | None = None,
     level: int = DEFAULT_GZIP_LEVEL,
     _hook: Any = None,
+    groups: dict[str, Any] | None = None,
 ) -> dict:
     """Write a :class:`TabulatedBRDF` or :class:`MeasuredSamples` as ``*.brdf.h5``, atomically.
 
@@ -249,6 +250,11 @@ def write_native(
     _hook : callable(stage), optional
         Test hook called with "attrs" and "values" while the file is being written (the tests
         raise from it to prove that a crash leaves no file behind).
+    groups : dict, optional
+        More tables stored in the same file, each in a group ``/<name>`` laid out exactly like a
+        file root (attributes, ``channels``, ``values``...), e.g. a run's scattered samples at the
+        root and the gridded table resampled from them in ``/gridded``. Read them with
+        ``read_native(path, group=name)``; readers that ignore groups see the root object.
 
     Returns
     -------
@@ -278,6 +284,16 @@ def write_native(
             report = _write_gridded(h5, obj, path, lossy, level, _hook)
         else:
             _write_scattered(h5, obj, path, level)
+        for name, extra in (groups or {}).items():
+            if name in h5 or not name.isidentifier():
+                raise ParameterError(f"bad or reserved group name {name!r}")
+            g = h5.create_group(name)
+            _common_attrs(g, "gridded" if hasattr(extra, "axes") else "scattered", extra.meta)
+            _write_channels(g, extra.channels)
+            if hasattr(extra, "axes"):
+                _write_gridded(g, extra, path, None, level, None)
+            else:
+                _write_scattered(g, extra, path, level)
     return report
 
 
@@ -624,15 +640,24 @@ def read_values(
         h5.close()
 
 
-def read_native(path: PathLike) -> Any:
-    """Read a ``*.brdf.h5`` file as :class:`TabulatedBRDF` (gridded) or :class:`MeasuredSamples`."""
+def read_native(path: PathLike, group: str | None = None) -> Any:
+    """Read a ``*.brdf.h5`` file as :class:`TabulatedBRDF` (gridded) or :class:`MeasuredSamples`.
+
+    ``group`` reads a table stored in a group of the file (see ``write_native(groups=...)``)
+    instead of the root one.
+    """
     from gonio.errors import GonioError
 
     h5 = _open(path)
     try:
         with _Guard(path):
-            header = _header(h5, path)
-            arrays = _read_arrays(h5, header, path)
+            root = h5
+            if group is not None:
+                if group not in h5 or not isinstance(h5[group], type(h5["channels"])):
+                    raise fail(path, f"no table group /{group}")
+                root = h5[group]
+            header = _header(root, path)
+            arrays = _read_arrays(root, header, path)
     finally:
         h5.close()
     try:

@@ -123,16 +123,66 @@ SPEC: dict = {
     },
     "camera": {
         "__doc__": "The camera.",
-        "kind": _str("Camera backend: 'sim' (simulated sample measurement).", enum=["sim"]),
-        "exposure_s": _num("Default exposure (s).", exclusiveMinimum=0),
+        "kind": _str(
+            "Camera backend: 'sim' (virtual camera writing DNG files: the imaging pipeline),"
+            " 'sim-sample' (a direct BRDF reading of the simulated sample without images: fast"
+            " motion and bookkeeping tests), 'gphoto2' (a tethered camera via a command-line"
+            " program), 'folder' (raw files dropped into a folder by the camera's own software).",
+            enum=["sim", "sim-sample", "gphoto2", "folder"],
+        ),
+        "exposure_s": _num("Default (first probe) exposure (s).", exclusiveMinimum=0),
         "capture_time_s": _num("Simulated capture duration (s, wall clock).", minimum=0),
+        # --- imaging (RAW backends) ---
+        "width": _int("Image width (pixels).", minimum=16, maximum=20000),
+        "height": _int("Image height (pixels).", minimum=16, maximum=20000),
+        "focal_px": _num("Focal length (pixels; pinhole, no distortion).", exclusiveMinimum=0),
+        "supersample": _int("Simulated camera: rays per pixel along each axis.", minimum=1),
+        "t_min_s": _num("Shortest exposure the camera takes (s).", exclusiveMinimum=0),
+        "t_max_s": _num("Longest exposure the camera takes (s).", exclusiveMinimum=0),
+        "snr_target": _num("SNR every sample/reference pixel reaches in some bracket.", minimum=1),
+        "headroom": _num(
+            "Fraction of the full well the brightest pixel may fill.", exclusiveMinimum=0, maximum=1
+        ),
+        "planning": _bool("Plan exposures from the previous frame (false: fixed brackets)."),
+        "fixed_brackets": {
+            "type": "array",
+            "minItems": 1,
+            "items": {"type": "number", "exclusiveMinimum": 0},
+            "description": "Exposures relative to exposure_s when planning is off.",
+        },
+        "spot_radius_m": _num("Radius of the measured spot on the sample (m).", exclusiveMinimum=0),
+        "sensor": {
+            "__doc__": "Sensor noise model (EMVA 1288), also used for merge weights.",
+            "gain": _num("Conversion gain (DN per electron).", exclusiveMinimum=0),
+            "read_noise": _num("Read noise (electrons RMS).", minimum=0),
+            "dark_current": _num("Dark current (electrons/s).", minimum=0),
+            "full_well": _num("Full-well capacity (electrons).", exclusiveMinimum=0),
+            "black_level": _int("Black level (DN).", minimum=0),
+            "bits": _int("ADC bits.", minimum=8, maximum=16),
+            "cfa": _str("Bayer tile, row-major.", enum=["RGGB", "BGGR", "GRBG", "GBRG"]),
+            "shutter_error": _num("Simulated: relative exposure-time error (1 sigma).", minimum=0),
+        },
+        "program": _str("gphoto2: the program to run (name on PATH or path)."),
+        "port": _str("gphoto2: --port of the camera (e.g. usb:001,004)."),
+        "shutter_key": _str("gphoto2: config key of the shutter speed."),
+        "timeout_s": _num("gphoto2/folder: longest wait for a frame (s).", exclusiveMinimum=0),
+        "folder": _str("folder: directory the camera software writes raw files into."),
+        "pattern": _str("folder: glob of the raw files (e.g. *.dng, *.CR2)."),
     },
     "light": {
         "__doc__": "The light source.",
-        "kind": _str("Light backend: 'sim'.", enum=["sim"]),
+        "kind": _str(
+            "Light backend: 'sim', or 'serial' (LED driver speaking gonio's line protocol,"
+            " see gonio.rigs.lights).",
+            enum=["sim", "serial"],
+        ),
         "irradiance_w_m2": _num(
             "Irradiance on a surface facing the light (W/m^2).", exclusiveMinimum=0
         ),
+        "intensity": _num("Relative output when on, 0..1.", minimum=0, maximum=1),
+        "port": _str("serial: device path or pyserial URL."),
+        "baudrate": _int("serial: baud rate.", minimum=300),
+        "timeout_s": _num("serial: reply timeout (s).", exclusiveMinimum=0),
     },
     "park": {
         "__doc__": "Park pose: joint name -> angle (deg). Joints not named keep their angle.",

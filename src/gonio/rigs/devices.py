@@ -59,12 +59,23 @@ class Camera(Protocol):
 
 
 def open_camera(rig) -> Camera:
-    """The camera backend named by the rig file's ``[camera] kind`` (default ``"sim"``)."""
+    """The non-imaging camera backend of the rig file's ``[camera] kind`` (``"sim-sample"``).
+
+    RAW cameras (``"sim"``, ``"gphoto2"``, ``"folder"``) are opened by
+    :func:`gonio.acquire.imaging.open_imaging_camera`.
+    """
     from gonio.errors import RigConfigError
 
     kind = rig.camera.get("kind", "sim")
-    if kind == "sim":
+    if kind == "sim-sample":
         from gonio.rigs.sim.sample import SimulatedSampleCamera
 
         return SimulatedSampleCamera(rig)
+    if kind in ("sim", "gphoto2", "folder"):
+        # RAW cameras measure through the imaging pipeline (gonio.acquire.imaging), which needs
+        # a run directory for its files; the run engine opens them there.
+        raise RigConfigError(
+            f"{rig.source}: camera.kind {kind!r} is a RAW camera: open it with"
+            " gonio.acquire.imaging.open_imaging_camera"
+        )
     raise RigConfigError(f"{rig.source}: camera.kind {kind!r} has no backend")

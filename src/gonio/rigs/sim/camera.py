@@ -190,7 +190,13 @@ class VirtualCamera:
         L += np.where(in_board[..., None], (board_albedo / np.pi)[..., None] * irradiance, 0.0)
         L += np.where(in_ref[..., None], lay.reference_albedo / np.pi * irradiance, 0.0)
         if in_sample.any():
-            f = np.asarray(self.truth.f(wi[in_sample], wo[in_sample]), dtype=np.float64)
+            # Pad to a power of two: JAX models compile once per input shape, and the number of
+            # sample pixels changes with every geometry.
+            a, b = wi[in_sample], wo[in_sample]
+            n = len(a)
+            pad = np.tile([0.0, 0.0, 1.0], ((1 << (n - 1).bit_length()) - n, 1))
+            a, b = np.concatenate([a, pad]), np.concatenate([b, pad])
+            f = np.asarray(self.truth.f(a, b), dtype=np.float64)[:n]
             if f.shape[-1] == 1:
                 f = np.repeat(f, 3, axis=-1)
             L[in_sample] = f * irradiance[in_sample]
