@@ -21,13 +21,13 @@ import random
 import select
 import threading
 import time
-import tty
 from dataclasses import dataclass
 from pathlib import Path
 
 from gonio.errors import ParameterError
 from gonio.rigs import control_table as ct
 from gonio.rigs import protocol as p
+from gonio.rigs.sim.pty_device import PtyDevice
 
 
 @dataclass(frozen=True)
@@ -223,7 +223,7 @@ def _default_table(spec: ServoSpec) -> bytearray:
     return t
 
 
-class ServoChainEmulator:
+class ServoChainEmulator(PtyDevice):
     """Emulated Dynamixel X-series chain on a pseudo-terminal.
 
     Parameters
@@ -246,6 +246,8 @@ class ServoChainEmulator:
     driver opens.
     """
 
+    thread_name = "dxl-emulator"
+
     def __init__(
         self,
         servos,
@@ -257,6 +259,7 @@ class ServoChainEmulator:
     ) -> None:
         if time_scale <= 0:
             raise ValueError("time_scale must be > 0")
+        super().__init__()
         self.faults = faults or FaultConfig()
         self.time_scale = float(time_scale)
         self._t0 = time.monotonic()
@@ -280,48 +283,11 @@ class ServoChainEmulator:
         self.packets_in = 0
         self.crc_errors_seen = 0
         self._goal_log_path = Path(goal_log_path) if goal_log_path else None
-        self._master = -1
-        self._slave = -1
-        self.port = ""
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
 
     # --- lifecycle ---------------------------------------------------------------------------
     def now(self) -> float:
         """Simulated time in seconds since the emulator was created."""
         return (time.monotonic() - self._t0) * self.time_scale
-
-    def start(self) -> str:
-        """Open the pty, start answering, and return the slave path for the driver."""
-        self._master, self._slave = os.openpty()
-        # Raw mode: no echo, no newline translation; pyserial sets it again when it opens.
-        tty.setraw(self._slave)
-        self.port = os.ttyname(self._slave)
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name="dxl-emulator", daemon=True)
-        self._thread.start()
-        return self.port
-
-    def stop(self) -> None:
-        """Stop the thread and close the pty."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-        for fd in (self._master, self._slave):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self._master = self._slave = -1
-
-    def __enter__(self) -> ServoChainEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
     # --- fault and state control (thread-safe) -----------------------------------------------
     def kill(self, servo_id: int, duration_s: float = float("inf")) -> None:

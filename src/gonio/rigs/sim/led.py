@@ -10,15 +10,14 @@ from __future__ import annotations
 
 import os
 import select
-import threading
-import tty
 
 from gonio.rigs.lights import LEVEL_MAX
+from gonio.rigs.sim.pty_device import PtyDevice
 
 VERSION = "1.0"
 
 
-class LEDDriverEmulator:
+class LEDDriverEmulator(PtyDevice):
     """An Arduino-style LED driver answering ``ID?``, ``L <n>`` and ``L?``.
 
     Parameters
@@ -26,44 +25,13 @@ class LEDDriverEmulator:
     silent : never answer (to test the driver's timeout).
     """
 
+    thread_name = "led-emulator"
+
     def __init__(self, silent: bool = False) -> None:
+        super().__init__()
         self.level = 0
         self.silent = silent
         self.received: list[bytes] = []
-        self.port = ""
-        self._master = self._slave = -1
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    def start(self) -> str:
-        """Open the pty, start answering, return the slave path."""
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self.port = os.ttyname(self._slave)
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name="led-emulator", daemon=True)
-        self._thread.start()
-        return self.port
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-        for fd in (self._master, self._slave):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self._master = self._slave = -1
-
-    def __enter__(self) -> LEDDriverEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
     def reply_to(self, line: bytes) -> bytes:
         """The firmware's answer to one command line (without its newline)."""
