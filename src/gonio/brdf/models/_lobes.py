@@ -12,8 +12,9 @@ from collections.abc import Sequence
 
 import jax.numpy as jnp
 
+from gonio.brdf import warp
 from gonio.brdf.frames import safe_sqrt
-from gonio.brdf.models._base import choose_lobe
+from gonio.brdf.models._base import choose_lobe, mixture_sample
 
 Array = jnp.ndarray
 
@@ -59,3 +60,25 @@ def frame_about(axis: Array) -> tuple[Array, Array]:
 def lobe_probabilities(shape: tuple[int, ...], dtype, weights: Sequence[Array]) -> list[Array]:
     """Selection probabilities exactly as :func:`mixture_sample` computes them."""
     return choose_lobe(jnp.zeros(shape, dtype), weights)[2]
+
+
+def _cosine(wo: Array, u: Array) -> Array:
+    return warp.square_to_cosine_hemisphere(u)
+
+
+class DiffusePlusLobe:
+    """Sampling shared by the models ``rho_d / pi + one specular lobe`` (Phong, Blinn-Phong, Ward).
+
+    A model mixes this in before :class:`~gonio.brdf.models._base.BRDFModel` and provides
+    ``_weights(wo) -> (w_diffuse, w_lobe)`` (albedo estimates of the two parts) and
+    ``_sample_lobe(wo, u) -> wi``; cosine sampling and the lobe's sampler are then mixed in
+    proportion to the weights, and the model's ``_pdf`` must be the matching mixture.
+    """
+
+    def _sample(self, wo: Array, u: Array) -> Array:
+        wi, _ = mixture_sample(wo, u, self._weights(wo), [_cosine, self._sample_lobe])
+        return wi
+
+    def sampling_weight(self, wo: Array) -> Array:
+        w = self._weights(wo)
+        return jnp.broadcast_to(w[0] + w[1], wo.shape[:-1])

@@ -6,8 +6,13 @@ import jax.numpy as jnp
 
 from gonio.brdf import warp
 from gonio.brdf.frames import dot, safe_div, safe_sqrt
-from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
-from gonio.brdf.models._lobes import lobe_probabilities, pow_one_minus, power_lobe_local
+from gonio.brdf.models._base import BRDFModel, Param, channel_mean
+from gonio.brdf.models._lobes import (
+    DiffusePlusLobe,
+    lobe_probabilities,
+    pow_one_minus,
+    power_lobe_local,
+)
 
 Array = jnp.ndarray
 
@@ -20,7 +25,7 @@ def blinn_phong_norm(n: Array) -> Array:
     return (n + 2.0) * (n + 4.0) / (8.0 * jnp.pi * (jnp.exp(-0.5 * jnp.log(2.0) * n) + n))
 
 
-class BlinnPhong(BRDFModel):
+class BlinnPhong(DiffusePlusLobe, BRDFModel):
     """``f = rho_d/pi + rho_s K(n) cos^n(theta_h)``, ``theta_h`` the polar angle of the half
     vector ``h = (wi + wo)/|wi + wo|``, with the normalization
     ``K(n) = (n + 2)(n + 4) / (8 pi (2^(-n/2) + n))`` (see :func:`blinn_phong_norm`), chosen so
@@ -101,14 +106,3 @@ class BlinnPhong(BRDFModel):
         n = jnp.asarray(self.n).astype(wo.dtype)
         h = power_lobe_local(u, n)
         return 2.0 * dot(wo, h)[..., None] * h - wo
-
-    def _sample(self, wo: Array, u: Array) -> Array:
-        wi, _ = mixture_sample(
-            wo, u, self._weights(wo), [lambda w, uu: warp.square_to_cosine_hemisphere(uu),
-                                       self._sample_lobe]
-        )  # fmt: skip
-        return wi
-
-    def sampling_weight(self, wo: Array) -> Array:
-        w = self._weights(wo)
-        return jnp.broadcast_to(w[0] + w[1], wo.shape[:-1])

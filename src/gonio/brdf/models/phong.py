@@ -6,8 +6,9 @@ import jax.numpy as jnp
 
 from gonio.brdf import warp
 from gonio.brdf.frames import dot, reflect
-from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
+from gonio.brdf.models._base import BRDFModel, Param, channel_mean
 from gonio.brdf.models._lobes import (
+    DiffusePlusLobe,
     frame_about,
     lobe_probabilities,
     pow_one_minus,
@@ -17,7 +18,7 @@ from gonio.brdf.models._lobes import (
 Array = jnp.ndarray
 
 
-class Phong(BRDFModel):
+class Phong(DiffusePlusLobe, BRDFModel):
     """``f = rho_d/pi + rho_s (n + 2)/(2 pi) cos^n(a)``, ``a`` = angle between ``wi`` and the
     mirror direction of ``wo``. The lobe ends where ``a`` reaches 90 degrees (``cos^n`` is 0
     beyond, also for ``n = 0``, where the lobe is a hemisphere about the mirror direction).
@@ -91,14 +92,3 @@ class Phong(BRDFModel):
         t, b = frame_about(r)
         loc = power_lobe_local(u, n)
         return loc[..., 0:1] * t + loc[..., 1:2] * b + loc[..., 2:3] * r
-
-    def _sample(self, wo: Array, u: Array) -> Array:
-        wi, _ = mixture_sample(
-            wo, u, self._weights(wo), [lambda w, uu: warp.square_to_cosine_hemisphere(uu),
-                                       self._sample_lobe]
-        )  # fmt: skip
-        return wi
-
-    def sampling_weight(self, wo: Array) -> Array:
-        w = self._weights(wo)
-        return jnp.broadcast_to(w[0] + w[1], wo.shape[:-1])

@@ -9,8 +9,8 @@ import numpy as np
 
 from gonio.brdf import warp
 from gonio.brdf.frames import dot, normalize, safe_sqrt
-from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
-from gonio.brdf.models._lobes import lobe_probabilities
+from gonio.brdf.models._base import BRDFModel, Param, channel_mean
+from gonio.brdf.models._lobes import DiffusePlusLobe, lobe_probabilities
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -22,7 +22,7 @@ VARIANTS = ("original", "duer", "balanced")
 _Q_MAX = 1e12
 
 
-class Ward(BRDFModel):
+class Ward(DiffusePlusLobe, BRDFModel):
     """Ward (1992) reflection: ``f = rho_d/pi + rho_s N(wi, wo) exp(-T)`` with ``H = wi + wo``
     (not normalized) and the anisotropic Gaussian exponent
     ``T = tan^2(theta_h) (cos^2(phi_h)/alpha_x^2 + sin^2(phi_h)/alpha_y^2)
@@ -183,14 +183,3 @@ class Ward(BRDFModel):
     def _sample_lobe(self, wo: Array, u: Array) -> Array:
         h = self.sample_half_vector(u, wo.dtype)
         return 2.0 * dot(wo, h)[..., None] * h - wo
-
-    def _sample(self, wo: Array, u: Array) -> Array:
-        wi, _ = mixture_sample(
-            wo, u, self._weights(wo), [lambda w, uu: warp.square_to_cosine_hemisphere(uu),
-                                       self._sample_lobe]
-        )  # fmt: skip
-        return wi
-
-    def sampling_weight(self, wo: Array) -> Array:
-        w = self._weights(wo)
-        return jnp.broadcast_to(w[0] + w[1], wo.shape[:-1])
