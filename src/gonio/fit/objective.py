@@ -135,7 +135,7 @@ class Compiled:
             parts = {}
             for e in entries:
                 v = layout._forward(e, u[e.offset : e.offset + e.size])
-                parts[e.key] = v if e.spec.per_channel else v[0]
+                parts[e.key] = v.reshape(e.shape)
             for target, source in tied.items():
                 parts[target] = parts[source]
             return tmpl.replace(**parts)
@@ -195,10 +195,7 @@ def compiled(layout: Layout, loss: Loss) -> Compiled:
     """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
     key = (
         jax.tree_util.tree_structure(layout.template),
-        tuple(
-            (e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.spec.per_channel)
-            for e in layout.entries
-        ),
+        tuple((e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.shape) for e in layout.entries),
         tuple(layout.tied.items()),
         loss.name,
     )

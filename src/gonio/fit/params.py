@@ -20,6 +20,7 @@ channels="separate")`` instead fits each channel on its own.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -45,7 +46,7 @@ class Entry:
     ----------
     key : model key (``"albedo"``, ``"ward.alpha_x"``).
     spec : the model's Param metadata.
-    size : number of values (1, or C for per-channel parameters).
+    size : number of values (1, C for per-channel, L or L*C for per-lobe parameters).
     offset : position of the first value in ``u``.
     scale : map used (``"log"``, ``"logit"`` or ``"linear"``).
     lo, hi : physical bounds of the transform (finite).
@@ -60,6 +61,7 @@ class Entry:
     lo: float
     hi: float
     box: tuple[float, float]
+    shape: tuple[int, ...] = ()
 
 
 def _entry(key: str, spec: Param, size: int, offset: int) -> Entry:
@@ -79,6 +81,27 @@ def _entry(key: str, spec: Param, size: int, offset: int) -> Entry:
     plo = lo if math.isfinite(lo) else d - 1e3 * mag
     phi = hi if math.isfinite(hi) else d + 1e3 * mag
     return Entry(key, spec, size, offset, "linear", plo, phi, (plo, phi))
+
+
+def _shape(spec: Param, channels: int, lobes: int) -> tuple[int, ...]:
+    """Shape of a fitted parameter: (), (C,), (L,) or (L, C)."""
+    if spec.per_lobe:
+        return (lobes, channels) if spec.per_channel else (lobes,)
+    return (channels,) if spec.per_channel else ()
+
+
+def _lobe_values(e: Entry, v: np.ndarray, channels: int) -> np.ndarray:
+    """A per-lobe value brought to the entry's shape: (L,) or (L, C)."""
+    lobes = e.shape[0]
+    if len(e.shape) == 2:
+        if v.ndim == 1 and v.size == lobes:
+            v = v[:, None]  # one scale per lobe, shared by the channels
+        elif v.ndim == 1 and lobes == 1 and v.size == channels:
+            v = v[None, :]  # a single lobe written with its channels
+    try:
+        return np.broadcast_to(v, e.shape).copy()
+    except ValueError:
+        raise FitError(f"{e.key} has shape {v.shape}, expected {e.shape}") from None
 
 
 class Layout:
@@ -124,13 +147,21 @@ class Layout:
             model = model.replace(**{k: v for k, v in fixed.items() if v is not None})
         self.channels = int(channels)
         current = model.params()
+        # Lobe count of each node with per-lobe parameters (Lafortune): the length of its
+        # per-lobe, not-per-channel values, whose shape (L,) is unambiguous.
+        lobes: dict[str, int] = {}
+        for key, spec in specs.items():
+            if spec.per_lobe and not spec.per_channel:
+                node = key.rpartition(".")[0]
+                lobes[node] = max(lobes.get(node, 1), int(np.size(current[key])))
         entries: list[Entry] = []
         offset = 0
         for key, spec in specs.items():
             if key in fixed or key in tied:
                 continue
-            size = self.channels if spec.per_channel else 1
-            entries.append(_entry(key, spec, size, offset))
+            shape = _shape(spec, self.channels, lobes.get(key.rpartition(".")[0], 1))
+            size = int(np.prod(shape, dtype=np.int64))
+            entries.append(dataclasses.replace(_entry(key, spec, size, offset), shape=shape))
             offset += size
         if not entries:
             raise FitError("every parameter is fixed: nothing to fit")
@@ -138,7 +169,9 @@ class Layout:
         template_kw = {}
         for e in entries:
             v = np.asarray(current[e.key], dtype=np.float64)
-            if e.spec.per_channel:
+            if e.spec.per_lobe:
+                template_kw[e.key] = _lobe_values(e, v, self.channels)
+            elif e.spec.per_channel:
                 if v.size not in (1, self.channels):
                     raise FitError(
                         f"{e.key} has {v.size} values but the data has {self.channels} channels"
@@ -166,14 +199,23 @@ class Layout:
         return [e.key for e in self.entries]
 
     def flat_names(self, channel_names: tuple[str, ...] | None = None) -> list[str]:
-        """One name per entry of ``u``: ``"albedo[R]"`` for per-channel values (C > 1)."""
+        """One name per entry of ``u``: ``"albedo[R]"`` for per-channel values (C > 1),
+        ``"n[lobe1]"`` and ``"rho_s[lobe1,R]"`` for per-lobe ones."""
+        labels = channel_names or tuple(str(i) for i in range(self.channels))
         out = []
         for e in self.entries:
             if e.size == 1:
                 out.append(e.key)
-            else:
-                labels = channel_names or tuple(str(i) for i in range(e.size))
+            elif not e.spec.per_lobe:
                 out.extend(f"{e.key}[{labels[i]}]" for i in range(e.size))
+            elif len(e.shape) == 1:
+                out.extend(f"{e.key}[lobe{i}]" for i in range(e.size))
+            else:
+                out.extend(
+                    f"{e.key}[lobe{i},{labels[c]}]"
+                    for i in range(e.shape[0])
+                    for c in range(e.shape[1])
+                )
         return out
 
     # -- transforms (JAX, traceable) ------------------------------------------------------------
@@ -212,8 +254,7 @@ class Layout:
         th = self.theta(u)
         kw = {}
         for e in self.entries:
-            v = th[e.offset : e.offset + e.size]
-            kw[e.key] = v if e.spec.per_channel else v[0]
+            kw[e.key] = th[e.offset : e.offset + e.size].reshape(e.shape)
         for target, source in self.tied.items():
             kw[target] = kw[source]
         return kw
@@ -225,7 +266,8 @@ class Layout:
         u = np.empty(self.size)
         for e in self.entries:
             v = np.asarray(values.get(e.key, current[e.key]), dtype=np.float64)
-            v = np.broadcast_to(v, (e.size,))
+            v = _lobe_values(e, v, self.channels) if e.spec.per_lobe else v
+            v = np.broadcast_to(v, e.shape).reshape(e.size)
             if e.scale == "log":
                 ue = np.log(np.clip(v, e.lo, e.hi))
             elif e.scale == "logit":
@@ -273,7 +315,7 @@ class Layout:
         out: dict[str, np.ndarray | float] = {}
         for e in self.entries:
             v = th[e.offset : e.offset + e.size]
-            out[e.key] = v.copy() if e.spec.per_channel else float(v[0])
+            out[e.key] = float(v[0]) if e.shape == () else v.reshape(e.shape).copy()
         return out
 
     def on_bounds(self, u: np.ndarray, rtol: float = 1e-4) -> list[str]:

@@ -55,6 +55,17 @@ def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
         "torrance-sparrow": _ts("beckmann", "vcavity"),
         "ts": _ts("beckmann", "vcavity"),
         "ts-ggx-smith": _ts("ggx", "smith"),
+        "lafortune": _make("Lafortune", cx=[-1.0], cy=[-1.0], cz=[1.0], n=[20.0], rho_s=[0.5]),
+        # A forward-scattering specular lobe and a broad retro/off-specular one.
+        "lafortune-2": _make(
+            "Lafortune",
+            cx=[-1.0, -0.5],
+            cy=[-1.0, -0.5],
+            cz=[1.0, 0.7],
+            n=[30.0, 3.0],
+            rho_s=[0.5, 0.1],
+        ),
+        "ashikhmin-shirley": _make("AshikhminShirley"),
     }
 
 
@@ -72,9 +83,9 @@ def available() -> list[str]:
 def build(name: str) -> tuple[BRDFModel, dict[str, Any], dict[str, str]]:
     """Template model, fixed parameters and tied parameters for a model name.
 
-    Ward lobes are fitted isotropic (``alpha_y`` tied to ``alpha_x``): measurements of
-    isotropic materials (every table in the half-diff-iso parameterization) cannot tell the
-    two apart.
+    Ward and Ashikhmin-Shirley lobes are fitted isotropic (``alpha_y`` tied to ``alpha_x``,
+    ``nv`` to ``nu``): measurements of isotropic materials (every table in the half-diff-iso
+    parameterization) cannot tell the two apart.
 
     Raises
     ------
@@ -94,8 +105,9 @@ def build(name: str) -> tuple[BRDFModel, dict[str, Any], dict[str, str]]:
     for key in model.param_specs():
         head, _, pname = key.rpartition(".")
         prefix = f"{head}." if head else ""
-        if pname == "alpha_y" and f"{prefix}alpha_x" in model.param_specs():
-            tied[key] = f"{prefix}alpha_x"
+        for y, x in (("alpha_y", "alpha_x"), ("nv", "nu")):
+            if pname == y and f"{prefix}{x}" in model.param_specs():
+                tied[key] = f"{prefix}{x}"
         if len(built) > 1 and "lambert" in parts and pname == "rho_d":
             if not head.startswith("lambert"):
                 fixed[key] = 0.0

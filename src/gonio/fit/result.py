@@ -28,7 +28,9 @@ SCHEMA_ID = "gonio/fit-result"
 SCHEMA_VERSION = 1
 
 _num = {"type": ["number", "null"]}
-_value = {"oneOf": [_num, {"type": "array", "items": _num, "minItems": 1}]}
+# A parameter value: a number, one per channel or lobe (C,) / (L,), or per lobe and channel (L, C).
+_vector = {"type": "array", "items": _num, "minItems": 1}
+_value = {"oneOf": [_num, _vector, {"type": "array", "items": _vector, "minItems": 1}]}
 _pair = {"type": "array", "items": _value, "minItems": 2, "maxItems": 2}
 
 #: JSON Schema (draft 2020-12) of a fit-result file.
@@ -189,8 +191,9 @@ class FitResult:
             key = name.split("[", 1)[0]
             groups.setdefault(key, []).append(v)
         for key, vals in groups.items():
-            per_channel = np.ndim(self.params[key]) > 0
-            out[key] = np.asarray(vals) if per_channel else np.asarray(vals[0])
+            shape = np.shape(self.params[key])
+            tail = np.shape(vals[0])  # per flat value: a scalar, or e.g. (lo, hi)
+            out[key] = np.asarray(vals).reshape(*shape, *tail) if shape else np.asarray(vals[0])
         return out
 
     def intervals(self, level: int = 95) -> dict[str, list[Any]]:
