@@ -371,11 +371,8 @@ class BRDFModel(Node):
 
     def sample(self, wo: Array, u: Array) -> BRDFSample:
         """Importance-sample ``wi`` for outgoing ``wo`` ``(..., 3)`` from ``u`` ``(..., 2)``."""
-        wo = as_float(wo)
-        u = clamp_u(as_float(u, wo.dtype))
-        wo, u = _broadcast_dir_u(wo, u)
-        ok_o = upper(wo)
-        wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        wo, u = sample_inputs(wo, u)
+        wo_s, ok_o = masked_outgoing(wo)
         wi = self._sample(wo_s, u).astype(wo.dtype)
         return self._finish(wi, wo_s, ok_o)
 
@@ -423,6 +420,21 @@ def _directions(wi: Any, wo: Any) -> tuple[Array, Array]:
 def _broadcast_dir_u(w: Array, u: Array) -> tuple[Array, Array]:
     shape = jnp.broadcast_shapes(w.shape[:-1], u.shape[:-1])
     return jnp.broadcast_to(w, (*shape, 3)), jnp.broadcast_to(u, (*shape, 2))
+
+
+def sample_inputs(wo: Any, u: Any) -> tuple[Array, Array]:
+    """``wo`` and ``u`` as floats of one dtype, ``u`` clamped below 1, broadcast together:
+    ``(..., 3)`` and ``(..., 2)``. The common start of every ``sample``."""
+    wo = as_float(wo)
+    u = clamp_u(as_float(u, wo.dtype))
+    return _broadcast_dir_u(wo, u)
+
+
+def masked_outgoing(wo: Array) -> tuple[Array, Array]:
+    """``(wo_s, ok)``: ``ok`` where ``wo`` is above the horizon, and ``wo`` with the others
+    replaced by the normal so that sampling code never sees degenerate input."""
+    ok = upper(wo)
+    return jnp.where(ok[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype)), ok
 
 
 def _safe_pair(wi: Array, wo: Array, ok: Array) -> tuple[Array, Array]:

@@ -67,10 +67,10 @@ from gonio.brdf.models._base import (
     Node,
     Param,
     _safe_pair,
-    as_float,
     channel_mean,
     choose_lobe,
-    clamp_u,
+    masked_outgoing,
+    sample_inputs,
 )
 from gonio.brdf.models.fresnel import Conductor
 from gonio.errors import ParameterError
@@ -411,13 +411,8 @@ class HTSG(BRDFModel):
         return sum(self._weights(wo))
 
     def sample(self, wo: Array, u: Array) -> BRDFSample:
-        wo = as_float(wo)
-        u = clamp_u(as_float(u, wo.dtype))
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u.shape[:-1])
-        wo = jnp.broadcast_to(wo, (*shape, 3))
-        u = jnp.broadcast_to(u, (*shape, 2))
-        ok_o = upper(wo)
-        wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        wo, u = sample_inputs(wo, u)
+        wo_s, ok_o = masked_outgoing(wo)
 
         index, u0, probs = choose_lobe(u[..., 0], self._weights(wo_s))
         uu = jnp.stack([u0, u[..., 1]], -1)

@@ -16,9 +16,7 @@ from gonio.brdf.models._base import (
     BRDFModel,
     BRDFSample,
     Param,
-    _broadcast_dir_u,
-    as_float,
-    clamp_u,
+    sample_inputs,
 )
 from gonio.brdf.models.fresnel import Fresnel, NoFresnel, dielectric_reflectance
 from gonio.errors import ParameterError
@@ -37,11 +35,7 @@ class _Delta(BRDFModel):
     def _pdf(self, wi: Array, wo: Array) -> Array:
         return jnp.zeros(wi.shape[:-1], dtype=wi.dtype)
 
-    @staticmethod
-    def _inputs(wo: Array, u: Array) -> tuple[Array, Array]:
-        wo = as_float(wo)
-        u = clamp_u(as_float(u, wo.dtype))
-        return _broadcast_dir_u(wo, u)
+    _inputs = staticmethod(sample_inputs)
 
 
 class SpecularReflection(_Delta):
