@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-test
 
-.PHONY: test lint format bench clean
+.PHONY: test demo lint format bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -13,6 +13,10 @@ $(PY):
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
+
+# The whole pipeline on the simulated rig; the report lands in gonio-demo/index.html.
+demo: $(STAMP)
+	$(VENV)/bin/gonio demo --force $(DEMO_ARGS)
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
@@ -32,4 +36,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache build src/*.egg-info
+	rm -rf $(VENV) gonio-demo .pytest_cache build src/*.egg-info

@@ -23,6 +23,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.acquire.cli",
     "gonio.fit.cli",
     "gonio.render.cli",
+    "gonio.demo.cli",
 )
 
 

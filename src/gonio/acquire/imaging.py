@@ -486,9 +486,9 @@ def open_imaging_camera(rig, run_dir: str | Path, planning: bool | None = None) 
     layout = HolderLayout()
     light = open_light(rig)
     if kind == "sim":
-        from gonio.brdf import models
+        from gonio.rigs.sim.truth import load_truth
 
-        truth = models.Node.from_dict(rig.sim.sample)
+        truth = load_truth(rig.sim.sample, rig.source)
         virtual = VirtualCamera(
             truth=truth,
             layout=layout,

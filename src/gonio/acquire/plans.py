@@ -322,6 +322,21 @@ BUILTIN: dict[str, dict] = {
         "dphi_deg": {"start": 0, "stop": 180, "step": 45},
         "refine": {"window_deg": 6.0, "step_deg": 3.0},
     },
+    # `gonio demo`: a coarse isotropic sweep, refined around the specular peak
+    "demo": {
+        "kind": "adaptive",
+        "theta_i_deg": [15, 35, 55],
+        "theta_o_deg": {"start": 0, "stop": 70, "step": 10},
+        "dphi_deg": {"start": 0, "stop": 180, "step": 30},
+        "refine": {"window_deg": 6.0, "step_deg": 2.0},
+    },
+    # `gonio demo --quick` (and the end-to-end test): the same sweep, coarser, no refinement
+    "demo-quick": {
+        "kind": "isotropic",
+        "theta_i_deg": [20, 45],
+        "theta_o_deg": {"start": 0, "stop": 70, "step": 10},
+        "dphi_deg": [0, 60, 120, 180],
+    },
     "adaptive": {
         "kind": "adaptive",
         "theta_i_deg": {"start": 10, "stop": 70, "step": 10},

@@ -231,7 +231,10 @@ SPEC: dict = {
         "noise_rel": _num("Relative measurement noise (1 sigma).", minimum=0),
         "noise_abs": _num("Absolute measurement noise floor (1/sr, 1 sigma).", minimum=0),
         "sample": {
-            "__doc__": "Ground-truth BRDF of the simulated sample (Node.to_dict() form).",
+            "__doc__": (
+                "Ground-truth BRDF of the simulated sample: a model (Node.to_dict() form: type,"
+                " params) or file = path of a tabulated BRDF (relative to the rig file)."
+            ),
             "__additional__": {},
         },
         "faults": {
@@ -596,13 +599,22 @@ def _build(data: dict, text: str, source: str) -> RigConfig:
     safety = SafetyConfig(keepout=tuple(keep), **s)
     sim = SimConfig(**data.get("sim", {}))
     if "sample" in data.get("sim", {}):
-        from gonio.brdf import models
+        from gonio.rigs.sim.truth import truth_file
 
-        Node = models.Node
         try:
-            Node.from_dict(sim.sample)
-        except Exception as exc:
-            raise fail(("sim", "sample"), f"not a gonio model: {exc}") from None
+            path = truth_file(sim.sample, source)
+        except RigConfigError as exc:
+            raise fail(("sim", "sample"), str(exc).split(": ", 1)[-1]) from None
+        if path is None:
+            from gonio.brdf import models
+
+            try:
+                models.Node.from_dict(sim.sample)
+            except Exception as exc:
+                raise fail(("sim", "sample"), f"not a gonio model: {exc}") from None
+        elif not path.is_file():
+            # the table itself is read when the camera opens, before any motion
+            raise fail(("sim", "sample", "file"), f"no such file: {path}")
     return RigConfig(
         name=data["name"],
         description=data.get("description", ""),

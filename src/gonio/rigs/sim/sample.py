@@ -21,9 +21,9 @@ class SimulatedSampleCamera:
     """Camera backend ``kind = "sim"``: BRDF reading of the rig file's ``[sim.sample]``."""
 
     def __init__(self, rig: RigConfig) -> None:
-        from gonio.brdf import models
+        from gonio.rigs.sim.truth import load_truth
 
-        self.model = models.Node.from_dict(rig.sim.sample)
+        self.model = load_truth(rig.sim.sample, rig.source)
         self._f = None
         self.seed = rig.sim.seed
         self.noise_rel = rig.sim.noise_rel

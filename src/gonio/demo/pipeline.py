@@ -1,0 +1,462 @@
+"""``gonio demo``: the whole pipeline on the simulated rig, from servo motion to a report.
+
+Stages, each with its own progress display:
+
+1. **Rig.** Write ``rig.toml``: the shipped ``sim`` rig (Dynamixel bus emulator on a
+   pseudo-terminal, virtual RAW camera, LED light) whose ``[sim.sample]`` is the demo material.
+2. **Acquire.** Run the demo plan through the run engine (journal, HDR brackets as DNG, ChArUco
+   pose, white-reference calibration) into ``run/``; ``run/table.brdf.h5`` holds the samples.
+3. **Fit.** Fit Lambert, Oren-Nayar, Lambert + Ward and Lambert + Torrance-Sparrow by weighted
+   least squares with Laplace (or MCMC) intervals; ``fits/<model>.json`` and plots.
+4. **Render.** Render the measured material (the ground-truth table, or the built-in model) and
+   every fit as spheres in the studio environment; EXR + PNG per sphere and ``compare.png``.
+5. **Report.** ``index.html`` (see :mod:`gonio.demo.report`) and ``demo-summary.json``.
+
+Images of the acquisition (raw brackets and merged HDR frames, about 4 MB per configuration) are
+pruned to the first :data:`KEPT_FRAMES` configurations unless ``keep_images`` is set: the table
+built from all of them is what the rest of the pipeline uses.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import time
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gonio.demo.materials import DemoMaterial
+from gonio.errors import ParameterError
+
+#: Fit presets of the demo, with the label shown for each.
+MODELS: tuple[tuple[str, str], ...] = (
+    ("lambert", "Lambert"),
+    ("oren-nayar", "Oren-Nayar"),
+    ("lambert+ward", "Lambert + Ward"),
+    ("lambert+ts", "Lambert + Torrance-Sparrow"),
+)
+
+#: Configurations whose raw and HDR images are kept when pruning.
+KEPT_FRAMES = 3
+
+#: Marker file that identifies a demo output folder (and lets ``--force`` replace it safely).
+SUMMARY = "demo-summary.json"
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """Sizes of a demo run.
+
+    ``plan`` is a built-in plan name (``gonio plan --plan NAME`` shows it); ``resolution`` and
+    ``spp`` are the sphere renders' size (pixels) and samples per pixel.
+    """
+
+    plan: str = "demo"
+    resolution: int = 256
+    spp: int = 64
+    uncertainty: str = "laplace"
+    keep_images: bool = False
+    seed: int = 0
+
+    @classmethod
+    def quick(cls, **kw: Any) -> DemoSettings:
+        """A reduced demo (about a minute): fewer configurations, small renders."""
+        return cls(**{"plan": "demo-quick", "resolution": 96, "spp": 16, **kw})
+
+
+@dataclass
+class ModelSummary:
+    """One fitted model's numbers as the summary table and the report show them."""
+
+    preset: str
+    label: str
+    params: dict[str, Any]
+    intervals: dict[str, Any]
+    reduced_chi2: float
+    aic: float
+    bic: float
+    fit_s: float
+    warnings: list[str]
+    rmse: float | None = None
+    rel_mse: float | None = None
+    ssim: float | None = None
+    truth_check: dict[str, bool] = field(default_factory=dict)
+    files: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class DemoSummary:
+    """Everything a demo run produced (written as ``demo-summary.json``)."""
+
+    out: str
+    material: dict[str, Any]
+    settings: dict[str, Any]
+    acquisition: dict[str, Any]
+    models: list[ModelSummary]
+    render: dict[str, Any]
+    timings_s: dict[str, float]
+    files: dict[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        return json.loads(json.dumps(d, default=_jsonable))
+
+
+def _jsonable(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+# -- stage 1: the rig file --------------------------------------------------------------------
+def rig_text(material: DemoMaterial) -> str:
+    """The shipped ``sim`` rig file with ``[sim.sample]`` set to the demo material."""
+    import tomli_w
+
+    text = resources.files("gonio.rigs").joinpath("sim.toml").read_text(encoding="utf-8")
+    # The sample table is the last key group before [sim.faults]; replace it (header, its keys
+    # and the comment above it) by the material, written as TOML by a TOML writer.
+    pattern = re.compile(r"(?:#[^\n]*\n)*\[sim\.sample\]\n(?:[^\[\n][^\n]*\n|\n)*")
+    sample = tomli_w.dumps({"sim": {"sample": material.sample}})
+    new, n = pattern.subn(f"# demo material: {material.description}\n{sample}\n", text)
+    if n != 1:  # the shipped file changed shape: fail loudly rather than run the wrong sample
+        raise RuntimeError("the shipped sim rig file has no single [sim.sample] table")
+    header = (
+        "# Written by 'gonio demo': the shipped 'sim' rig measuring the demo material.\n"
+        "# Rerun the acquisition alone with: gonio acquire --rig rig.toml --plan PLAN --out RUN\n"
+    )
+    return header + new
+
+
+def prepare_out(out: Path, force: bool) -> None:
+    """Create the output folder; refuse a non-empty one unless it is an earlier demo's."""
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"{out} exists and is not a folder")
+    if out.is_dir() and any(out.iterdir()):
+        if not force:
+            raise ParameterError(f"{out} is not empty (use --force to replace an earlier demo)")
+        if not (out / SUMMARY).is_file() and not (out / "run" / "journal.sqlite").is_file():
+            raise ParameterError(
+                f"{out} is not empty and holds no earlier demo; refusing to delete it"
+            )
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+
+
+# -- stage 2: acquisition -----------------------------------------------------------------------
+def prune_images(run_dir: Path, keep: int = KEPT_FRAMES) -> dict[str, int]:
+    """Delete raw brackets and HDR frames beyond the first ``keep`` configurations."""
+    removed = kept = 0
+    freed = 0
+    for sub in ("raw", "hdr"):
+        folder = run_dir / sub
+        if not folder.is_dir():
+            continue
+        configs = sorted({p.name.split("_")[0].split(".")[0] for p in folder.iterdir()})
+        keep_set = set(configs[:keep])
+        for p in folder.iterdir():
+            if p.name.split("_")[0].split(".")[0] in keep_set:
+                kept += 1
+            else:
+                freed += p.stat().st_size
+                p.unlink()
+                removed += 1
+    return {"removed": removed, "kept": kept, "freed_bytes": freed}
+
+
+def camera_view_png(run_dir: Path, path: Path) -> Path | None:
+    """Tone-map the first merged HDR frame (what the camera saw) to a PNG, if there is one."""
+    from gonio.render.output import read_exr, write_png
+
+    frames = sorted((run_dir / "hdr").glob("*.exr")) if (run_dir / "hdr").is_dir() else []
+    if not frames:
+        return None
+    return write_png(path, read_exr(frames[0]))
+
+
+# -- stage 3: fits ------------------------------------------------------------------------------
+def truth_check(result: Any, truth: dict[str, Any]) -> dict[str, bool]:
+    """Whether each true parameter lies inside the fit's 95 % interval (per key, all channels)."""
+    out: dict[str, bool] = {}
+    iv = result.intervals(95)
+    for key, value in truth.items():
+        if key not in iv:
+            continue
+        lo, hi = (np.asarray(x, dtype=float) for x in iv[key])
+        v = np.broadcast_to(np.asarray(value, dtype=float), lo.shape)
+        out[key] = bool(np.all((lo <= v) & (v <= hi)))
+    return out
+
+
+def short_params(params: dict[str, Any]) -> str:
+    """Parameters as ``name=value`` text, per-channel values in parentheses (3 digits)."""
+
+    def fmt(v: Any) -> str:
+        a = np.asarray(v, dtype=float)
+        if a.ndim == 0:
+            return f"{float(a):.3g}"
+        return "(" + ", ".join(f"{x:.3g}" for x in a.ravel()) + ")"
+
+    return ", ".join(f"{k.rsplit('.', 1)[-1]}={fmt(v)}" for k, v in params.items())
+
+
+# -- the whole run ------------------------------------------------------------------------------
+def run_demo(
+    out: str | Path,
+    material: DemoMaterial,
+    settings: DemoSettings | None = None,
+    *,
+    force: bool = False,
+    progress: bool = True,
+    console: Any = None,
+) -> DemoSummary:
+    """Run every stage (see the module docstring) into ``out``; returns the summary.
+
+    Parameters
+    ----------
+    out : output folder (created; must be empty, or an earlier demo's when ``force``).
+    material : the simulated sample (:func:`gonio.demo.materials.find_material`).
+    settings : sizes of the run (default :class:`DemoSettings`).
+    force : replace an earlier demo's folder.
+    progress : show progress bars (rich) on the console.
+    console : a ``rich.console.Console`` for the stage headers (default: stderr).
+    """
+    from rich.console import Console
+
+    settings = settings or DemoSettings()
+    console = console or Console(stderr=True, quiet=not progress)
+    out = Path(out)
+    prepare_out(out, force)
+    timings: dict[str, float] = {}
+    t0 = time.monotonic()
+
+    console.rule(f"[bold]1/5 rig[/]: simulated 4-axis rig measuring {material.name}")
+    rig_path = out / "rig.toml"
+    rig_path.write_text(rig_text(material), encoding="utf-8")
+    console.print(f"material: {material.description}")
+
+    console.rule(f"[bold]2/5 acquire[/]: plan '{settings.plan}' on the simulated rig")
+    acquisition = _acquire(out, rig_path, settings, progress, console)
+    timings["acquire"] = time.monotonic() - t0
+
+    console.rule("[bold]3/5 fit[/]: " + ", ".join(label for _, label in MODELS))
+    t = time.monotonic()
+    results, models_summary = _fit_all(out, material, settings, progress)
+    timings["fit"] = time.monotonic() - t
+
+    console.rule(f"[bold]4/5 render[/]: {settings.resolution}^2 px, {settings.spp} spp, studio")
+    t = time.monotonic()
+    render = _render_all(out, material, results, models_summary, settings, progress)
+    timings["render"] = time.monotonic() - t
+
+    console.rule("[bold]5/5 report[/]")
+    t = time.monotonic()
+    files = {
+        "rig": "rig.toml",
+        "table": "run/table.brdf.h5",
+        "compare": render.pop("compare"),
+        "camera_view": acquisition.pop("camera_view", None),
+        "report": "index.html",
+        "summary": SUMMARY,
+    }
+    summary = DemoSummary(
+        out=str(out),
+        material={
+            "name": material.name,
+            "description": material.description,
+            "table": None if material.table_path is None else str(material.table_path),
+            "truth_params": material.truth_params,
+        },
+        settings=asdict(settings),
+        acquisition=acquisition,
+        models=models_summary,
+        render=render,
+        timings_s=timings,
+        files=files,
+    )
+    from gonio.demo.report import write_report
+    from gonio.fit.result import write_json
+
+    timings["report"] = time.monotonic() - t
+    timings["total"] = time.monotonic() - t0
+    write_report(out / "index.html", summary)
+    write_json(summary.to_json(), out / SUMMARY)
+    return summary
+
+
+def _acquire(
+    out: Path, rig_path: Path, settings: DemoSettings, progress: bool, console: Any
+) -> dict[str, Any]:
+    from gonio.acquire.engine import acquire
+
+    run_dir = out / "run"
+    s = acquire(run_dir, rig_path, settings.plan, progress=progress)
+    if not s.complete or s.table is None:
+        raise ParameterError(f"the demo acquisition did not complete: {s.table_note}")
+    view = camera_view_png(run_dir, out / "camera-view.png")
+    pruned = (
+        {"removed": 0, "kept": 0, "freed_bytes": 0}
+        if settings.keep_images
+        else prune_images(run_dir)
+    )
+    console.print(
+        f"{s.done} configurations measured ({s.refused} refused by the safety checks) in"
+        f" {s.wall_s:.0f} s; {s.table_note}"
+    )
+    return {
+        "planned": s.planned,
+        "refused": s.refused,
+        "measured": s.done,
+        "wall_s": s.wall_s,
+        "table_note": s.table_note,
+        "bus": s.bus,
+        "images_pruned": pruned,
+        "camera_view": None if view is None else view.name,
+    }
+
+
+def _fit_all(
+    out: Path, material: DemoMaterial, settings: DemoSettings, progress: bool
+) -> tuple[list[Any], list[ModelSummary]]:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from gonio import io
+    from gonio.fit import fit
+    from gonio.fit.data import prepare
+    from gonio.fit.plots import plot_result
+
+    samples = io.load(out / "run" / "table.brdf.h5")
+    data = prepare(samples, name=material.name)
+    fits_dir = out / "fits"
+    fits_dir.mkdir(exist_ok=True)
+    results, summaries = [], []
+    columns = (
+        TextColumn("{task.description:<48}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+    )
+    with Progress(*columns, disable=not progress, transient=False) as bar:
+        task = bar.add_task("fitting", total=len(MODELS))
+        for preset, label in MODELS:
+            stem = preset.replace("+", "-")
+
+            def stage(text: str, label: str = label) -> None:
+                bar.update(task, description=f"{label}: {text}")
+
+            t = time.monotonic()
+            r = fit(
+                data,
+                model=preset,
+                uncertainty=settings.uncertainty,
+                seed=settings.seed,
+                name=material.name,
+                progress=stage,
+            )
+            fit_s = time.monotonic() - t
+            stage("plots")
+            r.save(fits_dir / f"{stem}.json")
+            plots = plot_result(r, data, fits_dir, stem)
+            shown = {k: v for k, v in r.params.items() if k not in r.fixed}
+            summaries.append(
+                ModelSummary(
+                    preset=preset,
+                    label=label,
+                    params=shown,
+                    intervals={k: v for k, v in r.intervals(95).items() if k in shown},
+                    reduced_chi2=float(r.reduced_chi2),
+                    aic=float(r.aic),
+                    bic=float(r.bic),
+                    fit_s=fit_s,
+                    warnings=list(r.warnings),
+                    truth_check=truth_check(r, material.truth_params.get(preset, {})),
+                    files={
+                        "fit": f"fits/{stem}.json",
+                        "plots": [f"fits/{p.name}" for p in plots],
+                    },
+                )
+            )
+            results.append(r)
+            bar.update(task, advance=1, description=f"{label}: done in {fit_s:.1f} s")
+    return results, summaries
+
+
+def _render_all(
+    out: Path,
+    material: DemoMaterial,
+    results: list[Any],
+    summaries: list[ModelSummary],
+    settings: DemoSettings,
+    progress: bool,
+) -> dict[str, Any]:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from gonio.render.compare import compare_images, comparison_figure
+    from gonio.render.integrator import render_sphere
+    from gonio.render.lights import Environment
+    from gonio.render.output import write_exr, write_png
+    from gonio.rigs.sim.truth import load_truth
+
+    truth = load_truth(material.sample, "demo")
+    measured = getattr(truth, "table", truth)
+    ref_label = "measured" if material.is_measured else "ground truth"
+    items = [("measured", ref_label, measured)]
+    for s, r in zip(summaries, results, strict=True):
+        items.append((s.preset.replace("+", "-"), s.label, r.model))
+    lights = [Environment("studio")]
+    renders_dir = out / "renders"
+    renders_dir.mkdir(exist_ok=True)
+    images: dict[str, np.ndarray] = {}
+    seconds: dict[str, float] = {}
+    columns = (TextColumn("{task.description:<40}"), BarColumn(), TimeRemainingColumn())
+    with Progress(*columns, disable=not progress) as bar:
+        for stem, label, mat in items:
+            task = bar.add_task(f"sphere: {label}", total=1)
+
+            def tick(done: int, total: int, task: Any = task) -> None:
+                bar.update(task, total=total, completed=done)
+
+            t = time.monotonic()
+            images[stem] = render_sphere(
+                mat,
+                lights=lights,
+                resolution=settings.resolution,
+                spp=settings.spp,
+                seed=settings.seed,
+                progress=tick,
+            )
+            seconds[stem] = time.monotonic() - t
+    reference = images["measured"]
+    exposure, comps = compare_images(
+        reference, [(label, images[stem]) for stem, label, _ in items[1:]]
+    )
+    files: dict[str, Any] = {}
+    for stem, _, _ in items:
+        write_exr(renders_dir / f"{stem}.exr", images[stem])
+        write_png(renders_dir / f"{stem}.png", images[stem], exposure)
+        files[stem] = {"exr": f"renders/{stem}.exr", "png": f"renders/{stem}.png"}
+    for s, c in zip(summaries, comps, strict=True):
+        s.rmse, s.rel_mse, s.ssim = c.errors.rmse, c.errors.rel_mse, c.errors.ssim
+        s.files["render"] = files[s.preset.replace("+", "-")]
+    comparison_figure(
+        out / "compare.png", reference, comps, exposure, title=f"{material.name}: {ref_label}"
+    )
+    return {
+        "reference": ref_label,
+        "resolution": settings.resolution,
+        "spp": settings.spp,
+        "lights": "studio environment",
+        "exposure": exposure,
+        "seconds": seconds,
+        "images": files,
+        "compare": "compare.png",
+    }

@@ -1,0 +1,184 @@
+"""The demo's ``index.html``: one self-contained page (no scripts, no network) with the numbers.
+
+Every image and link is a relative path inside the demo folder, so the folder can be copied or
+served as it is. Text from data (material descriptions, warnings) is HTML-escaped.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_CSS = """
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 70em; color: #222; }
+h1 { margin-bottom: 0.2em; }
+table { border-collapse: collapse; margin: 1em 0; }
+th, td { border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: left; vertical-align: top; }
+th { background: #f3f3f3; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+figure { display: inline-block; margin: 0.5em; text-align: center; }
+figure img { max-width: 100%; }
+.spheres img { width: 192px; image-rendering: pixelated; }
+.plots img { width: 30em; }
+.warn { color: #a40; font-size: 90%; }
+.ok { color: #070; }
+.bad { color: #a00; }
+code { background: #f6f6f6; padding: 0 0.2em; }
+"""
+
+
+def _e(x: Any) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _num(x: Any, digits: int = 4) -> str:
+    if x is None:
+        return "&ndash;"
+    return f"{float(x):.{digits}g}"
+
+
+def _value(v: Any) -> str:
+    a = np.asarray(v, dtype=float)
+    if a.ndim == 0:
+        return f"{float(a):.4g}"
+    return "(" + ", ".join(f"{x:.4g}" for x in a.ravel()) + ")"
+
+
+def _interval(iv: Any) -> str:
+    if not iv:
+        return "&ndash;"
+    lo, hi = (np.asarray(x, dtype=float) for x in iv)
+    if lo.ndim == 0:
+        return f"[{float(lo):.4g}, {float(hi):.4g}]"
+    return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in zip(lo.ravel(), hi.ravel(), strict=True))
+
+
+def _img(src: str, alt: str, cls: str = "") -> str:
+    c = f' class="{cls}"' if cls else ""
+    return f'<img src="{_e(src)}" alt="{_e(alt)}"{c}>'
+
+
+def _models_table(models: list[Any]) -> str:
+    rows = []
+    for m in models:
+        chk = ""
+        if m.truth_check:
+            ok = all(m.truth_check.values())
+            cls = "ok" if ok else "bad"
+            chk = f'<span class="{cls}">{"all" if ok else "not all"} inside</span>'
+        rows.append(
+            "<tr>"
+            f'<td><a href="{_e(m.files["fit"])}">{_e(m.label)}</a></td>'
+            f'<td class="num">{_num(m.reduced_chi2)}</td>'
+            f'<td class="num">{_num(m.aic, 6)}</td><td class="num">{_num(m.bic, 6)}</td>'
+            f'<td class="num">{_num(m.rmse)}</td><td class="num">{_num(m.rel_mse)}</td>'
+            f'<td class="num">{_num(m.ssim, 3)}</td><td class="num">{m.fit_s:.2f}</td>'
+            f"<td>{chk or '&ndash;'}</td></tr>"
+        )
+    head = (
+        "<tr><th>model (fit JSON)</th><th>reduced &chi;&sup2;</th><th>AIC</th><th>BIC</th>"
+        "<th>render RMSE</th><th>render relMSE</th><th>SSIM</th><th>fit time (s)</th>"
+        "<th>true parameters in 95&nbsp;% intervals</th></tr>"
+    )
+    return f"<table>{head}{''.join(rows)}</table>"
+
+
+def _params_table(m: Any, truth: dict[str, Any]) -> str:
+    rows = []
+    for key, value in m.params.items():
+        true = truth.get(key)
+        rows.append(
+            f"<tr><td><code>{_e(key)}</code></td><td class='num'>{_value(value)}</td>"
+            f"<td class='num'>{_interval(m.intervals.get(key))}</td>"
+            f"<td class='num'>{'&ndash;' if true is None else _value(true)}</td></tr>"
+        )
+    head = "<tr><th>parameter</th><th>value</th><th>95&nbsp;% interval</th><th>truth</th></tr>"
+    return f"<table>{head}{''.join(rows)}</table>"
+
+
+def render_html(summary: Any) -> str:
+    """The report page for a :class:`gonio.demo.pipeline.DemoSummary`."""
+    mat, acq, ren = summary.material, summary.acquisition, summary.render
+    files = summary.files
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>gonio demo: {_e(mat['name'])}</title><style>{_CSS}</style></head><body>",
+        f"<h1>gonio demo: {_e(mat['name'])}</h1>",
+        f"<p>{_e(mat['description'])}</p>",
+        "<h2>Acquisition</h2>",
+        f"<p>{acq['measured']} configurations measured on the simulated 4-axis rig"
+        f" ({acq['refused']} refused by its safety checks) in {acq['wall_s']:.0f}&nbsp;s;"
+        f' {_e(acq["table_note"])}. Rig file: <a href="{_e(files["rig"])}">rig.toml</a>;'
+        f' samples and gridded table: <a href="{_e(files["table"])}">table.brdf.h5</a>'
+        f' (<a href="run/log.jsonl">run log</a>).</p>',
+    ]
+    if files.get("camera_view"):
+        parts.append(
+            "<figure>"
+            + _img(files["camera_view"], "first HDR frame of the virtual camera")
+            + "<figcaption>What the camera saw (first configuration, tone-mapped HDR): ChArUco"
+            " board, the sample disk at its centre and the brighter white-reference disk beside"
+            " it.</figcaption></figure>"
+        )
+    parts += [
+        "<h2>Fits</h2>",
+        "<p>Weighted least squares on the measured samples (each weighted by its own"
+        " uncertainty), 95&nbsp;% intervals from the Laplace approximation. AIC and BIC compare"
+        " models fitted to the same data (lower is better). Render errors compare each fitted"
+        f" sphere with the {_e(ren['reference'])} sphere.</p>",
+        _models_table(summary.models),
+        "<h2>Spheres</h2>",
+        f"<p>{ren['resolution']}&times;{ren['resolution']} pixels, {ren['spp']} samples per"
+        f" pixel, {_e(ren['lights'])}; PNGs share one exposure; EXRs are linear radiance.</p>",
+        '<div class="spheres">',
+    ]
+    spheres = [("measured", ren["reference"])] + [
+        (m.preset.replace("+", "-"), m.label) for m in summary.models
+    ]
+    for stem, label in spheres:
+        im = ren["images"][stem]
+        parts.append(
+            f"<figure>{_img(im['png'], f'{label} sphere')}<figcaption>{_e(label)}<br>"
+            f'<a href="{_e(im["exr"])}">EXR</a></figcaption></figure>'
+        )
+    parts += [
+        "</div>",
+        "<figure>" + _img(files["compare"], "measured, fitted and difference per model"),
+        "<figcaption>measured | fitted | |difference| per model</figcaption></figure>",
+        "<h2>Per model</h2>",
+    ]
+    truth_all = mat.get("truth_params", {})
+    for m in summary.models:
+        parts.append(f"<h3>{_e(m.label)}</h3>")
+        parts.append(_params_table(m, truth_all.get(m.preset, {})))
+        for w in m.warnings:
+            parts.append(f'<p class="warn">{_e(w)}</p>')
+        parts.append('<div class="plots">')
+        for p in m.files["plots"]:
+            parts.append(f"<figure>{_img(p, Path(p).stem)}</figure>")
+        parts.append("</div>")
+    t = summary.timings_s
+    parts += [
+        "<h2>Timings</h2>",
+        "<table><tr><th>stage</th><th>seconds</th></tr>"
+        + "".join(f"<tr><td>{_e(k)}</td><td class='num'>{v:.1f}</td></tr>" for k, v in t.items())
+        + "</table>",
+        f'<p>All numbers: <a href="{_e(files["summary"])}">{_e(files["summary"])}</a>.</p>',
+        "</body></html>",
+    ]
+    return "\n".join(parts) + "\n"
+
+
+def write_report(path: str | Path, summary: Any) -> Path:
+    """Write ``index.html`` atomically; returns the path."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(render_html(summary), encoding="utf-8")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,90 @@
+"""The simulated sample's ground truth: an analytic gonio model or a measured table from a file.
+
+A rig file's ``[sim.sample]`` is either a model description (``Node.to_dict()`` form)::
+
+    [sim.sample]
+    type = "Phong"
+    params = { rho_d = [0.3, 0.25, 0.2], rho_s = 0.4, n = 80.0 }
+
+or a tabulated BRDF read through :func:`gonio.io.load` (RGL ``.bsdf``, MERL ``.binary``, native
+``.brdf.h5``), so that a real material's measurement is what the simulated rig sees::
+
+    [sim.sample]
+    file = "../shared/data/rgl/vch_golden_yellow_rgb.bsdf"   # relative to the rig file
+
+Measured RGB tables can hold small negative values where a spectral measurement was converted to
+RGB; a reflectance cannot be negative, so the ground truth clamps them to zero.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from gonio.errors import FormatError, RigConfigError
+
+
+def truth_file(spec: dict, source: str) -> Path | None:
+    """The table file named by a ``[sim.sample]`` spec (relative to the rig file), or None."""
+    if "file" not in spec:
+        return None
+    extra = sorted(set(spec) - {"file"})
+    if extra:
+        raise RigConfigError(f"{source}: sim.sample.{extra[0]}: not allowed beside 'file'")
+    p = Path(str(spec["file"])).expanduser()
+    src = Path(source)
+    if not p.is_absolute() and src.suffix == ".toml" and src.parent.is_dir():
+        p = src.parent / p
+    return p
+
+
+class ClampedTable:
+    """A tabulated BRDF whose ``f`` is clamped at zero (see the module docstring).
+
+    Only ``f`` is offered: the simulated camera evaluates the ground truth, it never samples it.
+    """
+
+    def __init__(self, table: Any) -> None:
+        self.table = table
+        self.channels = table.values.shape[-1]
+
+    def f(self, wi: Any, wo: Any) -> Any:
+        import jax.numpy as jnp
+
+        return jnp.maximum(self.table.f(wi, wo), 0.0)
+
+
+@lru_cache(maxsize=4)
+def _load_table(path: str, mtime_ns: int) -> ClampedTable:
+    from gonio import io
+
+    obj = io.load(path)
+    if not hasattr(obj, "values") or not hasattr(obj, "axes"):
+        raise FormatError(
+            f"{path}: holds scattered samples; a simulated sample needs a tabulated BRDF"
+        )
+    return ClampedTable(obj)
+
+
+def load_truth(spec: dict, source: str) -> Any:
+    """The ground truth of a ``[sim.sample]`` spec: a gonio model or a :class:`ClampedTable`.
+
+    Raises
+    ------
+    RigConfigError
+        When the file is missing or the model description is invalid.
+    FormatError
+        When the file cannot be read as a tabulated BRDF.
+    """
+    path = truth_file(spec, source)
+    if path is None:
+        from gonio.brdf.models import Node
+
+        try:
+            return Node.from_dict(spec)
+        except Exception as exc:
+            raise RigConfigError(f"{source}: sim.sample: not a gonio model: {exc}") from None
+    if not path.is_file():
+        raise RigConfigError(f"{source}: sim.sample.file: no such file: {path}")
+    return _load_table(str(path.resolve()), path.stat().st_mtime_ns)
