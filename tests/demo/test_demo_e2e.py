@@ -1,0 +1,192 @@
+"""End-to-end: a reduced ``gonio demo`` on the simulated rig, checked against its ground truth.
+
+One reduced run (plan ``demo-quick``, built-in analytic material, small renders) is shared by
+the tests of this module; they run in one xdist worker (``xdist_group``).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from urllib.parse import unquote, urlparse
+
+import numpy as np
+import pytest
+
+from gonio.demo import DemoSettings, builtin_material, run_demo
+
+pytestmark = pytest.mark.xdist_group("demo-e2e")
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMEDRIVER = Path("/usr/bin/chromedriver")
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "gonio-demo"
+    material = builtin_material()
+    summary = run_demo(out, material, DemoSettings.quick(resolution=64, spp=8), progress=False)
+    return out, material, summary
+
+
+def test_true_model_recovers_ground_truth_within_intervals(demo):
+    out, material, _ = demo
+    truth = material.truth_params["lambert+ts"]
+    # read the written fit file, not the in-memory summary: the file is the product
+    doc = json.loads((out / "fits" / "lambert-ts.json").read_text())
+    for key, value in truth.items():
+        lo, hi = (np.asarray(x, dtype=float) for x in doc["intervals"][key])
+        v = np.broadcast_to(np.asarray(value, dtype=float), lo.shape)
+        assert np.all(lo <= v) and np.all(v <= hi), (key, value, lo, hi)
+        if key not in doc["fixed"]:
+            assert np.all(hi > lo), key  # a real interval, not a point
+    assert 0.5 < doc["reduced_chi2"] < 2.0  # the true model fits to the noise level
+
+
+def test_true_model_is_preferred_and_renders_closest(demo):
+    _, _, summary = demo
+    by = {m.preset: m for m in summary.models}
+    assert [m.preset for m in summary.models] == [
+        "lambert",
+        "oren-nayar",
+        "lambert+ward",
+        "lambert+ts",
+    ]
+    best_bic = min(summary.models, key=lambda m: m.bic)
+    assert best_bic.preset == "lambert+ts"
+    assert by["lambert+ts"].truth_check and all(by["lambert+ts"].truth_check.values())
+    # the diffuse-only fits cannot show the coat's highlight
+    assert by["lambert+ts"].rmse < by["lambert"].rmse / 5
+    assert by["lambert+ts"].ssim > by["lambert"].ssim
+
+
+def test_outputs_exist_and_are_readable(demo):
+    from gonio import io
+    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.render.output import read_exr
+
+    out, _, summary = demo
+    samples = io.load(out / "run" / "table.brdf.h5")
+    assert isinstance(samples, MeasuredSamples)
+    assert len(samples.values) == summary.acquisition["measured"] > 40
+    for stem in ("measured", "lambert", "oren-nayar", "lambert-ward", "lambert-ts"):
+        img = read_exr(out / "renders" / f"{stem}.exr")
+        assert img.shape == (64, 64, 3) and np.isfinite(img).all() and img.max() > 0
+        assert (out / "renders" / f"{stem}.png").stat().st_size > 0
+    assert (out / "compare.png").is_file() and (out / "camera-view.png").is_file()
+    doc = json.loads((out / "demo-summary.json").read_text())
+    assert doc["material"]["name"] == "builtin-orange-paint"
+    assert set(doc["timings_s"]) >= {"acquire", "fit", "render", "total"}
+    # pruning kept the first configurations' images only; the table holds every sample
+    kept = {p.name.split("_")[0].split(".")[0] for p in (out / "run" / "raw").iterdir()}
+    assert 1 <= len(kept) <= 3
+
+
+def test_fit_files_validate_against_the_published_schema(demo):
+    import jsonschema
+
+    from gonio.fit.result import schema_text
+
+    out, _, _ = demo
+    schema = json.loads(schema_text())
+    for path in sorted((out / "fits").glob("*.json")):
+        jsonschema.validate(json.loads(path.read_text()), schema)
+
+
+def _local_refs(index: Path) -> list[tuple[str, str]]:
+    import html5lib
+
+    doc = html5lib.parse(index.read_text(encoding="utf-8"), namespaceHTMLElements=False)
+    refs = [("img", e.get("src")) for e in doc.iter("img")]
+    refs += [("a", e.get("href")) for e in doc.iter("a")]
+    return refs
+
+
+def test_report_is_valid_html_and_every_image_and_link_resolves(demo):
+    import html5lib
+
+    out, _, summary = demo
+    index = out / "index.html"
+    # the strict parser raises on any parse error of the HTML standard
+    html5lib.HTMLParser(strict=True).parse(index.read_text(encoding="utf-8"))
+    refs = _local_refs(index)
+    assert len([r for r in refs if r[0] == "img"]) >= 5 + 1 + 4 * 3  # spheres, compare, plots
+    for kind, ref in refs:
+        assert ref, f"{kind} without a target"
+        url = urlparse(ref)
+        assert not url.scheme and not url.netloc, f"{ref}: the report must be self-contained"
+        target = (out / unquote(url.path)).resolve()
+        assert target.is_relative_to(out.resolve()), ref
+        assert target.is_file(), f"{kind} {ref} does not resolve"
+    text = index.read_text(encoding="utf-8")
+    for m in summary.models:  # the numbers are on the page
+        assert f"{m.reduced_chi2:.4g}" in text
+
+
+def test_report_survives_a_move(demo, tmp_path):
+    out, _, _ = demo
+    moved = tmp_path / "copy"
+    shutil.copytree(out, moved)
+    for _, ref in _local_refs(moved / "index.html"):
+        assert (moved / unquote(urlparse(ref).path)).is_file(), ref
+
+
+@pytest.mark.skipif(
+    not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
+    reason="Debian's chromium and chromium-driver are not installed (/usr/bin/chromium, "
+    "/usr/bin/chromedriver)",
+)
+def test_report_opens_in_headless_chromium_without_console_errors(demo, tmp_path):
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
+    from selenium.webdriver.chrome.service import Service
+
+    out, _, _ = demo
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}",
+    ):
+        options.add_argument(flag)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=options)
+    try:
+        driver.get((out / "index.html").resolve().as_uri())
+        assert driver.title.startswith("gonio demo")
+        images = driver.execute_script(
+            "return Array.from(document.images).map(i => [i.src, i.complete, i.naturalWidth]);"
+        )
+        assert images and all(done and width > 0 for _, done, width in images), images
+        errors = [e for e in driver.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+        assert not errors, errors
+    finally:
+        driver.quit()
+
+
+def test_demo_refuses_a_foreign_non_empty_folder(tmp_path, capsys):
+    from gonio.cli import main
+
+    keep = tmp_path / "mine" / "notes.txt"
+    keep.parent.mkdir()
+    keep.write_text("precious")
+    rc = main(["demo", "--out", str(keep.parent), "--force", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc != 0 and err.count("\n") == 1 and "refusing to delete" in err
+    assert keep.read_text() == "precious"
+
+
+def test_demo_rejects_a_missing_material_file(tmp_path, capsys):
+    from gonio.cli import main
+
+    rc = main(["demo", "--out", str(tmp_path / "d"), "--material", str(tmp_path / "no.bsdf")])
+    err = capsys.readouterr().err
+    assert rc != 0 and "no such file" in err and err.count("\n") == 1
+    assert not (tmp_path / "d").exists()
