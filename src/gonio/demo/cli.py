@@ -82,32 +82,53 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(summary: Any) -> None:
-    """The final summary table on the terminal."""
+    """The final summary on the terminal: one table of fit quality, one of parameters."""
     from rich.console import Console
     from rich.table import Table
 
-    from gonio.demo.pipeline import short_params
-
-    table = Table(title=f"gonio demo: {summary.material['name']}")
-    for col in ("model", "parameters", "red. chi2", "BIC", "render RMSE", "SSIM", "truth in CI"):
-        table.add_column(col, justify="left" if col in ("model", "parameters") else "right")
+    quality = Table(title=f"gonio demo: {summary.material['name']}")
+    for col in ("model", "red. chi2", "BIC", "render RMSE", "SSIM", "truth in 95% CI"):
+        quality.add_column(col, justify="left" if col == "model" else "right")
+    params = Table(title="fitted parameters (95% intervals)")
+    for col in ("model", "parameter", "value", "interval"):
+        params.add_column(col, justify="left" if col in ("model", "parameter") else "right")
     for m in summary.models:
         chk = "-"
         if m.truth_check:
             chk = "yes" if all(m.truth_check.values()) else "NO"
-        table.add_row(
+        quality.add_row(
             m.label,
-            short_params(m.params),
             f"{m.reduced_chi2:.3g}",
             f"{m.bic:.4g}",
             "-" if m.rmse is None else f"{m.rmse:.3g}",
             "-" if m.ssim is None else f"{m.ssim:.3f}",
             chk,
         )
+        rows = list(_flat_rows(m.params, m.intervals))
+        for i, (name, value, interval) in enumerate(rows):
+            params.add_row(
+                m.label if i == 0 else "", name, value, interval, end_section=i == len(rows) - 1
+            )
     console = Console()
-    console.print(table)
+    console.print(quality)
+    console.print(params)
     t = summary.timings_s
     console.print(
         f"acquire {t['acquire']:.0f} s, fit {t['fit']:.0f} s, render {t['render']:.0f} s,"
         f" total {t['total']:.0f} s. Report: {summary.out}/index.html"
     )
+
+
+def _flat_rows(params: dict[str, Any], intervals: dict[str, Any]):
+    """``(name, value, interval)`` text per scalar: per-channel values get one row each."""
+    import numpy as np
+
+    for key, value in params.items():
+        v = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+        iv = intervals.get(key)
+        lo, hi = (np.atleast_1d(np.asarray(x, dtype=float)).ravel() for x in iv) if iv else ([], [])
+        short = key.split(".", 1)[-1] if "." in key else key
+        for c, x in enumerate(v):
+            name = short if v.size == 1 else f"{short}[{'RGB'[c] if v.size == 3 else c}]"
+            interval = f"[{lo[c]:.4g}, {hi[c]:.4g}]" if len(lo) == v.size else "-"
+            yield name, f"{x:.4g}", interval

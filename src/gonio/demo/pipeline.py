@@ -197,16 +197,20 @@ def truth_check(result: Any, truth: dict[str, Any]) -> dict[str, bool]:
     return out
 
 
-def short_params(params: dict[str, Any]) -> str:
-    """Parameters as ``name=value`` text, per-channel values in parentheses (3 digits)."""
+def format_value(v: Any, digits: int = 4) -> str:
+    """A scalar as ``0.123``, a per-channel value as ``(0.1, 0.2, 0.3)``."""
+    a = np.asarray(v, dtype=float)
+    if a.ndim == 0:
+        return f"{float(a):.{digits}g}"
+    return "(" + ", ".join(f"{x:.{digits}g}" for x in a.ravel()) + ")"
 
-    def fmt(v: Any) -> str:
-        a = np.asarray(v, dtype=float)
-        if a.ndim == 0:
-            return f"{float(a):.3g}"
-        return "(" + ", ".join(f"{x:.3g}" for x in a.ravel()) + ")"
 
-    return ", ".join(f"{k.rsplit('.', 1)[-1]}={fmt(v)}" for k, v in params.items())
+def format_interval(iv: Any, digits: int = 4) -> str:
+    """``[lo, hi]`` per value (per channel), or ``-`` when there is no interval."""
+    if not iv:
+        return "-"
+    lo, hi = (np.asarray(x, dtype=float).ravel() for x in iv)
+    return ", ".join(f"[{a:.{digits}g}, {b:.{digits}g}]" for a, b in zip(lo, hi, strict=True))
 
 
 # -- the whole run ------------------------------------------------------------------------------

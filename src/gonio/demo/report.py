@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from gonio.demo.pipeline import format_interval, format_value
 
 _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 70em; color: #222; }
@@ -39,22 +39,6 @@ def _num(x: Any, digits: int = 4) -> str:
     if x is None:
         return "&ndash;"
     return f"{float(x):.{digits}g}"
-
-
-def _value(v: Any) -> str:
-    a = np.asarray(v, dtype=float)
-    if a.ndim == 0:
-        return f"{float(a):.4g}"
-    return "(" + ", ".join(f"{x:.4g}" for x in a.ravel()) + ")"
-
-
-def _interval(iv: Any) -> str:
-    if not iv:
-        return "&ndash;"
-    lo, hi = (np.asarray(x, dtype=float) for x in iv)
-    if lo.ndim == 0:
-        return f"[{float(lo):.4g}, {float(hi):.4g}]"
-    return ", ".join(f"[{a:.4g}, {b:.4g}]" for a, b in zip(lo.ravel(), hi.ravel(), strict=True))
 
 
 def _img(src: str, alt: str, cls: str = "") -> str:
@@ -92,12 +76,25 @@ def _params_table(m: Any, truth: dict[str, Any]) -> str:
     for key, value in m.params.items():
         true = truth.get(key)
         rows.append(
-            f"<tr><td><code>{_e(key)}</code></td><td class='num'>{_value(value)}</td>"
-            f"<td class='num'>{_interval(m.intervals.get(key))}</td>"
-            f"<td class='num'>{'&ndash;' if true is None else _value(true)}</td></tr>"
+            f"<tr><td><code>{_e(key)}</code></td><td class='num'>{format_value(value)}</td>"
+            f"<td class='num'>{_e(format_interval(m.intervals.get(key)))}</td>"
+            f"<td class='num'>{'&ndash;' if true is None else format_value(true)}</td></tr>"
         )
     head = "<tr><th>parameter</th><th>value</th><th>95&nbsp;% interval</th><th>truth</th></tr>"
     return f"<table>{head}{''.join(rows)}</table>"
+
+
+def _reference_note(material: dict[str, Any], render: dict[str, Any]) -> str:
+    if material.get("table"):
+        return (
+            "The measured sphere renders the material's table itself (the simulated sample's"
+            " ground truth); the fitted spheres render the models fitted to what the simulated"
+            " rig acquired from it."
+        )
+    return (
+        f"The {render['reference']} sphere renders the built-in material's exact model; the"
+        " fitted spheres render the models fitted to what the simulated rig acquired from it."
+    )
 
 
 def render_html(summary: Any) -> str:
@@ -131,11 +128,14 @@ def render_html(summary: Any) -> str:
         "<p>Weighted least squares on the measured samples (each weighted by its own"
         " uncertainty), 95&nbsp;% intervals from the Laplace approximation. AIC and BIC compare"
         " models fitted to the same data (lower is better). Render errors compare each fitted"
-        f" sphere with the {_e(ren['reference'])} sphere.</p>",
+        f" sphere with the {_e(ren['reference'])} sphere. A reduced &chi;&sup2; far above 1 means"
+        " the model cannot follow the data within the measurement uncertainty (well below 1&nbsp;%"
+        " per sample here): no analytic model is exact for a real material.</p>",
         _models_table(summary.models),
         "<h2>Spheres</h2>",
         f"<p>{ren['resolution']}&times;{ren['resolution']} pixels, {ren['spp']} samples per"
-        f" pixel, {_e(ren['lights'])}; PNGs share one exposure; EXRs are linear radiance.</p>",
+        f" pixel, {_e(ren['lights'])}; PNGs share one exposure; EXRs are linear radiance."
+        f" {_e(_reference_note(mat, ren))}</p>",
         '<div class="spheres">',
     ]
     spheres = [("measured", ren["reference"])] + [
