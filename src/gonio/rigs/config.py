@@ -603,8 +603,8 @@ def _build(data: dict, text: str, source: str) -> RigConfig:
 
         try:
             path = truth_file(sim.sample, source)
-        except RigConfigError as exc:
-            raise fail(("sim", "sample"), str(exc).split(": ", 1)[-1]) from None
+        except ValueError as exc:
+            raise fail(("sim", "sample"), str(exc)) from None
         if path is None:
             from gonio.brdf import models
 

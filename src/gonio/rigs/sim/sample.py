@@ -38,9 +38,13 @@ class SimulatedSampleCamera:
         import jax
         import jax.numpy as jnp
 
+        from gonio.brdf import models
+
         if self._f is None:
-            # jit at the device boundary: one compile, then ~0.1 ms per capture
-            self._f = jax.jit(self.model.f)
+            # jit at the device boundary: one compile, then ~0.1 ms per capture (an analytic
+            # model; a table would be baked into the compiled code as a constant)
+            is_model = isinstance(self.model, models.BRDFModel)
+            self._f = jax.jit(self.model.f) if is_model else self.model.f
         f = self._f(jnp.asarray(wi, dtype=jnp.float64), jnp.asarray(wo, dtype=jnp.float64))
         return np.asarray(f, dtype=float)
 

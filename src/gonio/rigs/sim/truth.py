@@ -26,12 +26,18 @@ from gonio.errors import FormatError, RigConfigError
 
 
 def truth_file(spec: dict, source: str) -> Path | None:
-    """The table file named by a ``[sim.sample]`` spec (relative to the rig file), or None."""
+    """The table file named by a ``[sim.sample]`` spec (relative to the rig file), or None.
+
+    Raises
+    ------
+    ValueError
+        When the spec mixes ``file`` with model keys (the message names the key).
+    """
     if "file" not in spec:
         return None
     extra = sorted(set(spec) - {"file"})
     if extra:
-        raise RigConfigError(f"{source}: sim.sample.{extra[0]}: not allowed beside 'file'")
+        raise ValueError(f"{extra[0]}: not allowed beside 'file'")
     p = Path(str(spec["file"])).expanduser()
     src = Path(source)
     if not p.is_absolute() and src.suffix == ".toml" and src.parent.is_dir():
@@ -77,7 +83,10 @@ def load_truth(spec: dict, source: str) -> Any:
     FormatError
         When the file cannot be read as a tabulated BRDF.
     """
-    path = truth_file(spec, source)
+    try:
+        path = truth_file(spec, source)
+    except ValueError as exc:
+        raise RigConfigError(f"{source}: sim.sample.{exc}") from None
     if path is None:
         from gonio.brdf.models import Node
 
