@@ -152,6 +152,27 @@ def test_load_model_rejects_bad_files(tmp_path):
         gf.load_model(tmp_path / "missing.json")
 
 
+def test_laplace_draws_match_intervals_and_respect_bounds(fitted):
+    # interior parameters: the draws' 2.5/97.5 percentiles are the 95 % interval (4000 draws:
+    # a percentile's sampling error is ~0.1 sd, allow 0.25 sd)
+    _, res = fitted
+    unc = res.uncertainty
+    assert unc.samples.shape == (4000, len(unc.names))
+    q = np.percentile(unc.samples, [2.5, 97.5], axis=0).T
+    finite = np.isfinite(unc.std)
+    err = np.abs(q[finite] - unc.interval95[finite]) / unc.std[finite, None]
+    assert err.max() < 0.25, err
+    # a parameter on its lower bound (Oren-Nayar sigma of Lambertian data): no draw below it
+    data, _ = synthetic(models.Lambert(albedo=0.5), n=400, seed=2)
+    on = gf.fit(data, model="oren-nayar", uncertainty="laplace")
+    i = on.flat_names.index("sigma")
+    lower = models.OrenNayar().param_specs()["sigma"].lower
+    assert on.uncertainty.samples[:, i].min() >= lower
+    # and 2.5 % of them above its one-sided interval (binomial sd 0.25 %; 4 sd allowed)
+    above = np.mean(on.uncertainty.samples[:, i] > on.uncertainty.interval95[i, 1])
+    assert abs(above - 0.025) < 0.01
+
+
 # -- stress ----------------------------------------------------------------------------------
 def test_all_diffuse_data_puts_lobe_on_bound():
     data, _ = synthetic(models.Lambert(albedo=[0.4, 0.5, 0.6]), n=800, seed=1)

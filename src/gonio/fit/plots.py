@@ -147,14 +147,6 @@ def corner_plot(
     return _save(fig, path)
 
 
-def laplace_samples(unc: Any, n: int = 4000, seed: int = 0) -> np.ndarray:
-    """Draws from the Laplace Gaussian (physical units, delta method) for a corner plot."""
-    std = np.where(np.isfinite(unc.std), unc.std, 0.0)
-    cov = unc.correlation * np.outer(std, std)
-    rng = np.random.default_rng(seed)
-    return rng.multivariate_normal(unc.center, cov, size=n, method="eigh")
-
-
 def plot_result(result: Any, data: FitData, out_dir: str | Path, stem: str) -> list[Path]:
     """Every plot of one result into ``out_dir`` as ``<stem>-*.png``; returns the paths."""
     out_dir = Path(out_dir)
@@ -164,15 +156,13 @@ def plot_result(result: Any, data: FitData, out_dir: str | Path, stem: str) -> l
         polar_slices(data, result.model, out_dir / f"{stem}-slices.png", result.name, f=f),
     ]
     unc = result.uncertainty
-    if unc is not None and len(unc.names) >= 1:
-        samples = unc.samples if unc.samples is not None else laplace_samples(unc)
-        if len(unc.names) <= 12:
-            paths.append(
-                corner_plot(
-                    samples,
-                    unc.names,
-                    out_dir / f"{stem}-corner.png",
-                    title=f"{result.name} ({unc.method})",
-                )
+    if unc is not None and unc.samples is not None and 1 <= len(unc.names) <= 12:
+        paths.append(
+            corner_plot(
+                unc.samples,
+                unc.names,
+                out_dir / f"{stem}-corner.png",
+                title=f"{result.name} ({unc.method})",
             )
+        )
     return paths
