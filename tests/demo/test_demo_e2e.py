@@ -190,3 +190,26 @@ def test_demo_rejects_a_missing_material_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc != 0 and "no such file" in err and err.count("\n") == 1
     assert not (tmp_path / "d").exists()
+
+
+def test_demo_rejects_scattered_samples_as_material(tmp_path, capsys):
+    from gonio.cli import main
+    from tests.conftest import shared_file
+
+    path = shared_file("cornell", "acryl_blue.brdf")
+    rc = main(["demo", "--out", str(tmp_path / "d"), "--material", str(path)])
+    err = capsys.readouterr().err
+    assert rc != 0 and "scattered samples" in err and err.count("\n") == 1
+    assert not (tmp_path / "d").exists()
+
+
+def test_auto_material_prefers_rgl_data_and_falls_back_to_builtin(tmp_path, monkeypatch):
+    from gonio.demo import find_material, materials
+    from tests.conftest import shared_file
+
+    felt = shared_file("rgl", "acrylic_felt_green_rgb.bsdf")
+    monkeypatch.setattr(materials, "data_folders", lambda: [tmp_path, felt.parents[1]])
+    m = find_material("auto")
+    assert m.is_measured and m.table_path == felt.resolve() and "felt" in m.description.lower()
+    monkeypatch.setattr(materials, "data_folders", lambda: [tmp_path])
+    assert find_material("auto").name == "builtin-orange-paint"

@@ -93,25 +93,25 @@ def data_folders() -> list[Path]:
     return list(dict.fromkeys(out))
 
 
-def _description(path: Path) -> str:
-    from gonio import io
-
-    try:
-        meta = io.load(path).meta.get("source", {})
-    except Exception:  # the description is cosmetic; the demo reports load errors later
-        return f"RGL-EPFL measurement {path.name}"
-    text = meta.get("description") or path.name
-    return f"RGL-EPFL measurement: {text} ({path.name})"
-
-
 def table_material(path: Path) -> DemoMaterial:
     """A demo material whose ground truth is the tabulated BRDF in ``path``."""
+    from gonio.rigs.sim.truth import load_truth
+
     path = Path(path).expanduser().resolve()
     if not path.is_file():
         raise ParameterError(f"--material: no such file: {path}")
+    # read (and validate) the table now, before anything is created; the simulated camera gets
+    # the same, cached, object
+    table = load_truth({"file": str(path)}, "--material").table
+    source = table.meta.get("source", {}) if isinstance(table.meta, dict) else {}
+    text = source.get("description") if isinstance(source, dict) else None
+    kind = "RGL-EPFL measurement" if path.suffix == ".bsdf" else "measured table"
     stem = path.name.split(".")[0].removesuffix("_rgb")
     return DemoMaterial(
-        name=stem, description=_description(path), sample={"file": str(path)}, table_path=path
+        name=stem,
+        description=f"{kind}: {text} ({path.name})" if text else f"{kind} {path.name}",
+        sample={"file": str(path)},
+        table_path=path,
     )
 
 
