@@ -139,7 +139,13 @@ def laplace(problem: Problem, u: np.ndarray, method: str = "gauss-newton") -> Un
             + ", ".join(n for n, e in zip(names, on_edge, strict=True) if e)
         )
     return Uncertainty(
-        samples=_laplace_draws(layout, u, cov_u, weak, lo_box, hi_box),
+        samples=_laplace_draws(
+            layout,
+            u,
+            v[:, ok] / np.sqrt(w[ok]) * np.sqrt(s2) / scale[:, None],
+            weak,
+            (lo_box, hi_box),
+        ),
         method="laplace",
         names=names,
         center=center,
@@ -160,23 +166,24 @@ def laplace(problem: Problem, u: np.ndarray, method: str = "gauss-newton") -> Un
 def _laplace_draws(
     layout: Any,
     u: np.ndarray,
-    cov_u: np.ndarray,
+    root: np.ndarray,
     weak: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
     n: int = 4000,
     seed: int = 0,
 ) -> np.ndarray:
     """(n, P) draws of the Laplace approximation in physical units.
 
-    The Gaussian lives in the fitted coordinates ``u``; draws are clipped to the search box and
-    mapped through the parameter transforms, like the intervals. (A Gaussian in physical units,
-    from the delta-method covariance, would put mass beyond a bound that a parameter sits on.)
-    Parameters the data do not constrain are drawn uniformly over the box.
+    The Gaussian lives in the fitted coordinates: ``u + root @ z`` with ``z ~ N(0, I)`` and
+    ``root @ root.T`` the covariance of ``u`` (from its eigendecomposition, so no numerically
+    indefinite matrix is ever factorized). Draws are clipped to the search box and mapped through
+    the parameter transforms, like the intervals; a Gaussian in physical units (the delta-method
+    covariance) would put mass beyond a bound that a parameter sits on. Parameters the data do
+    not constrain are drawn uniformly over the box.
     """
+    lo, hi = box
     rng = np.random.default_rng(seed)
-    cov = np.where(weak[:, None] | weak[None, :], 0.0, cov_u)
-    x = rng.multivariate_normal(u, cov, size=n, method="eigh")
+    x = u + rng.standard_normal((n, root.shape[1])) @ root.T
     if weak.any():
         x[:, weak] = rng.uniform(lo[weak], hi[weak], (n, int(weak.sum())))
     x = np.clip(x, lo, hi)
