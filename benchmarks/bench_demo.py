@@ -21,7 +21,7 @@ from pathlib import Path
 from gonio.demo import DemoSettings, find_material, run_demo
 
 RESULTS = Path(__file__).resolve().parent / "results"
-STAGES = ("acquire", "fit", "render", "report", "total")
+STAGES = ("acquire", "fit", "render", "total")
 
 
 def run(label: str, material_choice: str, settings: DemoSettings, tmp: Path) -> dict:
