@@ -15,7 +15,7 @@ def register(sub: Any) -> None:
         description=(
             "Start the simulated rig (Dynamixel servos emulated on a pseudo-terminal, a virtual"
             " camera writing DNG brackets), measure a real material with it, build the table,"
-            " fit Lambert, Oren-Nayar, Lambert + Ward and Lambert + Torrance-Sparrow with 95%%"
+            " fit Lambert, Oren-Nayar, Lambert + Ward and Lambert + Torrance-Sparrow with 95%"
             " intervals, render measured and fitted spheres and write OUT/index.html. The"
             " material is an RGL-EPFL measurement found in $GONIO_DATA/rgl or ../shared/data/rgl"
             " (the simulated sample's ground truth), else a built-in analytic paint. About 4"
@@ -33,7 +33,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--quick",
         action="store_true",
-        help="reduced run: plan 'demo-quick' (64 configurations), 96 px spheres at 16 spp",
+        help="reduced run: plan 'demo-quick' (64 planned configurations), 96 px spheres at 16 spp",
     )
     p.add_argument(
         "--uncertainty",
