@@ -1,7 +1,7 @@
 """End-to-end: a reduced ``gonio demo`` on the simulated rig, checked against its ground truth.
 
 One reduced run (plan ``demo-quick``, built-in analytic material, small renders) is shared by
-the tests of this module; they run in one xdist worker (``xdist_group``).
+the tests of this module; they run in one xdist worker (``xdist_group``), which builds it once.
 """
 
 from __future__ import annotations
@@ -22,7 +22,9 @@ CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
 
 
-@pytest.fixture(scope="module")
+# session scope: xdist may run another module's tests between these in the same worker, which
+# would tear a module-scoped fixture down and run the demo twice
+@pytest.fixture(scope="session")
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "gonio-demo"
     material = builtin_material()
