@@ -147,11 +147,14 @@ class _Lazy:
             slot_of = np.zeros(n_buckets, np.int32)
             slot_of[keys] = np.arange(len(keys), dtype=np.int32)
             names = self.items[keys[0]].keys()
-            arrays = {
-                name: jnp.asarray(np.stack([self.items[k][name] for k in keys_padded]))
-                for name in names
-            }
-            self._stack = (jnp.asarray(slot_of), arrays)
+            # concrete arrays even when first asked for under a jit trace: the cache outlives
+            # the trace (a staged constant would leak into the next trace)
+            with jax.ensure_compile_time_eval():
+                arrays = {
+                    name: jnp.asarray(np.stack([self.items[k][name] for k in keys_padded]))
+                    for name in names
+                }
+                self._stack = (jnp.asarray(slot_of), arrays)
         return self._stack
 
 
@@ -168,14 +171,15 @@ class TableSampler:
         cos_desc[0], cos_desc[-1] = 1.0, 0.0
         self.cos_desc = cos_desc
         self.omega = (cos_desc[:-1] - cos_desc[1:]) * (TWO_PI / n_p)
-        self._consts = {
-            dt: (
-                jnp.asarray(cos_desc, dt),
-                jnp.asarray(cos_desc[::-1].copy(), dt),
-                jnp.asarray(self.omega, dt),
-            )
-            for dt in (jnp.float32, jnp.float64)
-        }
+        with jax.ensure_compile_time_eval():  # the sampler may be created under a jit trace
+            self._consts = {
+                dt: (
+                    jnp.asarray(cos_desc, dt),
+                    jnp.asarray(cos_desc[::-1].copy(), dt),
+                    jnp.asarray(self.omega, dt),
+                )
+                for dt in (jnp.float32, jnp.float64)
+            }
         self._grid = _Lazy(self._build_grid)
         self._alias = _Lazy(self._build_alias)
         self._rejection: dict[Any, _Lazy] = {}
