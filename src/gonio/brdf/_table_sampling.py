@@ -56,6 +56,7 @@ from gonio.brdf.sampling import (
     seeds_from_rng,
     seeds_from_u,
 )
+from gonio.brdf.tabulated import atan2 as _atan2
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -84,28 +85,38 @@ class _Geo:
 
 def _bucket_of(geo: _Geo, wo: Array) -> Array:
     x, y, z = wo[..., 0], wo[..., 1], wo[..., 2]
-    theta = jnp.arctan2(jnp.sqrt(x * x + y * y), z)
+    # fast polynomial atan2 in float32 (XLA's is ~25x slower on CPU), exact in float64; sample
+    # and pdf both bucket through here, so they always agree
+    theta = _atan2(jnp.sqrt(x * x + y * y), z)
     bt = jnp.clip(jnp.floor(theta * (geo.n_to / HALF_PI)).astype(jnp.int32), 0, geo.n_to - 1)
     if geo.iso:
         return bt
-    phi = jnp.arctan2(y, x)
+    phi = _atan2(y, x)
     phi = jnp.where(phi < 0, phi + TWO_PI, phi)
     bp = jnp.clip(jnp.floor(phi * (geo.n_po / TWO_PI)).astype(jnp.int32), 0, geo.n_po - 1)
     return bt * geo.n_po + bp
 
 
-def _phi_o(wo: Array) -> Array:
-    return jnp.arctan2(wo[..., 1], wo[..., 0])
+def _azimuth_frame(wo: Array) -> tuple[Array, Array]:
+    """``(cos phi_o, sin phi_o)`` of ``wo``; ``(1, 0)`` at the pole (where atan2 gives 0)."""
+    x, y = wo[..., 0], wo[..., 1]
+    r2 = x * x + y * y
+    pole = r2 <= 0
+    inv = jnp.where(pole, 0.0, jax.lax.rsqrt(jnp.where(pole, 1.0, r2)))
+    return jnp.where(pole, 1.0, x * inv), y * inv
 
 
 def _cell_of(geo: _Geo, wi: Array, wo: Array, cos_asc: Array) -> tuple[Array, Array]:
     """Incident-grid cell ``(row, col)`` of ``wi`` (rows by cos theta, as the sampler builds)."""
     k = jnp.searchsorted(cos_asc, wi[..., 2], side="left").astype(jnp.int32)
     row = jnp.clip(geo.n_t - k, 0, geo.n_t - 1)
-    phi = jnp.arctan2(wi[..., 1], wi[..., 0])
-    if geo.iso:
-        phi = phi - _phi_o(wo)
-    phi = jnp.mod(phi, TWO_PI)
+    x, y = wi[..., 0], wi[..., 1]
+    if geo.iso:  # azimuth relative to wo's: rotate wi by -phi_o
+        c, s = _azimuth_frame(wo)
+        x, y = c * x + s * y, c * y - s * x
+    phi = _atan2(y, x)
+    phi = jnp.where(phi < 0, phi + TWO_PI, phi)
+    phi = jnp.where(phi >= TWO_PI, 0.0, phi)
     col = jnp.clip(jnp.floor(phi * (geo.n_p / TWO_PI)).astype(jnp.int32), 0, geo.n_p - 1)
     return row, col
 
@@ -118,9 +129,13 @@ def _direction_in_cell(
     ct = c0 - ry * (c0 - c1)
     st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
     phi = (col.astype(ct.dtype) + rx) * (TWO_PI / geo.n_p)
-    if geo.iso:
-        phi = phi + _phi_o(wo)
-    return jnp.stack([st * jnp.cos(phi), st * jnp.sin(phi), ct], -1)
+    cp, sp = jnp.cos(phi), jnp.sin(phi)
+    if geo.iso:  # phi is relative to wo's azimuth: rotate by +phi_o
+        c, s = _azimuth_frame(wo)
+        cp, sp = c * cp - s * sp, s * cp + c * sp
+    # stacked along a new leading axis and transposed: XLA's CPU backend then evaluates each
+    # component in its own vectorized loop instead of one scalar loop over (..., 3)
+    return jnp.moveaxis(jnp.stack([st * cp, st * sp, ct], 0), 0, -1)
 
 
 class _Lazy:
@@ -640,7 +655,7 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
     b = _bucket_of(geo, wo)
     s = jnp.take(slot_of, b)
     x, y, z = wo[..., 0], wo[..., 1], wo[..., 2]
-    theta = jnp.arctan2(jnp.sqrt(x * x + y * y), z)
+    theta = _atan2(jnp.sqrt(x * x + y * y), z)
     bt = b // geo.n_po
     ft = jnp.clip(theta * (geo.n_to / HALF_PI) - bt.astype(theta.dtype), 0.0, 1.0)
     if geo.iso:
@@ -652,7 +667,7 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
         base = s * _RHO_NODES + i0
         return (1 - fr) * jnp.take(flat, base) + fr * jnp.take(flat, base + 1)
     k = _RHO_NODES_ANISO - 1
-    phi = jnp.arctan2(y, x)
+    phi = _atan2(y, x)
     phi = jnp.where(phi < 0, phi + TWO_PI, phi)
     bp = b % geo.n_po
     fp = jnp.clip(phi * (geo.n_po / TWO_PI) - bp.astype(phi.dtype), 0.0, 1.0)
