@@ -56,6 +56,7 @@ from gonio.brdf.sampling import (
     seeds_from_rng,
     seeds_from_u,
 )
+from gonio.brdf.tabulated import _materialize
 from gonio.brdf.tabulated import atan2 as _atan2
 from gonio.errors import ParameterError
 
@@ -127,8 +128,11 @@ def _direction_in_cell(
     c0 = jnp.take(cos_desc, row)
     c1 = jnp.take(cos_desc, row + 1)
     ct = c0 - ry * (c0 - c1)
-    st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
     phi = (col.astype(ct.dtype) + rx) * (TWO_PI / geo.n_p)
+    # stored once: otherwise XLA fuses the gathers above into the loop below, which then runs
+    # as scalar code (cos/sin included), once per output component
+    ct, phi = _materialize([ct, phi], ct)
+    st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
     cp, sp = jnp.cos(phi), jnp.sin(phi)
     if geo.iso:  # phi is relative to wo's azimuth: rotate by +phi_o
         c, s = _azimuth_frame(wo)

@@ -444,9 +444,10 @@ def atan2(y: Array, x: Array) -> Array:
 def _half_diff_fast(wi: Array, wo: Array, need_phi_h: bool) -> tuple[Array, ...]:
     """Rusinkiewicz angles without trigonometric round trips (same conventions as
     :func:`gonio.brdf.frames.half_diff`); hand-written because this is the hot path of lookups."""
-    h = wi + wo
-    h = h * jax.lax.rsqrt(jnp.maximum(jnp.sum(h * h, -1, keepdims=True), 1e-30))
-    hx, hy, hz = h[..., 0], h[..., 1], h[..., 2]
+    # per component, not jnp.sum over the last axis: a reduction would store h as (..., 3)
+    hx, hy, hz = wi[..., 0] + wo[..., 0], wi[..., 1] + wo[..., 1], wi[..., 2] + wo[..., 2]
+    inv_h = jax.lax.rsqrt(jnp.maximum(hx * hx + hy * hy + hz * hz, 1e-30))
+    hx, hy, hz = hx * inv_h, hy * inv_h, hz * inv_h
     r2 = hx * hx + hy * hy
     pole = r2 <= 0
     inv_r = jnp.where(pole, 0.0, jax.lax.rsqrt(jnp.where(pole, 1.0, r2)))
@@ -485,13 +486,24 @@ def _coords(spec: _Spec, wi: Array, wo: Array) -> list[Array]:
 
 def _axis_corners(ax: Axis, angle: Array) -> tuple[Array, Array, Array]:
     """``(i0, i1, frac)`` of the two nodes bracketing ``angle`` and the weight of ``i1``."""
+    return _index_corners(ax, _wrapped_index(ax, angle))
+
+
+def _wrapped_index(ax: Axis, angle: Array) -> Array:
+    """Continuous node index of ``angle``, wrapped into ``[0, n)`` on periodic axes."""
     t = ax.continuous_index(angle)
+    if ax.periodic and ax.size > 1:
+        t = jnp.mod(t, float(ax.size))
+    return t
+
+
+def _index_corners(ax: Axis, t: Array) -> tuple[Array, Array, Array]:
+    """:func:`_axis_corners` from the output of :func:`_wrapped_index`."""
     n = ax.size
     if n == 1:
         zero = jnp.zeros(t.shape, jnp.int32)
         return zero, zero, jnp.zeros_like(t)
     if ax.periodic:
-        t = jnp.mod(t, float(n))
         i0f = jnp.floor(t)
         frac = t - i0f
         i0 = i0f.astype(jnp.int32)
@@ -502,6 +514,28 @@ def _axis_corners(ax: Axis, angle: Array) -> tuple[Array, Array, Array]:
     i0 = jnp.minimum(jnp.floor(t).astype(jnp.int32), n - 2)
     frac = t - i0.astype(t.dtype)
     return i0, i0 + 1, frac
+
+
+def _materialize(arrays: Sequence[Array], like: Array) -> list[Array]:
+    """The same values, computed once: each array is divided by a runtime 1.0.
+
+    XLA's CPU backend fuses cheap elementwise producers into every consumer. Fed to eight
+    gathers (and to every channel of the output), the angle-to-index arithmetic was recomputed
+    in each gather loop, which XLA emits as scalar code. A division counts as expensive, so its
+    result is computed once, in a vectorized loop, and stored. ``like * 0 + 1`` is 1.0 (NaN
+    where ``like`` is NaN, i.e. where the lookup is NaN anyway) and XLA cannot fold it away;
+    dividing by 1.0 is exact, so the values are unchanged bit for bit.
+    """
+    one = like * 0.0 + 1.0
+    return [x / one.astype(x.dtype) for x in arrays]
+
+
+def _corner_params(spec: _Spec, coords: Sequence[Array]) -> list[tuple[Array, Array, Array]]:
+    """Per axis ``(i0, i1, frac)`` (see :func:`_axis_corners`) from continuous indices stored
+    once (:func:`_materialize`)."""
+    ts = [_wrapped_index(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
+    ts = _materialize(ts, coords[0])
+    return [_index_corners(ax, t) for ax, t in zip(spec.axes, ts, strict=True)]
 
 
 def _strides(axes: Sequence[Axis]) -> list[int]:
@@ -523,7 +557,7 @@ def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence
     vals, mask = data
     strides = _strides(spec.axes)
     dtype = coords[0].dtype
-    per_axis = [_axis_corners(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
+    per_axis = _corner_params(spec, coords)
     if spec.interpolation == "nearest" and mask is None:
         flat = sum(
             jnp.where(frac >= 0.5, i1, i0) * s
@@ -559,7 +593,8 @@ def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence
     if mask is None:
         return num
     den = sum(w * jnp.take(mask, flat, axis=0, mode="clip") for flat, w in corners)
-    den = den.astype(dtype)[..., None]
+    (den,) = _materialize([den.astype(dtype)], coords[0])  # once, not once per channel
+    den = den[..., None]
     ok = den > 0
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
