@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf import frames
+from gonio.brdf._xla import materialize
 from gonio.brdf.models._base import BRDFSample
 from gonio.errors import FormatError, ParameterError
 
@@ -516,25 +517,12 @@ def _index_corners(ax: Axis, t: Array) -> tuple[Array, Array, Array]:
     return i0, i0 + 1, frac
 
 
-def _materialize(arrays: Sequence[Array], like: Array) -> list[Array]:
-    """The same values, computed once: each array is divided by a runtime 1.0.
-
-    XLA's CPU backend fuses cheap elementwise producers into every consumer. Fed to eight
-    gathers (and to every channel of the output), the angle-to-index arithmetic was recomputed
-    in each gather loop, which XLA emits as scalar code. A division counts as expensive, so its
-    result is computed once, in a vectorized loop, and stored. ``like * 0 + 1`` is 1.0 (NaN
-    where ``like`` is NaN, i.e. where the lookup is NaN anyway) and XLA cannot fold it away;
-    dividing by 1.0 is exact, so the values are unchanged bit for bit.
-    """
-    one = like * 0.0 + 1.0
-    return [x / one.astype(x.dtype) for x in arrays]
-
-
 def _corner_params(spec: _Spec, coords: Sequence[Array]) -> list[tuple[Array, Array, Array]]:
     """Per axis ``(i0, i1, frac)`` (see :func:`_axis_corners`) from continuous indices stored
-    once (:func:`_materialize`)."""
+    once (:func:`gonio.brdf._xla.materialize`): otherwise XLA recomputes the angle-to-index
+    arithmetic inside each of the gather loops, as scalar code."""
     ts = [_wrapped_index(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
-    ts = _materialize(ts, coords[0])
+    ts = materialize(ts, coords[0])
     return [_index_corners(ax, t) for ax, t in zip(spec.axes, ts, strict=True)]
 
 
@@ -593,7 +581,7 @@ def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence
     if mask is None:
         return num
     den = sum(w * jnp.take(mask, flat, axis=0, mode="clip") for flat, w in corners)
-    (den,) = _materialize([den.astype(dtype)], coords[0])  # once, not once per channel
+    (den,) = materialize([den.astype(dtype)], coords[0])  # once, not once per channel
     den = den[..., None]
     ok = den > 0
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
