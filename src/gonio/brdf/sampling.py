@@ -97,7 +97,10 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
     """
     idx = jnp.zeros(u.shape, jnp.int32)
     step = 1 << max(0, (n - 1).bit_length() - 1) if n > 1 else 0
-    if step:  # stored once rather than recomputed in every step's gather loop (~3x faster)
+    # base and each step's index are stored (gonio.brdf._xla.materialize): otherwise XLA
+    # recomputes them inside every later step's gather loop and keeps every step's gathered
+    # values alive to the end (together ~3x slower)
+    if step:
         (base,) = materialize([jnp.broadcast_to(base, u.shape)], u)
     while step:
         cand = idx + step
@@ -105,6 +108,8 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
         val = jnp.take(cdf_flat, base + jnp.minimum(cand, n - 1), mode="clip")
         idx = jnp.where(ok & (val <= u), cand, idx)
         step >>= 1
+        if step:
+            (idx,) = materialize([idx], u)
     return idx
 
 
