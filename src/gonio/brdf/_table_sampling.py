@@ -25,10 +25,13 @@ Methods
     BRDF model mixed with 10 % cosine sampling, accepted with probability
     ``g cos / (M q)``. ``M`` is a bound of ``g cos / q`` over the bucket: the table part is
     rigorous (interval bounds of theta_h and theta_d over each incident-grid cell and the
-    bucket, and multilinear interpolation never exceeds the largest valid node it uses); for a
-    model proposal the lower bound of the model's pdf per cell of a 48 x 96 grid comes from
-    evaluating it at 3 x 3 points x 12 outgoing directions (the one heuristic part; the cosine
-    part of the mixture keeps the bound finite). ``rho(wo) = int g cos dwi`` is
+    bucket, interval bounds of ``cos theta_o`` and ``cos theta_i`` over each table cell, which
+    say which cells, phi_d included, the bucket can reach at all, and multilinear
+    interpolation never exceeds the largest valid node it uses); for a model proposal the
+    bucket's theta_o range is bounded in 4 parts, and the lower bound of the model's pdf per
+    cell of a 48 x 96 grid comes from evaluating it at 3 x 3 points x 12 outgoing directions
+    per part (the one heuristic part; the cosine part of the mixture keeps the bound
+    finite). ``rho(wo) = int g cos dwi`` is
     computed by a 128 x 256 midpoint quadrature over the half vector (sqrt-warped theta_h, where
     the tables put their nodes) at 9 theta_o nodes per bucket (5 x 5 (theta_o, phi_o) nodes for
     anisotropic tables) and interpolated linearly in between.
@@ -46,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf import warp
+from gonio.brdf._xla import materialize
 from gonio.brdf.sampling import (
     _sample_discrete_cdf,
     _vose,
@@ -56,6 +60,7 @@ from gonio.brdf.sampling import (
     seeds_from_rng,
     seeds_from_u,
 )
+from gonio.brdf.tabulated import atan2 as _atan2
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -69,6 +74,7 @@ _RHO_NODES_ANISO = 5
 _RHO_RES = (128, 256)
 _BOUND_RES = (16, 32)  # incident cells for the cosine-proposal bound
 _BOUND_RES_MODEL = (48, 96)  # finer: a model proposal's pdf varies within a cell
+_MODEL_BOUND_SPLIT = 4  # theta_o parts per bucket bounded separately for a model proposal
 
 
 @dataclass(frozen=True)
@@ -84,28 +90,38 @@ class _Geo:
 
 def _bucket_of(geo: _Geo, wo: Array) -> Array:
     x, y, z = wo[..., 0], wo[..., 1], wo[..., 2]
-    theta = jnp.arctan2(jnp.sqrt(x * x + y * y), z)
+    # fast polynomial atan2 in float32 (XLA's is ~25x slower on CPU), exact in float64; sample
+    # and pdf both bucket through here, so they always agree
+    theta = _atan2(jnp.sqrt(x * x + y * y), z)
     bt = jnp.clip(jnp.floor(theta * (geo.n_to / HALF_PI)).astype(jnp.int32), 0, geo.n_to - 1)
     if geo.iso:
         return bt
-    phi = jnp.arctan2(y, x)
+    phi = _atan2(y, x)
     phi = jnp.where(phi < 0, phi + TWO_PI, phi)
     bp = jnp.clip(jnp.floor(phi * (geo.n_po / TWO_PI)).astype(jnp.int32), 0, geo.n_po - 1)
     return bt * geo.n_po + bp
 
 
-def _phi_o(wo: Array) -> Array:
-    return jnp.arctan2(wo[..., 1], wo[..., 0])
+def _azimuth_frame(wo: Array) -> tuple[Array, Array]:
+    """``(cos phi_o, sin phi_o)`` of ``wo``; ``(1, 0)`` at the pole (where atan2 gives 0)."""
+    x, y = wo[..., 0], wo[..., 1]
+    r2 = x * x + y * y
+    pole = r2 <= 0
+    inv = jnp.where(pole, 0.0, jax.lax.rsqrt(jnp.where(pole, 1.0, r2)))
+    return jnp.where(pole, 1.0, x * inv), y * inv
 
 
 def _cell_of(geo: _Geo, wi: Array, wo: Array, cos_asc: Array) -> tuple[Array, Array]:
     """Incident-grid cell ``(row, col)`` of ``wi`` (rows by cos theta, as the sampler builds)."""
     k = jnp.searchsorted(cos_asc, wi[..., 2], side="left").astype(jnp.int32)
     row = jnp.clip(geo.n_t - k, 0, geo.n_t - 1)
-    phi = jnp.arctan2(wi[..., 1], wi[..., 0])
-    if geo.iso:
-        phi = phi - _phi_o(wo)
-    phi = jnp.mod(phi, TWO_PI)
+    x, y = wi[..., 0], wi[..., 1]
+    if geo.iso:  # azimuth relative to wo's: rotate wi by -phi_o
+        c, s = _azimuth_frame(wo)
+        x, y = c * x + s * y, c * y - s * x
+    phi = _atan2(y, x)
+    phi = jnp.where(phi < 0, phi + TWO_PI, phi)
+    phi = jnp.where(phi >= TWO_PI, 0.0, phi)
     col = jnp.clip(jnp.floor(phi * (geo.n_p / TWO_PI)).astype(jnp.int32), 0, geo.n_p - 1)
     return row, col
 
@@ -116,11 +132,18 @@ def _direction_in_cell(
     c0 = jnp.take(cos_desc, row)
     c1 = jnp.take(cos_desc, row + 1)
     ct = c0 - ry * (c0 - c1)
-    st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
     phi = (col.astype(ct.dtype) + rx) * (TWO_PI / geo.n_p)
-    if geo.iso:
-        phi = phi + _phi_o(wo)
-    return jnp.stack([st * jnp.cos(phi), st * jnp.sin(phi), ct], -1)
+    # stored once: otherwise XLA fuses the gathers above into the loop below, which then runs
+    # as scalar code (cos/sin included), once per output component
+    ct, phi = materialize([ct, phi], ct)
+    st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
+    cp, sp = jnp.cos(phi), jnp.sin(phi)
+    if geo.iso:  # phi is relative to wo's azimuth: rotate by +phi_o
+        c, s = _azimuth_frame(wo)
+        cp, sp = c * cp - s * sp, s * cp + c * sp
+    # stacked along a new leading axis and transposed: XLA's CPU backend then evaluates each
+    # component in its own vectorized loop instead of one scalar loop over (..., 3)
+    return jnp.moveaxis(jnp.stack([st * cp, st * sp, ct], 0), 0, -1)
 
 
 class _Lazy:
@@ -147,11 +170,14 @@ class _Lazy:
             slot_of = np.zeros(n_buckets, np.int32)
             slot_of[keys] = np.arange(len(keys), dtype=np.int32)
             names = self.items[keys[0]].keys()
-            arrays = {
-                name: jnp.asarray(np.stack([self.items[k][name] for k in keys_padded]))
-                for name in names
-            }
-            self._stack = (jnp.asarray(slot_of), arrays)
+            # concrete arrays even when first asked for under a jit trace: the cache outlives
+            # the trace (a staged constant would leak into the next trace)
+            with jax.ensure_compile_time_eval():
+                arrays = {
+                    name: jnp.asarray(np.stack([self.items[k][name] for k in keys_padded]))
+                    for name in names
+                }
+                self._stack = (jnp.asarray(slot_of), arrays)
         return self._stack
 
 
@@ -168,18 +194,21 @@ class TableSampler:
         cos_desc[0], cos_desc[-1] = 1.0, 0.0
         self.cos_desc = cos_desc
         self.omega = (cos_desc[:-1] - cos_desc[1:]) * (TWO_PI / n_p)
-        self._consts = {
-            dt: (
-                jnp.asarray(cos_desc, dt),
-                jnp.asarray(cos_desc[::-1].copy(), dt),
-                jnp.asarray(self.omega, dt),
-            )
-            for dt in (jnp.float32, jnp.float64)
-        }
+        with jax.ensure_compile_time_eval():  # the sampler may be created under a jit trace
+            self._consts = {
+                dt: (
+                    jnp.asarray(cos_desc, dt),
+                    jnp.asarray(cos_desc[::-1].copy(), dt),
+                    jnp.asarray(self.omega, dt),
+                )
+                for dt in (jnp.float32, jnp.float64)
+            }
         self._grid = _Lazy(self._build_grid)
         self._alias = _Lazy(self._build_alias)
         self._rejection: dict[Any, _Lazy] = {}
         self._node_max: np.ndarray | None = None
+        self._sup_cache: dict[str, np.ndarray] | None = None
+        self._reach_cache: dict[tuple[float, float], tuple[float, np.ndarray]] = {}
         self._round_fns: dict[Any, Any] = {}
         self.stats: dict[str, float] = {}
 
@@ -319,8 +348,90 @@ class TableSampler:
             self._node_max = np.maximum(h, 0.0)
         return self._node_max
 
-    def _table_bound(self, th: tuple[np.ndarray, np.ndarray], td: tuple[np.ndarray, np.ndarray]):
-        """Bound of g over boxes of (theta_h, theta_d) angle ranges (arrays of lo, hi)."""
+    def _bucket_sup(self, b: int) -> float:
+        """Upper bound of ``g`` over every ``wi`` above the horizon and every ``wo`` in bucket
+        ``b``, aware of phi_d (unlike :meth:`_h_max`); see :meth:`_reachable`."""
+        t0, t1, _, _ = self._bucket_ranges(b)
+        return self._reachable(t0, t1)[0]
+
+    def _reachable(self, t0: float, t1: float) -> tuple[float, np.ndarray]:
+        """``(sup, cells)`` for outgoing directions with theta_o in ``[t0, t1]``: a bound of
+        ``g`` over them and every ``wi`` above the horizon, and per (theta_h, theta_d) table
+        cell (sorted by angle, see ``_sup_static``) a bound over the cells reachable from them.
+
+        ``cos theta_o = A + B cos phi_d`` and ``cos theta_i = A - B cos phi_d`` with
+        ``A = cos theta_h cos theta_d``, ``B = sin theta_h sin theta_d`` (the Rusinkiewicz
+        angles of :func:`gonio.brdf.frames.half_diff`). Interval arithmetic over each
+        interpolation cell of the table says whether the cell can be reached with theta_o in
+        the range and ``cos theta_i > 0``; multilinear interpolation with renormalized weights
+        never exceeds the largest valid corner of its cell, so the largest corner over the
+        reachable cells bounds ``g`` (rigorously, up to the small margins below).
+        """
+        key = (round(t0, 12), round(t1, 12))
+        hit = self._reach_cache.get(key)
+        if hit is not None:
+            return hit
+        st = self._sup_static()
+        eps = 1e-4  # covers float32 rounding of the lookup's angles and of the bucketing
+        reach = (st["wo_hi"] >= math.cos(t1) - eps) & (st["wo_lo"] <= math.cos(t0) + eps)
+        m = np.where(reach & st["wi_up"], st["cmax"], -np.inf)
+        sup = max(float(m.max()), 0.0) * (1 + 1e-5)
+        cells = np.maximum(m.max(axis=2), 0.0)[np.ix_(st["oh"], st["od"])]
+        self._reach_cache[key] = (sup, cells)
+        return sup, cells
+
+    def _sup_static(self) -> dict[str, np.ndarray]:
+        """Table-only parts of :meth:`_reachable`, computed once."""
+        if self._sup_cache is not None:
+            return self._sup_cache
+        t = self.table
+        names = [a.name for a in t.axes]
+        ih, idd, ip = names.index("theta_h"), names.index("theta_d"), names.index("phi_d")
+        v = np.where(t.mask, t.values.mean(axis=-1, dtype=np.float64), -np.inf)
+        if v.ndim == 4:  # anisotropic: theta_o does not depend on phi_h
+            v = v.max(axis=names.index("phi_h"))
+            ih, idd, ip = (0, 1, 2)
+        v = np.moveaxis(v, (ih, idd, ip), (0, 1, 2))
+        h_lo, h_hi, h_a, h_b = _axis_cells(t.axes[names.index("theta_h")])
+        d_lo, d_hi, d_a, d_b = _axis_cells(t.axes[names.index("theta_d")])
+        p_lo, p_hi, p_a, p_b = _axis_cells(t.axes[names.index("phi_d")])
+        # largest corner of every cell (-inf where no corner is valid)
+        cmax = np.full((len(h_a), len(d_a), len(p_a)), -np.inf)
+        for hs in (h_a, h_b):
+            for ds in (d_a, d_b):
+                for ps in (p_a, p_b):
+                    cmax = np.maximum(cmax, v[np.ix_(hs, ds, ps)])
+        ca = (np.cos(h_hi)[:, None] * np.cos(d_hi)[None, :], np.cos(h_lo)[:, None] * np.cos(d_lo))
+        sb = (np.sin(h_lo)[:, None] * np.sin(d_lo)[None, :], np.sin(h_hi)[:, None] * np.sin(d_hi))
+        c_lo, c_hi = _cos_range(p_lo, p_hi)
+        if t._spec.fold >= 1:  # the folded cell also serves phi_d + pi (and pi - phi_d): cos < 0
+            c_lo, c_hi = np.minimum(c_lo, -c_hi), np.maximum(c_hi, -c_lo)
+        A_lo, A_hi = ca[0][:, :, None], ca[1][:, :, None]
+        B_lo, B_hi = sb[0][:, :, None], sb[1][:, :, None]
+        bc_lo = np.where(c_lo >= 0, B_lo * c_lo, B_hi * c_lo)  # B >= 0
+        bc_hi = np.where(c_hi >= 0, B_hi * c_hi, B_lo * c_hi)
+        # cells sorted by angle, so that the cells meeting an angle range are contiguous
+        oh, od = np.argsort(h_lo), np.argsort(d_lo)
+        self._sup_cache = {
+            "cmax": cmax,
+            "wo_lo": A_lo + bc_lo,
+            "wo_hi": A_hi + bc_hi,
+            "wi_up": (A_hi - bc_lo) > -1e-4,
+            "oh": oh,
+            "od": od,
+            "h_cells": (h_lo[oh], h_hi[oh]),
+            "d_cells": (d_lo[od], d_hi[od]),
+        }
+        return self._sup_cache
+
+    def _table_bound(
+        self,
+        th: tuple[np.ndarray, np.ndarray],
+        td: tuple[np.ndarray, np.ndarray],
+        theta_o: tuple[float, float],
+    ):
+        """Bound of g over boxes of (theta_h, theta_d) angle ranges (arrays of lo, hi), for
+        outgoing directions with theta_o in the range ``theta_o``."""
         t = self.table
         ax_h = next(a for a in t.axes if a.name == "theta_h")
         ax_d = next(a for a in t.axes if a.name == "theta_d")
@@ -336,14 +447,30 @@ class TableSampler:
 
         h0, h1 = node_range(ax_h, *th)
         d0, d1 = node_range(ax_d, *td)
+        # phi_d-aware: the table cells meeting the boxes that bucket b can reach at all
+        _, hc = self._reachable(*theta_o)
+        st = self._sup_static()
+        (hl, hh), (dl, dh) = st["h_cells"], st["d_cells"]
+        margin = 1e-6  # radians, beyond the float64 rounding of the boxes
+        ch0 = np.searchsorted(hh, th[0] - margin, side="left")  # first cell ending at/after lo
+        ch1 = np.searchsorted(hl, th[1] + margin, side="right")  # past the last starting <= hi
+        cd0 = np.searchsorted(dh, td[0] - margin, side="left")
+        cd1 = np.searchsorted(dl, td[1] + margin, side="right")
         for i in np.ndindex(out.shape):
-            out[i] = H[h0[i] : h1[i] + 1, d0[i] : d1[i] + 1].max()
+            node_bound = H[h0[i] : h1[i] + 1, d0[i] : d1[i] + 1].max()
+            cells = hc[ch0[i] : max(ch1[i], ch0[i] + 1), cd0[i] : max(cd1[i], cd0[i] + 1)]
+            out[i] = min(node_bound, cells.max() if cells.size else node_bound)
         return out * (1 + 1e-5)
 
-    def _cell_bounds(self, b: int, res: tuple[int, int]) -> tuple[np.ndarray, ...]:
-        """Per coarse incident cell: (bound of g, max cos theta_i, min cos theta_i)."""
+    def _cell_bounds(
+        self, b: int, res: tuple[int, int], theta_o: tuple[float, float] | None = None
+    ) -> tuple[np.ndarray, ...]:
+        """Per coarse incident cell: (bound of g, max cos theta_i, min cos theta_i), for the
+        outgoing directions of bucket ``b`` (with theta_o restricted to ``theta_o`` if given)."""
         nt, npp = res
         t0, t1, p0, p1 = self._bucket_ranges(b)
+        if theta_o is not None:
+            t0, t1 = theta_o
         te = np.linspace(0, HALF_PI, nt + 1)
         pe = np.linspace(0, TWO_PI, npp + 1)
         ti0, ti1 = (
@@ -374,7 +501,7 @@ class TableSampler:
         den = 2 * (1 + p_lo)
         ch_hi = np.where(den > 0, (ci[1] + co[1]) / np.sqrt(np.maximum(den, 1e-300)), 1.0)
         th = (np.arccos(np.clip(ch_hi, 0, 1)), np.arccos(np.clip(ch_lo, 0, 1)))
-        U = self._table_bound(th, td)
+        U = np.minimum(self._table_bound(th, td, (t0, t1)), self._reachable(t0, t1)[0])
         return U, ci[1], ci[0]
 
     def _rho_nodes(self, b: int) -> np.ndarray:
@@ -408,55 +535,67 @@ class TableSampler:
     ) -> dict[int, dict[str, np.ndarray]]:
         out = {}
         for b in buckets:
-            res = _BOUND_RES if proposal == "cosine" else _BOUND_RES_MODEL
-            U, cmax, cmin = self._cell_bounds(b, res)
             if proposal == "cosine":
                 # g cos / (cos / pi) = pi g
-                M = math.pi * U.max()
+                U, _, _ = self._cell_bounds(b, _BOUND_RES)
+                M = math.pi * min(U.max(), self._bucket_sup(b))
             else:
-                M = self._model_bound(b, proposal, U, cmax, cmin)
+                M = self._model_bound(b, proposal)
             out[b] = {"bound": np.asarray(M), "rho": self._rho_nodes(b)}
         return out
 
-    def _model_bound(self, b, model, U, cmax, cmin) -> float:
+    def _model_bound(self, b: int, model: Any) -> float:
+        """Bound of ``g cos / q`` over bucket ``b`` for the mixture proposal ``q``.
+
+        The bucket's theta_o range is split in ``_MODEL_BOUND_SPLIT`` parts, each bounded on
+        its own (the table bound and the proposal's pdf move together with theta_o; one bound
+        over the whole bucket pairs the largest table value at one end with the smallest pdf
+        at the other, which near grazing angles overstates the ratio a hundredfold).
+        """
         nt, npp = _BOUND_RES_MODEL
         t0, t1, p0, p1 = self._bucket_ranges(b)
+        k = _MODEL_BOUND_SPLIT
         s = np.linspace(0, 1, 3)
         te = np.linspace(0, HALF_PI, nt + 1)
         pe = np.linspace(0, TWO_PI, npp + 1)
         tt = te[:-1, None] + s[None, :] * (te[1:] - te[:-1])[:, None]  # (nt, 3)
         pp = pe[:-1, None] + s[None, :] * (pe[1:] - pe[:-1])[:, None]  # (npp, 3)
         tt = np.clip(tt, 0, HALF_PI - 1e-4)
-        if self.geo.iso:
-            wos = [
-                (t, p)
-                for t in (t0, 0.5 * (t0 + t1), t1)
-                for p in (0, 0.5 * math.pi, math.pi, 1.5 * math.pi)
-            ]
-        else:
-            wos = [(t, p) for t in (t0, 0.5 * (t0 + t1), t1) for p in np.linspace(p0, p1, 4)]
-        qmin = np.full((nt, npp), np.inf)
+        thetas = np.linspace(t0, t1, 2 * k + 1)  # ends and middles of the k parts
+        phis = (
+            (0, 0.5 * math.pi, math.pi, 1.5 * math.pi) if self.geo.iso else np.linspace(p0, p1, 4)
+        )
         st = np.sin(tt)[:, :, None, None]
-        for t, p in wos:
-            wo = np.array(
-                [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), max(math.cos(t), 1e-4)]
-            )
-            wo = wo / np.linalg.norm(wo)
-            phi = pp[None, None] + (p if self.geo.iso else 0.0)
-            wi = np.stack(
-                np.broadcast_arrays(
-                    st * np.cos(phi), st * np.sin(phi), np.cos(tt)[:, :, None, None]
-                ),
-                -1,
-            )  # (nt, 3, npp, 3, 3)
-            q = np.asarray(model.pdf(wi.reshape(-1, 3), wo)).reshape(nt, 3, npp, 3)
-            qmin = np.minimum(qmin, q.min(axis=(1, 3)))
+        wis, wos = [], []
+        for t in thetas:
+            for p in phis:
+                wo = np.array(
+                    [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), max(math.cos(t), 1e-4)]
+                )
+                phi = pp[None, None] + (p if self.geo.iso else 0.0)
+                wi = np.stack(
+                    np.broadcast_arrays(
+                        st * np.cos(phi), st * np.sin(phi), np.cos(tt)[:, :, None, None]
+                    ),
+                    -1,
+                ).reshape(-1, 3)  # (nt, 3, npp, 3) points
+                wis.append(wi)
+                wos.append(np.broadcast_to(wo / np.linalg.norm(wo), wi.shape))
+        q = np.asarray(model.pdf(np.concatenate(wis), np.concatenate(wos)), np.float64)
+        q = q.reshape(len(thetas), len(phis), nt, 3, npp, 3).min(axis=(1, 3, 5))  # (thetas, cells)
         eps = _PROPOSAL_EPS
-        lower = eps * cmin / math.pi + (1 - eps) * 0.5 * np.maximum(qmin, 0.0)
-        with np.errstate(divide="ignore"):
-            ratio = np.where(lower > 0, U * cmax / np.where(lower > 0, lower, 1.0), np.inf)
-        ratio = np.minimum(ratio, math.pi * U / eps)
-        return float(ratio.max())
+        out = 0.0
+        for j in range(k):
+            U, cmax, cmin = self._cell_bounds(
+                b, _BOUND_RES_MODEL, (thetas[2 * j], thetas[2 * j + 2])
+            )
+            qmin = q[2 * j : 2 * j + 3].min(axis=0)
+            lower = eps * cmin / math.pi + (1 - eps) * 0.5 * np.maximum(qmin, 0.0)
+            with np.errstate(divide="ignore"):
+                ratio = np.where(lower > 0, U * cmax / np.where(lower > 0, lower, 1.0), np.inf)
+            ratio = np.minimum(ratio, math.pi * U / eps)
+            out = max(out, float(ratio.max()))
+        return out
 
     # -- public entry points -------------------------------------------------------------------
     def sample(self, wo: Array, u: Array, method: str, rng: Any, proposal: Any):
@@ -560,6 +699,28 @@ def _proposal_key(proposal: Any) -> Any:
     return id(proposal)
 
 
+def _axis_cells(ax: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Interpolation cells of an axis: angle ranges ``(lo, hi)`` and their two nodes ``(a, b)``.
+
+    Cells between consecutive nodes, plus the end ranges that the lookup clamps to one node
+    (``a == b``), or, on a periodic axis, the cell that wraps from the last node to the first.
+    """
+    nodes = ax.nodes()
+    n = ax.size
+    lo, hi, a, b = list(nodes[:-1]), list(nodes[1:]), list(range(n - 1)), list(range(1, n))
+    if ax.periodic:
+        lo.append(nodes[-1])
+        hi.append(nodes[0] + (ax.hi - ax.lo))
+        a.append(n - 1)
+        b.append(0)
+    else:
+        if nodes[0] > ax.lo:
+            lo.append(ax.lo), hi.append(nodes[0]), a.append(0), b.append(0)
+        if nodes[-1] < ax.hi or n == 1:
+            lo.append(nodes[-1]), hi.append(ax.hi), a.append(n - 1), b.append(n - 1)
+    return np.asarray(lo), np.asarray(hi), np.asarray(a), np.asarray(b)
+
+
 def _cos_range(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Range of cos over each interval [lo, hi] (hi - lo <= 2 pi)."""
     c_lo = np.minimum(np.cos(lo), np.cos(hi))
@@ -636,7 +797,7 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
     b = _bucket_of(geo, wo)
     s = jnp.take(slot_of, b)
     x, y, z = wo[..., 0], wo[..., 1], wo[..., 2]
-    theta = jnp.arctan2(jnp.sqrt(x * x + y * y), z)
+    theta = _atan2(jnp.sqrt(x * x + y * y), z)
     bt = b // geo.n_po
     ft = jnp.clip(theta * (geo.n_to / HALF_PI) - bt.astype(theta.dtype), 0.0, 1.0)
     if geo.iso:
@@ -648,7 +809,7 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
         base = s * _RHO_NODES + i0
         return (1 - fr) * jnp.take(flat, base) + fr * jnp.take(flat, base + 1)
     k = _RHO_NODES_ANISO - 1
-    phi = jnp.arctan2(y, x)
+    phi = _atan2(y, x)
     phi = jnp.where(phi < 0, phi + TWO_PI, phi)
     bp = b % geo.n_po
     fp = jnp.clip(phi * (geo.n_po / TWO_PI) - bp.astype(phi.dtype), 0.0, 1.0)

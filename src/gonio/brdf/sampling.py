@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf._xla import materialize
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -96,12 +97,19 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
     """
     idx = jnp.zeros(u.shape, jnp.int32)
     step = 1 << max(0, (n - 1).bit_length() - 1) if n > 1 else 0
+    # base and each step's index are stored (gonio.brdf._xla.materialize): otherwise XLA
+    # recomputes them inside every later step's gather loop and keeps every step's gathered
+    # values alive to the end (together ~3x slower)
+    if step:
+        (base,) = materialize([jnp.broadcast_to(base, u.shape)], u)
     while step:
         cand = idx + step
         ok = cand <= n - 1
         val = jnp.take(cdf_flat, base + jnp.minimum(cand, n - 1), mode="clip")
         idx = jnp.where(ok & (val <= u), cand, idx)
         step >>= 1
+        if step:
+            (idx,) = materialize([idx], u)
     return idx
 
 

@@ -29,7 +29,7 @@ or below the horizon.
 JAX
 ---
 :meth:`TabulatedBRDF.f` is pure JAX, vectorized over any batch shape, and keeps float32 inputs in
-float32. A table is also a registered pytree (its only leaf is the float32 lookup array), so it can
+float32. A table is also a registered pytree (its leaves are the float32 lookup arrays), so it can
 be passed to ``jax.jit`` as an argument or closed over. The sampling structures (see
 :mod:`gonio.brdf.sampling` and :meth:`TabulatedBRDF.sample`) are built lazily, on the host, from the
 table's values; they are shared by every copy of the table that a pytree round trip makes.
@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf import frames
+from gonio.brdf._xla import materialize
 from gonio.brdf.models._base import BRDFSample
 from gonio.errors import FormatError, ParameterError
 
@@ -444,9 +445,10 @@ def atan2(y: Array, x: Array) -> Array:
 def _half_diff_fast(wi: Array, wo: Array, need_phi_h: bool) -> tuple[Array, ...]:
     """Rusinkiewicz angles without trigonometric round trips (same conventions as
     :func:`gonio.brdf.frames.half_diff`); hand-written because this is the hot path of lookups."""
-    h = wi + wo
-    h = h * jax.lax.rsqrt(jnp.maximum(jnp.sum(h * h, -1, keepdims=True), 1e-30))
-    hx, hy, hz = h[..., 0], h[..., 1], h[..., 2]
+    # per component, not jnp.sum over the last axis: a reduction would store h as (..., 3)
+    hx, hy, hz = wi[..., 0] + wo[..., 0], wi[..., 1] + wo[..., 1], wi[..., 2] + wo[..., 2]
+    inv_h = jax.lax.rsqrt(jnp.maximum(hx * hx + hy * hy + hz * hz, 1e-30))
+    hx, hy, hz = hx * inv_h, hy * inv_h, hz * inv_h
     r2 = hx * hx + hy * hy
     pole = r2 <= 0
     inv_r = jnp.where(pole, 0.0, jax.lax.rsqrt(jnp.where(pole, 1.0, r2)))
@@ -485,13 +487,24 @@ def _coords(spec: _Spec, wi: Array, wo: Array) -> list[Array]:
 
 def _axis_corners(ax: Axis, angle: Array) -> tuple[Array, Array, Array]:
     """``(i0, i1, frac)`` of the two nodes bracketing ``angle`` and the weight of ``i1``."""
+    return _index_corners(ax, _wrapped_index(ax, angle))
+
+
+def _wrapped_index(ax: Axis, angle: Array) -> Array:
+    """Continuous node index of ``angle``, wrapped into ``[0, n)`` on periodic axes."""
     t = ax.continuous_index(angle)
+    if ax.periodic and ax.size > 1:
+        t = jnp.mod(t, float(ax.size))
+    return t
+
+
+def _index_corners(ax: Axis, t: Array) -> tuple[Array, Array, Array]:
+    """:func:`_axis_corners` from the output of :func:`_wrapped_index`."""
     n = ax.size
     if n == 1:
         zero = jnp.zeros(t.shape, jnp.int32)
         return zero, zero, jnp.zeros_like(t)
     if ax.periodic:
-        t = jnp.mod(t, float(n))
         i0f = jnp.floor(t)
         frac = t - i0f
         i0 = i0f.astype(jnp.int32)
@@ -504,6 +517,15 @@ def _axis_corners(ax: Axis, angle: Array) -> tuple[Array, Array, Array]:
     return i0, i0 + 1, frac
 
 
+def _corner_params(spec: _Spec, coords: Sequence[Array]) -> list[tuple[Array, Array, Array]]:
+    """Per axis ``(i0, i1, frac)`` (see :func:`_axis_corners`) from continuous indices stored
+    once (:func:`gonio.brdf._xla.materialize`): otherwise XLA recomputes the angle-to-index
+    arithmetic inside each of the gather loops, as scalar code."""
+    ts = [_wrapped_index(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
+    ts = materialize(ts, coords[0])
+    return [_index_corners(ax, t) for ax, t in zip(spec.axes, ts, strict=True)]
+
+
 def _strides(axes: Sequence[Axis]) -> list[int]:
     strides = [1] * len(axes)
     for a in range(len(axes) - 2, -1, -1):
@@ -511,40 +533,26 @@ def _strides(axes: Sequence[Axis]) -> list[int]:
     return strides
 
 
-def _interpolate(spec: _Spec, data: Array, coords: Sequence[Array]) -> Array:
-    """Multilinear or nearest lookup at axis angles; ``data`` is ``(n_nodes, C [+1 mask])``."""
+def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence[Array]) -> Array:
+    """Multilinear or nearest lookup at axis angles.
+
+    ``data`` is ``(values, mask)``: values ``(n_nodes, C)`` premultiplied by the mask (invalid
+    nodes hold 0) and the mask ``(n_nodes,)`` as 0/1 floats, or None when every node is valid.
+    Values and mask are separate arrays on purpose: XLA's CPU backend runs fused scalar gathers
+    from two arrays faster than row gathers of ``(C + 1)``-wide rows, whose eight results it
+    materializes (and pages in) before the weighted sum.
+    """
+    vals, mask = data
     strides = _strides(spec.axes)
     dtype = coords[0].dtype
-    per_axis = [_axis_corners(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
-    C = spec.n_channels
-    if spec.interpolation == "nearest" and not spec.has_mask:
+    per_axis = _corner_params(spec, coords)
+    if spec.interpolation == "nearest" and mask is None:
         flat = sum(
             jnp.where(frac >= 0.5, i1, i0) * s
             for (i0, i1, frac), s in zip(per_axis, strides, strict=True)
         )
-        return jnp.take(data, flat, axis=0, mode="clip").astype(dtype)
-    if spec.interpolation == "nearest":
-        best_w = None
-        best_flat = None
-        for bits in itertools.product((0, 1), repeat=len(per_axis)):
-            flat = sum(
-                (i1 if b else i0) * s
-                for (i0, i1, _), b, s in zip(per_axis, bits, strides, strict=True)
-            )
-            w = math.prod(
-                (frac if b else 1 - frac) for (_, _, frac), b in zip(per_axis, bits, strict=True)
-            )
-            m = jnp.take(data[:, C], flat, axis=0, mode="clip").astype(dtype)
-            score = w * m + m * 1e-6  # a valid corner always beats an invalid one
-            if best_w is None:
-                best_w, best_flat = score, flat
-            else:
-                better = score > best_w
-                best_w = jnp.where(better, score, best_w)
-                best_flat = jnp.where(better, flat, best_flat)
-        val = jnp.take(data, best_flat, axis=0, mode="clip").astype(dtype)
-        return jnp.where(best_w[..., None] > 0, val[..., :C], 0.0)
-    acc = None
+        return jnp.take(vals, flat, axis=0, mode="clip").astype(dtype)
+    corners = []
     for bits in itertools.product((0, 1), repeat=len(per_axis)):
         flat = None
         w = None
@@ -553,17 +561,34 @@ def _interpolate(spec: _Spec, data: Array, coords: Sequence[Array]) -> Array:
             flat = idx if flat is None else flat + idx
             wa = frac if b else 1 - frac
             w = wa if w is None else w * wa
-        term = w[..., None] * jnp.take(data, flat, axis=0, mode="clip").astype(dtype)
-        acc = term if acc is None else acc + term
-    if not spec.has_mask:
-        return acc
-    den = acc[..., C:]
+        corners.append((flat, w))
+    if spec.interpolation == "nearest":
+        best_w = None
+        best_flat = None
+        for flat, w in corners:
+            m = jnp.take(mask, flat, axis=0, mode="clip").astype(dtype)
+            score = w * m + m * 1e-6  # a valid corner always beats an invalid one
+            if best_w is None:
+                best_w, best_flat = score, flat
+            else:
+                better = score > best_w
+                best_w = jnp.where(better, score, best_w)
+                best_flat = jnp.where(better, flat, best_flat)
+        val = jnp.take(vals, best_flat, axis=0, mode="clip").astype(dtype)
+        return jnp.where(best_w[..., None] > 0, val, 0.0)
+    num = sum(w[..., None] * jnp.take(vals, flat, axis=0, mode="clip") for flat, w in corners)
+    num = num.astype(dtype)
+    if mask is None:
+        return num
+    den = sum(w * jnp.take(mask, flat, axis=0, mode="clip") for flat, w in corners)
+    (den,) = materialize([den.astype(dtype)], coords[0])  # once, not once per channel
+    den = den[..., None]
     ok = den > 0
-    return jnp.where(ok, acc[..., :C] / jnp.where(ok, den, 1.0), 0.0)
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
 
 @partial(jax.jit, static_argnames=("spec",))
-def _eval_kernel(data: Array, wi: Array, wo: Array, spec: _Spec) -> Array:
+def _eval_kernel(data: tuple[Array, Array | None], wi: Array, wo: Array, spec: _Spec) -> Array:
     coords = _coords(spec, wi, wo)
     val = _interpolate(spec, data, coords)
     ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
@@ -734,9 +759,8 @@ class TabulatedBRDF:
             fold = 2 if span <= math.pi / 2 + _EPS_ANGLE else (1 if span <= math.pi + 1e-6 else 0)
         self._spec = _Spec(axes, parameterization, interpolation, has_mask, C, fold)
         clean = np.where(m[..., None], vals, np.float32(0.0)).reshape(-1, C)
-        if has_mask:
-            clean = np.concatenate([clean, m.reshape(-1, 1).astype(np.float32)], axis=1)
-        self._data = jnp.asarray(np.ascontiguousarray(clean, dtype=np.float32))
+        flat_mask = jnp.asarray(m.reshape(-1).astype(np.float32)) if has_mask else None
+        self._data = (jnp.asarray(np.ascontiguousarray(clean, dtype=np.float32)), flat_mask)
         self._host = _Host()
 
     # -- construction helpers ------------------------------------------------------------------
@@ -1003,15 +1027,15 @@ class TabulatedBRDF:
         return MeasuredSamples(wi[keep], wo[keep], vals, sig, self.channels, weights, meta)
 
     # -- pytree --------------------------------------------------------------------------------
-    def _tree_flatten(self) -> tuple[tuple[Array], tuple[Any, ...]]:
-        return (self._data,), (self._spec, _Ref(self))
+    def _tree_flatten(self) -> tuple[tuple[Array, Array | None], tuple[Any, ...]]:
+        return self._data, (self._spec, _Ref(self))
 
     @classmethod
     def _tree_unflatten(cls, aux: tuple[Any, ...], leaves: Sequence[Any]) -> TabulatedBRDF:
         spec, ref = aux
         obj = object.__new__(cls)
         obj.__dict__.update(ref.obj.__dict__)
-        obj._data = leaves[0]
+        obj._data = tuple(leaves)
         obj._spec = spec
         return obj
 

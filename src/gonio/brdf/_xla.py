@@ -1,0 +1,36 @@
+"""Workarounds for XLA's CPU fusion heuristics on hot lookup and sampling paths."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax.numpy as jnp
+
+Array = jnp.ndarray
+
+
+def materialize(arrays: Sequence[Array], like: Array) -> list[Array]:
+    """The same values, computed once: each array is divided by a runtime 1.0.
+
+    XLA's CPU backend fuses cheap elementwise producers into every consumer. Fed to several
+    gathers (or to every channel of an output), index arithmetic is then recomputed inside each
+    gather loop, which XLA emits as scalar code. A division counts as expensive, so its result
+    is computed once, in a vectorized loop, and stored. ``like * 0 + 1`` is 1.0 (NaN where
+    ``like`` is NaN, where the result is meaningless anyway) and XLA cannot fold it away;
+    dividing by 1.0 is exact, so the values are unchanged bit for bit. Integer arrays go
+    through float64 or float32 (exact for indices below 2**24 in float32).
+
+    Parameters
+    ----------
+    arrays : arrays broadcastable with ``like``.
+    like : a float array of the batch shape.
+    """
+    one = like * 0.0 + 1.0
+    out = []
+    for x in arrays:
+        if jnp.issubdtype(x.dtype, jnp.integer):
+            f = jnp.float64 if like.dtype == jnp.float64 else jnp.float32
+            out.append((x.astype(f) / one.astype(f)).astype(x.dtype))
+        else:
+            out.append(x / one.astype(x.dtype))
+    return out
