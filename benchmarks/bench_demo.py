@@ -7,7 +7,7 @@ from the run's own summary, the number of configurations and, for the built-in m
 every true parameter of the true model lies inside its 95 % interval.
 
 Writes benchmarks/results/demo_timings.csv and demo_timings.png.
-Run: PYTHONPATH=src python benchmarks/bench_demo.py [--quick-only]
+Run: PYTHONPATH=src python benchmarks/bench_demo.py [--quick-only] [--replot]
 """
 
 from __future__ import annotations
@@ -44,7 +44,14 @@ def run(label: str, material_choice: str, settings: DemoSettings, tmp: Path) -> 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick-only", action="store_true", help="skip the full demo")
+    ap.add_argument(
+        "--replot", action="store_true", help="only redraw the PNG from the existing CSV"
+    )
     args = ap.parse_args()
+    if args.replot:
+        with open(RESULTS / "demo_timings.csv", newline="") as fh:
+            plot(list(csv.DictReader(fh)), RESULTS / "demo_timings.png")
+        return
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
@@ -72,12 +79,13 @@ def plot(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    colors = dict(zip(STAGES[:-1], ("tab:blue", "tab:orange", "tab:green"), strict=True))
     fig, ax = plt.subplots(figsize=(7, 1.2 + 0.6 * len(rows)))
     for i, r in enumerate(rows):
         left = 0.0
         for stage in STAGES[:-1]:
-            v = r[f"{stage}_s"]
-            ax.barh(i, v, left=left, label=stage if i == 0 else None)
+            v = float(r[f"{stage}_s"])
+            ax.barh(i, v, left=left, color=colors[stage], label=stage if i == 0 else None)
             left += v
     ax.set_yticks(range(len(rows)), [r["run"] for r in rows])
     ax.axvline(600, color="k", ls="--", lw=1, label="10 min")
