@@ -19,7 +19,7 @@ from gonio.errors import ParameterError
 #: Environment variable naming the folder of third-party data (holding ``rgl/``).
 DATA_ENV = "GONIO_DATA"
 
-#: RGL-EPFL measurements tried in order (file stem, short description). Acrylic felt first: no
+#: RGL-EPFL measurement files tried in order. Acrylic felt first: no
 #: channel of it is near zero anywhere, so a weighted least-squares fit is well posed on all
 #: three channels; the vinyl films have sharp highlights and blue values clamped at zero.
 RGL_CANDIDATES: tuple[str, ...] = (
