@@ -19,7 +19,6 @@ built from all of them is what the rest of the pipeline uses.
 
 from __future__ import annotations
 
-import json
 import re
 import shutil
 import time
@@ -103,18 +102,9 @@ class DemoSummary:
     files: dict[str, Any]
 
     def to_json(self) -> dict[str, Any]:
-        d = asdict(self)
-        return json.loads(json.dumps(d, default=_jsonable))
+        from gonio.fit.result import to_jsonable
 
-
-def _jsonable(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+        return to_jsonable(asdict(self))
 
 
 # -- stage 1: the rig file --------------------------------------------------------------------
@@ -157,14 +147,17 @@ def prune_images(run_dir: Path, keep: int = KEPT_FRAMES) -> dict[str, int]:
     """Delete raw brackets and HDR frames beyond the first ``keep`` configurations."""
     removed = kept = 0
     freed = 0
+
+    def config_of(p: Path) -> str:  # c00012_t0.01.dng, c00012.exr -> c00012
+        return p.name.split("_")[0].split(".")[0]
+
     for sub in ("raw", "hdr"):
         folder = run_dir / sub
         if not folder.is_dir():
             continue
-        configs = sorted({p.name.split("_")[0].split(".")[0] for p in folder.iterdir()})
-        keep_set = set(configs[:keep])
+        keep_set = set(sorted({config_of(p) for p in folder.iterdir()})[:keep])
         for p in folder.iterdir():
-            if p.name.split("_")[0].split(".")[0] in keep_set:
+            if config_of(p) in keep_set:
                 kept += 1
             else:
                 freed += p.stat().st_size
@@ -195,22 +188,6 @@ def truth_check(result: Any, truth: dict[str, Any]) -> dict[str, bool]:
         v = np.broadcast_to(np.asarray(value, dtype=float), lo.shape)
         out[key] = bool(np.all((lo <= v) & (v <= hi)))
     return out
-
-
-def format_value(v: Any, digits: int = 4) -> str:
-    """A scalar as ``0.123``, a per-channel value as ``(0.1, 0.2, 0.3)``."""
-    a = np.asarray(v, dtype=float)
-    if a.ndim == 0:
-        return f"{float(a):.{digits}g}"
-    return "(" + ", ".join(f"{x:.{digits}g}" for x in a.ravel()) + ")"
-
-
-def format_interval(iv: Any, digits: int = 4) -> str:
-    """``[lo, hi]`` per value (per channel), or ``-`` when there is no interval."""
-    if not iv:
-        return "-"
-    lo, hi = (np.asarray(x, dtype=float).ravel() for x in iv)
-    return ", ".join(f"[{a:.{digits}g}, {b:.{digits}g}]" for a, b in zip(lo, hi, strict=True))
 
 
 # -- the whole run ------------------------------------------------------------------------------

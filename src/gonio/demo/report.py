@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from gonio.demo.pipeline import format_interval, format_value
+import numpy as np
 
 _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 70em; color: #222; }
@@ -39,6 +39,22 @@ def _num(x: Any, digits: int = 4) -> str:
     if x is None:
         return "&ndash;"
     return f"{float(x):.{digits}g}"
+
+
+def format_value(v: Any, digits: int = 4) -> str:
+    """A scalar as ``0.123``, a per-channel value as ``(0.1, 0.2, 0.3)``."""
+    a = np.asarray(v, dtype=float)
+    if a.ndim == 0:
+        return f"{float(a):.{digits}g}"
+    return "(" + ", ".join(f"{x:.{digits}g}" for x in a.ravel()) + ")"
+
+
+def format_interval(iv: Any, digits: int = 4) -> str:
+    """``[lo, hi]`` per value (per channel), or ``-`` when there is no interval."""
+    if not iv:
+        return "-"
+    lo, hi = (np.asarray(x, dtype=float).ravel() for x in iv)
+    return ", ".join(f"[{a:.{digits}g}, {b:.{digits}g}]" for a, b in zip(lo, hi, strict=True))
 
 
 def _img(src: str, alt: str, cls: str = "") -> str:

@@ -39,9 +39,10 @@ class Comparison:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary (without the per-model details)."""
-        from gonio.fit.result import _clean
+        from gonio.fit.result import to_jsonable
 
-        return _clean({"table": self.table, "recommended": self.recommended, "reason": self.reason})
+        d = {"table": self.table, "recommended": self.recommended, "reason": self.reason}
+        return to_jsonable(d)
 
 
 def summarize(results: Sequence[FitResult]) -> Comparison:

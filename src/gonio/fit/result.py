@@ -113,14 +113,14 @@ SCHEMA: dict[str, Any] = {
 }
 
 
-def _clean(x: Any) -> Any:
-    """NumPy -> JSON: arrays to lists, non-finite floats to None."""
+def to_jsonable(x: Any) -> Any:
+    """NumPy -> JSON: arrays to lists, non-finite floats to None (nested dicts and lists)."""
     if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
+        return {str(k): to_jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [to_jsonable(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
+        return to_jsonable(x.tolist())
     if isinstance(x, (np.floating, float)):
         v = float(x)
         return v if math.isfinite(v) else None
@@ -251,7 +251,7 @@ class FitResult:
             "wall_s": self.wall_s,
             "gonio_version": __version__,
         }
-        return _clean(d)
+        return to_jsonable(d)
 
     def save(self, path: str | Path) -> Path:
         """Write the JSON atomically (temporary file, then rename); returns the path."""
