@@ -31,7 +31,7 @@ from tests.brdf.test_tabulated import _GGXLike
 
 HALF = math.pi / 2
 N_DISCRETE = 8  # chi-square tests on discrete outcomes in this module
-N_TABLE = 12  # chi-square tests of table samplers (default + slow)
+N_TABLE = 15  # chi-square tests of table samplers (default + slow)
 SIDAK_DISCRETE = 1 - (1 - 0.01) ** (1 / N_DISCRETE)
 
 
@@ -183,7 +183,7 @@ def rough():
     return TabulatedBRDF.from_model(_GGXLike(kd=0.2, ks=0.7, alpha=0.5), axes=_axes())
 
 
-def _chi2(table, theta_o_deg, method, proposal="cosine", phi_o=0.0, n=1_000_000):
+def _chi2(table, theta_o_deg, method, proposal="majorant", phi_o=0.0, n=1_000_000):
     wo = np.asarray(frames.spherical_to_direction(math.radians(theta_o_deg), phi_o))
 
     def sample(u):
@@ -213,13 +213,69 @@ def test_alias_chi2(glossy, theta_o):
 
 
 def test_rejection_chi2_cosine(rough):
-    _chi2(rough, 40, "rejection")
+    _chi2(rough, 40, "rejection", proposal="cosine")
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("theta_o", [0, 85])
 def test_rejection_chi2_cosine_slow(rough, theta_o):
-    _chi2(rough, theta_o, "rejection")
+    _chi2(rough, theta_o, "rejection", proposal="cosine")
+
+
+@pytest.mark.parametrize("theta_o", [0, 45, 85])
+def test_rejection_chi2_majorant(glossy, theta_o):
+    """The default proposal: exact sampling of g cos on the glossy table."""
+    _chi2(glossy, theta_o, "rejection", proposal="majorant")
+
+
+def test_majorant_bounds_g_cos_and_acceptance(glossy):
+    """The per-cell bound of the majorant proposal is never exceeded by ``g cos`` for outgoing
+    directions anywhere in a bucket, and it is tight enough to accept often."""
+    from gonio.brdf._table_sampling import _cell_of
+
+    smp = glossy._sampler()
+    geo = smp.geo
+    rng = np.random.default_rng(7)
+    cos_asc = jnp.asarray(smp.cos_desc[::-1].copy())
+    worst = 0.0
+    for b in (0, geo.n_to // 2, geo.n_to - 1):
+        maj = smp._majorant(b)
+        t0, t1, _, _ = smp._bucket_ranges(b)
+        n = 200_000
+        th_o = rng.uniform(t0, t1, n)
+        wo = np.asarray(frames.spherical_to_direction(th_o, rng.uniform(0, 2 * math.pi, n)))
+        z = rng.uniform(0, 1, n)
+        phi = rng.uniform(0, 2 * math.pi, n)
+        r = np.sqrt(1 - z * z)
+        wi = np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
+        row, col = _cell_of(geo, jnp.asarray(wi), jnp.asarray(wo), cos_asc)
+        cell = np.asarray(row) * geo.n_p + np.asarray(col)
+        g = np.maximum(np.asarray(glossy.f(wi, wo)).mean(-1), 0) * wi[:, 2]
+        worst = max(worst, float(np.max(g / maj["bound"][cell])))
+    assert worst <= 1.0, f"g cos exceeds the majorant by {worst:.4f}x"
+    wo = np.asarray(frames.spherical_to_direction(math.radians(45), 0.0))
+    glossy.sample(wo, np.random.default_rng(3).random((20_000, 2)), method="rejection")
+    acceptance = smp.stats["rejection_samples"] / smp.stats["rejection_proposals"]
+    assert acceptance > 0.3, f"majorant acceptance {acceptance:.3f}"
+
+
+@pytest.mark.parametrize("proposal", ["majorant", "cosine"])
+def test_rejection_on_a_bucket_edge(proposal):
+    """Proposals run in float32: a float64 direction on a bucket edge (45 degrees is the edge
+    between buckets 7 and 8 of 16) rounds into the lower bucket there. Its structures must be
+    built and used, whatever other buckets are already built."""
+
+    def table():
+        model = _GGXLike(kd=0.2, ks=0.7, alpha=0.3)
+        return TabulatedBRDF.from_model(model, axes=_axes(16), sampling_res=(16, 32, 64))
+
+    wo = np.asarray(frames.spherical_to_direction(math.radians(45), 0.0))
+    u = np.random.default_rng(4).random((2000, 2))
+    fresh = table().sample(wo, u, method="rejection", proposal=proposal)
+    t = table()
+    t.sample(np.array([0.0, 0.0, 1.0]), u[:4], method="rejection", proposal=proposal)
+    after = t.sample(wo, u, method="rejection", proposal=proposal)
+    np.testing.assert_array_equal(np.asarray(after.wi), np.asarray(fresh.wi))
 
 
 class _MirrorLobe:
@@ -290,8 +346,13 @@ def test_sample_weight_and_pdf_consistency():
     th = rng.uniform(0, math.radians(85), n)
     wo = np.asarray(frames.spherical_to_direction(th, rng.uniform(0, 2 * math.pi, n)))
     u = rng.random((n, 2))
-    for method in ("inversion", "alias", "rejection"):
-        s = rough.sample(wo, u, method=method)
+    for method, proposal in [
+        ("inversion", "majorant"),
+        ("alias", "majorant"),
+        ("rejection", "majorant"),
+        ("rejection", "cosine"),
+    ]:
+        s = rough.sample(wo, u, method=method, proposal=proposal)
         ok = np.asarray(s.pdf) > 0
         assert ok.mean() > 0.99
         wi = np.asarray(s.wi)[ok]
@@ -301,9 +362,23 @@ def test_sample_weight_and_pdf_consistency():
         f = np.asarray(rough.f(wi, wo[ok]))
         expect = f * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
         np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-5)
-        # float32 in, float32 out
-        s32 = rough.sample(wo[:10].astype(np.float32), u[:10].astype(np.float32), method=method)
+        # float32 in, float32 out (rejection then reuses the f its acceptance test looked up)
+        wo32, u32 = wo[:500].astype(np.float32), u[:500].astype(np.float32)
+        s32 = rough.sample(wo32, u32, method=method, proposal=proposal)
         assert s32.wi.dtype == jnp.float32 and s32.pdf.dtype == jnp.float32
+        ok32 = np.asarray(s32.pdf) > 0
+        wi32 = np.asarray(s32.wi)[ok32]
+        np.testing.assert_allclose(
+            np.asarray(rough.pdf(wi32, wo32[ok32], method=method)),
+            np.asarray(s32.pdf)[ok32],
+            rtol=1e-5,
+        )
+        f32 = np.asarray(rough.f(wi32, wo32[ok32]))
+        np.testing.assert_allclose(
+            np.asarray(s32.weight)[ok32],
+            f32 * wi32[:, 2:3] / np.asarray(s32.pdf)[ok32][:, None],
+            rtol=1e-5,
+        )
 
 
 def test_laziness_and_cache():

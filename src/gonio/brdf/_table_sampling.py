@@ -51,9 +51,10 @@ import numpy as np
 from gonio.brdf import warp
 from gonio.brdf._xla import materialize
 from gonio.brdf.sampling import (
+    _normalized_cdf,
     _sample_discrete_cdf,
     _vose,
-    alias_sample,
+    alias_sample_2d,
     hash_uniform,
     rejection_sample,
     rejection_step,
@@ -253,7 +254,13 @@ class TableSampler:
             # inside jit the outgoing directions are unknown: build every bucket
             store.ensure(np.arange(self.n_buckets))
         else:
-            store.ensure(np.asarray(_bucket_kernel(self.geo, wo)).reshape(-1))
+            buckets = np.asarray(_bucket_kernel(self.geo, wo)).reshape(-1)
+            if method == "rejection" and wo.dtype != jnp.float32:
+                # proposals run in float32, where a direction on a bucket edge may round into
+                # the neighbouring bucket: build that one too
+                b32 = np.asarray(_bucket_kernel(self.geo, wo.astype(jnp.float32))).reshape(-1)
+                buckets = np.concatenate([buckets, b32])
+            store.ensure(buckets)
         return store.stacked(self.n_buckets)
 
     # -- scalar target g cos -------------------------------------------------------------------
@@ -316,8 +323,6 @@ class TableSampler:
         return F + floor * self.omega[:, None]
 
     def _build_grid(self, buckets: list[int]) -> dict[int, dict[str, np.ndarray]]:
-        from gonio.brdf.sampling import _normalized_cdf
-
         out = {}
         for b in buckets:
             w = self._cell_weights(b)
@@ -325,15 +330,7 @@ class TableSampler:
         return out
 
     def _build_alias(self, buckets: list[int]) -> dict[int, dict[str, np.ndarray]]:
-        out = {}
-        for b in buckets:
-            w = self._cell_weights(b).reshape(-1)
-            q, alias = _vose(w / w.sum())
-            n = w.size
-            realized = q / n
-            np.add.at(realized, alias, (1.0 - q) / n)
-            out[b] = {"q": q, "alias": alias, "p": realized}
-        return out
+        return {b: _alias_arrays(self._cell_weights(b).reshape(-1)) for b in buckets}
 
     # -- rejection -----------------------------------------------------------------------------
     def _h_max(self) -> np.ndarray:
@@ -535,6 +532,9 @@ class TableSampler:
     ) -> dict[int, dict[str, np.ndarray]]:
         out = {}
         for b in buckets:
+            if proposal == "majorant":
+                out[b] = {**self._majorant(b), "rho": self._rho_nodes(b)}
+                continue
             if proposal == "cosine":
                 # g cos / (cos / pi) = pi g
                 U, _, _ = self._cell_bounds(b, _BOUND_RES)
@@ -543,6 +543,32 @@ class TableSampler:
                 M = self._model_bound(b, proposal)
             out[b] = {"bound": np.asarray(M), "rho": self._rho_nodes(b)}
         return out
+
+    def _majorant(self, b: int) -> dict[str, np.ndarray]:
+        """Piecewise-constant proposal of bucket ``b`` on the incident grid, and its bound.
+
+        Cell ``c``'s weight is ``m_c Omega_c`` with ``m_c`` a rigorous bound of ``g cos`` over
+        the cell and every outgoing direction in the bucket (:meth:`_cell_bounds`: the table
+        bound times the largest ``cos theta_i`` of the cell). Cells are drawn from an alias
+        table and the direction is uniform in solid angle inside the cell, so the proposal
+        density is ``q = p_c / Omega_c`` with ``p_c`` the probability the table *realizes*.
+        ``bound_c = M q_c`` with ``M = max_c m_c / q_c`` then bounds ``g cos`` in cell ``c``
+        (``bound_c >= m_c``), and accepting with probability ``g cos / bound_c`` samples
+        ``g cos`` exactly. The acceptance rate is ``rho / sum_c m_c Omega_c``.
+        """
+        U, cmax, _ = self._cell_bounds(b, (self.geo.n_t, self.geo.n_p))
+        m = (U * cmax).reshape(-1)
+        omega = np.repeat(self.omega, self.geo.n_p)
+        w = m * omega
+        if not w.sum() > 0:  # g = 0 for the whole bucket: propose anything, accept nothing
+            w = omega
+        arrays = _alias_arrays(w)
+        q = arrays["p"] / omega
+        with np.errstate(divide="ignore", invalid="ignore"):
+            M = float(np.max(np.where(q > 0, m / np.where(q > 0, q, 1.0), 0.0)))
+        # a cell the alias table never draws has m = 0 up to rounding: its bound stays m
+        bound = np.where(q > 0, M * q, m) * (1 + 1e-6)
+        return {**arrays, "bound": bound}
 
     def _model_bound(self, b: int, model: Any) -> float:
         """Bound of ``g cos / q`` over bucket ``b`` for the mixture proposal ``q``.
@@ -599,6 +625,8 @@ class TableSampler:
 
     # -- public entry points -------------------------------------------------------------------
     def sample(self, wo: Array, u: Array, method: str, rng: Any, proposal: Any):
+        """``(wi, pdf, f)``: ``f (..., C)`` is the table at ``(wi, wo)`` when the sampler has
+        already looked it up (rejection in float32), else None."""
         slot_of, arrays = self._prepare(method, proposal, wo)
         dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
         cos_desc, _cos_asc, omega = self._consts[dt]
@@ -613,7 +641,7 @@ class TableSampler:
                 wo,
                 u,
             )
-            return wi, pdf
+            return wi, pdf, None
         if method == "alias":
             wi, pdf = _alias_kernel(
                 self.geo,
@@ -626,7 +654,7 @@ class TableSampler:
                 wo,
                 u,
             )
-            return wi, pdf
+            return wi, pdf, None
         return self._sample_rejection(slot_of, arrays, wo, u, rng, proposal, dt)
 
     def _sample_rejection(self, slot_of, arrays, wo, u, rng, proposal, dt):
@@ -640,25 +668,36 @@ class TableSampler:
         u32 = jnp.clip(u_f.astype(jnp.float32), 0.0, _ONE_MINUS_EPS32)
         bound = arrays["bound"].astype(jnp.float32)
         key = _proposal_key(proposal)
-        model = None if proposal == "cosine" else proposal
-        round_fn = partial(_rejection_round, self.table, model, self.geo)
-        consts = (slot_of, bound)
+        if proposal == "majorant":
+            cos_desc = self._consts[jnp.float32][0]
+            round_fn = partial(_majorant_round, self.table, self.geo)
+            consts = (slot_of, arrays["q"].astype(jnp.float32), arrays["alias"], bound, cos_desc)
+        else:
+            model = None if proposal == "cosine" else proposal
+            round_fn = partial(_rejection_round, self.table, model, self.geo)
+            consts = (slot_of, bound)
         if isinstance(wo, jax.core.Tracer) or isinstance(u, jax.core.Tracer):
-            wi, ok = _rejection_loop_traced(
+            x, ok = _rejection_loop_traced(
                 lambda w, a, b: round_fn(*consts, w, a, b), wo32, u32, seeds
             )
         else:
             step = self._round_fns.get(key)
             if step is None:
-                step = rejection_step(lambda w, a, b, so, bd: round_fn(so, bd, w, a, b))
+                step = rejection_step(lambda w, a, b, *c: round_fn(*c, w, a, b))
                 self._round_fns[key] = step
-            wi, ok, rounds = rejection_sample(step, (wo32,), u32, seeds, consts=consts)
+            x, ok, rounds = rejection_sample(step, (wo32,), u32, seeds, consts=consts)
             self.stats["rejection_proposals"] = float(np.asarray(rounds).sum())
             self.stats["rejection_samples"] = float(wo_f.shape[0])
+        wi, f = x
         wi = wi.astype(dt)
-        pdf = self.pdf_rejection(slot_of, arrays, wi, wo_f, dt)
+        if dt == jnp.float32:  # the acceptance test looked f up at (wi, wo) in float32
+            pdf = _rejection_pdf_from_f(self.geo, slot_of, arrays["rho"].astype(dt), f, wi, wo_f)
+            f = f.reshape(*shape, f.shape[-1])
+        else:
+            f = None
+            pdf = self.pdf_rejection(slot_of, arrays, wi, wo_f, dt)
         pdf = jnp.where(ok, pdf, 0.0)
-        return wi.reshape(*shape, 3), pdf.reshape(shape)
+        return wi.reshape(*shape, 3), pdf.reshape(shape), f
 
     def pdf_rejection(self, slot_of, arrays, wi, wo, dt):
         t = self.table
@@ -691,12 +730,26 @@ class TableSampler:
 
 def _proposal_key(proposal: Any) -> Any:
     if isinstance(proposal, str):
-        if proposal != "cosine":
-            raise ParameterError(f"proposal must be 'cosine' or a BRDF model, got {proposal!r}")
-        return "cosine"
+        if proposal not in ("majorant", "cosine"):
+            raise ParameterError(
+                f"proposal must be 'majorant', 'cosine' or a BRDF model, got {proposal!r}"
+            )
+        return proposal
     if not (hasattr(proposal, "sample") and hasattr(proposal, "pdf")):
-        raise ParameterError("proposal must be 'cosine' or a BRDF model with sample and pdf")
+        raise ParameterError(
+            "proposal must be 'majorant', 'cosine' or a BRDF model with sample and pdf"
+        )
     return id(proposal)
+
+
+def _alias_arrays(w: np.ndarray) -> dict[str, np.ndarray]:
+    """Alias table of the weights ``w (n,)`` (positive sum): thresholds ``q``, ``alias`` and
+    the probabilities ``p`` the table realizes."""
+    q, alias = _vose(w / w.sum())
+    n = w.size
+    realized = q / n
+    np.add.at(realized, alias, (1.0 - q) / n)
+    return {"q": q, "alias": alias, "p": realized}
 
 
 def _axis_cells(ax: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -769,9 +822,11 @@ def _alias_kernel(geo, slot_of, q, alias, p, cos_desc, omega, wo, u):
     s = jnp.take(slot_of, _bucket_of(geo, wo))
     n = geo.n_t * geo.n_p
     alias_flat = (alias + (jnp.arange(alias.shape[0], dtype=jnp.int32) * n)[:, None]).reshape(-1)
-    k, r, pk = alias_sample(q.reshape(-1), alias_flat, p.reshape(-1), s * n, n, u[..., 0])
+    k, ry, rx, pk = alias_sample_2d(
+        q.reshape(-1), alias_flat, p.reshape(-1), s * n, n, u[..., 0], u[..., 1]
+    )
     row, col = k // geo.n_p, k % geo.n_p
-    wi = _direction_in_cell(geo, row, col, r, u[..., 1], cos_desc, wo)
+    wi = _direction_in_cell(geo, row, col, ry, rx, cos_desc, wo)
     return wi, pk / jnp.take(omega, row)
 
 
@@ -787,8 +842,14 @@ def _alias_pdf(geo, slot_of, p, cos_asc, omega, wi, wo):
 def _rejection_pdf_kernel(geo, spec, data, slot_of, rho, wi, wo):
     from gonio.brdf.tabulated import _eval_kernel
 
+    return _rejection_pdf_from_f(geo, slot_of, rho, _eval_kernel(data, wi, wo, spec), wi, wo)
+
+
+@partial(jax.jit, static_argnames=("geo",))
+def _rejection_pdf_from_f(geo, slot_of, rho, f, wi, wo):
+    """``g cos theta_i / rho(wo)`` from the table's values ``f (..., C)`` at ``(wi, wo)``."""
     rho_o = _rho_interp(geo, slot_of, rho, wo)
-    g = jnp.maximum(jnp.mean(_eval_kernel(data, wi, wo, spec), axis=-1), 0.0)
+    g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
     ok = rho_o > 0
     return jnp.where(ok, g * jnp.maximum(wi[..., 2], 0.0) / jnp.where(ok, rho_o, 1.0), 0.0)
 
@@ -825,15 +886,35 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
     return (1 - a) * ((1 - c) * v00 + c * v01) + a * ((1 - c) * v10 + c * v11)
 
 
+def _majorant_round(table, geo, slot_of, q, alias, bound, cos_desc, wo, up, ua):
+    """One proposal from the bucket's piecewise-constant majorant (:meth:`TableSampler._majorant`)
+    and its acceptance test per query: ``((wi, f), accepted)``."""
+    s = jnp.take(slot_of, _bucket_of(geo, wo))
+    n = geo.n_t * geo.n_p
+    alias_flat = (alias + (jnp.arange(alias.shape[0], dtype=jnp.int32) * n)[:, None]).reshape(-1)
+    base = s * n
+    k, ry, rx, _ = alias_sample_2d(
+        q.reshape(-1), alias_flat, q.reshape(-1), base, n, up[..., 0], up[..., 1]
+    )
+    row, col = k // geo.n_p, k % geo.n_p
+    wi = _direction_in_cell(geo, row, col, ry, rx, cos_desc, wo)
+    f = table.f(wi, wo)
+    g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
+    accept = ua * jnp.take(bound.reshape(-1), base + k) < g * wi[..., 2]
+    return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
+
+
 def _rejection_round(table, model, geo, slot_of, bound, wo, up, ua):
-    """One proposal and acceptance test per query: ``(wi, accepted)``."""
+    """One proposal (cosine or ``model`` mixed with cosine) and acceptance test per query:
+    ``((wi, f), accepted)``."""
     s = jnp.take(slot_of, _bucket_of(geo, wo))
     M = jnp.take(bound, s)
     if model is None:
         wi = warp.square_to_cosine_hemisphere(up).astype(wo.dtype)
-        ratio_num = jnp.maximum(jnp.mean(table.f(wi, wo), axis=-1), 0.0) * jnp.pi
+        f = table.f(wi, wo)
+        ratio_num = jnp.maximum(jnp.mean(f, axis=-1), 0.0) * jnp.pi
         accept = ua * M < ratio_num
-        return wi, accept & (wi[..., 2] > 0)
+        return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
     eps = _PROPOSAL_EPS
     use_cos = up[..., 0] < eps
     u0 = jnp.where(use_cos, up[..., 0] / eps, (up[..., 0] - eps) / (1 - eps))
@@ -842,29 +923,31 @@ def _rejection_round(table, model, geo, slot_of, bound, wo, up, ua):
     wi_m = model.sample(wo, uu).wi.astype(wo.dtype)
     wi = jnp.where(use_cos[..., None], wi_c, wi_m)
     q = eps * jnp.maximum(wi[..., 2], 0.0) / jnp.pi + (1 - eps) * model.pdf(wi, wo).astype(wo.dtype)
-    g = jnp.maximum(jnp.mean(table.f(wi, wo), axis=-1), 0.0)
+    f = table.f(wi, wo)
+    g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
     accept = ua * M * q < g * wi[..., 2]
-    return wi, accept & (wi[..., 2] > 0)
+    return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
 
 
 def _rejection_loop_traced(round_fn, wo, u, seeds, max_rounds: int = 4096):
     """``lax.while_loop`` version of :func:`rejection_sample` for traced inputs (no compaction)."""
     dtype = u.dtype
-    wi0, ok0 = round_fn(wo, u, hash_uniform(seeds, 2, dtype))
+    x0, ok0 = round_fn(wo, u, hash_uniform(seeds, 2, dtype))
 
     def cond(c):
         r, _, ok = c
         return (r < max_rounds) & ~jnp.all(ok)
 
     def body(c):
-        r, wi, ok = c
+        r, x, ok = c
         ru = r.astype(jnp.uint32)
         up = jnp.stack(
             [hash_uniform(seeds, 3 * ru, dtype), hash_uniform(seeds, 3 * ru + 1, dtype)], -1
         )
         w, acc = round_fn(wo, up, hash_uniform(seeds, 3 * ru + 2, dtype))
         take = acc & ~ok
-        return r + 1, jnp.where(take[..., None], w, wi), ok | acc
+        keep = jax.tree.map(lambda new, old: jnp.where(take[:, None], new, old), w, x)
+        return r + 1, keep, ok | acc
 
-    _, wi, ok = jax.lax.while_loop(cond, body, (jnp.asarray(1, jnp.int32), wi0, ok0))
-    return wi, ok
+    _, x, ok = jax.lax.while_loop(cond, body, (jnp.asarray(1, jnp.int32), x0, ok0))
+    return x, ok

@@ -22,15 +22,16 @@ def materialize(arrays: Sequence[Array], like: Array) -> list[Array]:
 
     Parameters
     ----------
-    arrays : arrays broadcastable with ``like``.
+    arrays : arrays of the batch shape, optionally with trailing axes (e.g. ``(..., 3)``).
     like : a float array of the batch shape.
     """
     one = like * 0.0 + 1.0
     out = []
     for x in arrays:
+        o = one.reshape(one.shape + (1,) * (x.ndim - one.ndim))  # trailing axes of x broadcast
         if jnp.issubdtype(x.dtype, jnp.integer):
             f = jnp.float64 if like.dtype == jnp.float64 else jnp.float32
-            out.append((x.astype(f) / one.astype(f)).astype(x.dtype))
+            out.append((x.astype(f) / o.astype(f)).astype(x.dtype))
         else:
-            out.append(x / one.astype(x.dtype))
+            out.append(x / o.astype(x.dtype))
     return out

@@ -344,6 +344,34 @@ def alias_sample(
     return chosen - base, rr, jnp.take(probs, chosen, mode="clip")
 
 
+def alias_sample_2d(
+    q: Array, alias_flat: Array, probs: Array, base: Array, n: int, u_col: Array, u_keep: Array
+) -> tuple[Array, Array, Array, Array]:
+    """:func:`alias_sample` with two uniform numbers: ``u_col`` picks the column, ``u_keep``
+    decides between the column and its alias.
+
+    With one number split over ``n`` columns only ``24 - log2(n)`` of a float32's bits are left
+    for that decision (11 for 8192 cells), so a column whose threshold is below ``2**-11``
+    would be kept with the wrong probability. Returns ``(index within the row, fractional part
+    of u_col * n, u_keep remapped to [0, 1), probability)``: the two remapped numbers are
+    independent and uniform given the outcome, ready to place a sample inside a 2-D cell.
+    """
+    s = u_col * n
+    col = jnp.minimum(jnp.floor(s).astype(jnp.int32), n - 1)
+    frac = jnp.clip(s - col.astype(u_col.dtype), 0.0, _one_minus_eps(u_col.dtype))
+    flat = base + col
+    thr = jnp.take(q, flat, mode="clip")
+    keep = u_keep < thr
+    chosen = jnp.where(keep, flat, jnp.take(alias_flat, flat, mode="clip"))
+    rr = jnp.where(
+        keep,
+        u_keep / jnp.where(thr > 0, thr, 1.0),
+        (u_keep - thr) / jnp.where(thr < 1, 1 - thr, 1.0),
+    )
+    rr = jnp.clip(rr, 0.0, _one_minus_eps(u_keep.dtype))
+    return chosen - base, frac, rr, jnp.take(probs, chosen, mode="clip")
+
+
 # ---------------------------------------------------------------------------------------------
 # Rejection sampling
 # ---------------------------------------------------------------------------------------------
@@ -402,16 +430,18 @@ def hash_uniform(seed: Array, counter: int | Array, dtype: Any = jnp.float32) ->
 def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> Callable[..., Any]:
     """Wrap a one-proposal function into the jit-compiled step :func:`rejection_sample` runs.
 
-    ``round_fn(*inputs, u_prop (m, 2), u_acc (m,), *consts) -> (x (m, d), accepted (m,))`` draws
-    one proposal per query from ``u_prop`` and accepts it when ``u_acc`` is below the acceptance
-    ratio. Query ``i``'s ``r``-th proposal uses the caller's ``u`` when ``r = 0`` and
+    ``round_fn(*inputs, u_prop (m, 2), u_acc (m,), *consts) -> (x, accepted (m,))`` draws one
+    proposal per query from ``u_prop`` and accepts it when ``u_acc`` is below the acceptance
+    ratio; ``x`` is an array ``(m, ...)`` or a tuple of them (a tuple rather than one
+    concatenated array: XLA fuses a concatenation's producers into it, several times slower).
+    Query ``i``'s ``r``-th proposal uses the caller's ``u`` when ``r = 0`` and
     :func:`hash_uniform` counters ``3r, 3r + 1`` after that; its acceptance test uses ``3r + 2``.
     Keep the returned step and reuse it: each new one compiles again.
     """
 
     def step(inputs, u, seeds, rounds, consts):
         dtype = u.dtype
-        r = rounds.astype(jnp.uint32)
+        r = jnp.broadcast_to(rounds, seeds.shape).astype(jnp.uint32)
         hashed = jnp.stack(
             [hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1
         )
@@ -442,45 +472,78 @@ def rejection_sample(
         :func:`seeds_from_rng`).
     max_rounds : queries still rejected after this many proposals fail (``ok`` False).
     consts : extra arguments passed unchanged to every call.
-    chunk : largest batch per call; batches are padded to 1024, 8192 or 65536 queries so only
-        a few shapes are ever compiled.
+    chunk : largest batch per call (1024 times a power of 4); smaller batches are padded to
+        1024 times a power of 4, so only a few shapes are ever compiled. Batches of about 65536
+        keep a proposal's intermediates in cache (1e6 at once runs about 1.5x slower on CPU).
 
     Returns
     -------
-    x : ``(N, d)`` accepted proposals (the last proposal where failed).
+    x : ``(N, ...)`` accepted proposals, as the step returns them (array or tuple of arrays;
+        the last proposal where failed).
     ok : ``(N,)`` bool.
     rounds : ``(N,)`` int32 number of proposals each query used.
 
-    Queries that are done are removed between calls (on the host), so the total work is about
-    ``N / acceptance`` proposals, and the result does not depend on the chunking.
+    Each round proposes once for every query still pending (all of them have made the same
+    number of proposals), dispatching every chunk before reading any result back so the host
+    work overlaps the device's; queries that accepted leave between rounds. The total work is
+    about ``N / acceptance`` proposals, and the result does not depend on the chunking.
     """
     inputs = tuple(np.asarray(a) for a in inputs)
     u = np.asarray(u)
     seeds = np.asarray(seeds)
     n = u.shape[0]
-    x_out = None
     ok = np.zeros(n, bool)
     rounds = np.zeros(n, np.int32)
     pending = np.arange(n)
+    kept: list[tuple[np.ndarray, Array, np.ndarray]] = []  # (queries, proposals, their rows)
+    r = 0
     while pending.size:
-        m = min(pending.size, chunk)
-        size = 1024
-        while size < m:
-            size *= 8
-        part = pending[:m]
-        idx = np.concatenate([part, np.full(size - m, part[0])])
-        x, acc = step(tuple(a[idx] for a in inputs), u[idx], seeds[idx], rounds[idx], consts)
-        x = np.asarray(x)[:m]
-        acc = np.asarray(acc)[:m]
-        if x_out is None:
-            x_out = np.zeros((n, *x.shape[1:]), x.dtype)
-        x_out[part] = x  # accepted queries leave `pending` and keep this proposal
-        rounds[part] += 1
-        ok[part[acc]] = True
-        failed = part[~acc]
-        failed = failed[rounds[failed] < max_rounds]
-        pending = np.concatenate([pending[m:], failed])
-    return jnp.asarray(x_out), jnp.asarray(ok), jnp.asarray(rounds)
+        calls = []
+        for start in range(0, pending.size, chunk):
+            part = pending[start : start + chunk]
+            m = part.size
+            size = 1024
+            while size < m:
+                size *= 4
+            if size > m:
+                idx = np.concatenate([part, np.full(size - m, part[0])])
+            else:  # in the first round `part` is a range: slice, don't gather
+                idx = slice(start, start + m) if r == 0 else part
+            out = step(tuple(a[idx] for a in inputs), u[idx], seeds[idx], np.int32(r), consts)
+            calls.append((part, out))
+        r += 1
+        rounds[pending] = r
+        failed = []
+        for part, (x, acc) in calls:
+            # only the acceptance flags come back each round; the proposals stay on the device
+            acc = np.asarray(acc)[: part.size]
+            ok[part[acc]] = True
+            rows = np.flatnonzero(acc) if r < max_rounds else np.arange(part.size)
+            if rows.size:  # accepted (or, after the last round, the last proposal)
+                kept.append((part[rows], x, rows))
+            failed.append(part[~acc])
+        pending = np.concatenate(failed) if r < max_rounds else pending[:0]
+    return _assemble(n, kept, step, inputs, u, seeds, consts), jnp.asarray(ok), jnp.asarray(rounds)
+
+
+def _assemble(n, kept, step, inputs, u, seeds, consts) -> Any:
+    """``(n, ...)`` proposals (each leaf of the proposal pytree) from the ``(queries, proposals,
+    rows)`` kept by each call, put together on the host (on CPU, reading a device array back
+    is free; eager device-side gathers would compile anew for every new number of rows)."""
+    shape = jax.eval_shape(
+        step,
+        tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
+        np.zeros((1024, *u.shape[1:]), u.dtype),
+        np.zeros(1024, seeds.dtype),
+        np.int32(0),
+        consts,
+    )[0]
+    leaves, tree = jax.tree.flatten(shape)
+    out = [np.zeros((n, *a.shape[1:]), a.dtype) for a in leaves]
+    for queries, x, rows in kept:
+        for o, a in zip(out, jax.tree.leaves(x), strict=True):
+            o[queries] = np.asarray(a)[rows]
+    return jax.tree.unflatten(tree, [jnp.asarray(o) for o in out])
 
 
 __all__ = [
@@ -488,6 +551,7 @@ __all__ = [
     "Distribution1D",
     "Distribution2D",
     "alias_sample",
+    "alias_sample_2d",
     "find_interval",
     "hash_uniform",
     "rejection_sample",
