@@ -122,7 +122,8 @@ class ImagingCamera:
         self.hdr_dir = self.run_dir / "hdr"
         self.raw_dir.mkdir(parents=True, exist_ok=True)
         self.hdr_dir.mkdir(parents=True, exist_ok=True)
-        self.noise = NoiseModel(self.sensor.gain, self.sensor.read_noise)
+        sen = self.sensor
+        self.noise = NoiseModel(sen.gain, sen.read_noise, sen.dark_current)
         self._darks: dict[float, np.ndarray] = {}
         self._hint: _Hint | None = self._hint_from_disk()
         self.last_times = FrameTimes()
