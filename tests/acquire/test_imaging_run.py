@@ -150,3 +150,16 @@ def test_a_saturating_probe_is_rescued_by_shorter_brackets(tmp_path):
     assert min(cap.meta["exposures_s"]) < 0.05 < max(cap.meta["exposures_s"])
     truth = np.asarray(models.Node.from_dict(rig.sim.sample).f(cap.meta["wi"], cap.meta["wo"]))
     assert np.all(np.abs(cap.value - truth) < 4 * cap.sigma)
+
+
+def test_rig_file_sets_the_blooming_guard():
+    from gonio.acquire.imaging import settings_from_rig
+    from gonio.errors import RigConfigError
+
+    text = load_rig("sim").text
+    assert settings_from_rig(parse_rig(text, "sim.toml")).bloom_guard_px == 1
+    off = text.replace("spot_radius_m = 0.002", "spot_radius_m = 0.002\nbloom_guard_px = 0")
+    assert settings_from_rig(parse_rig(off, "off.toml")).bloom_guard_px == 0
+    bad = text.replace("spot_radius_m = 0.002", "spot_radius_m = 0.002\nbloom_guard_px = -1")
+    with pytest.raises(RigConfigError, match="bloom_guard_px"):
+        parse_rig(bad, "bad.toml")

@@ -2,13 +2,15 @@
 
 import numpy as np
 import pytest
+from scipy.stats import chi2 as chi2_dist
 
 from gonio.acquire.hdr import Bracket, NoiseModel, merge_brackets, plan_exposures
 from gonio.acquire.pose import estimate_pose, mosaic_to_gray, pose_samples, to_8bit
-from gonio.acquire.radiometry import measure_brdf
+from gonio.acquire.radiometry import measure_brdf, pixel_rays_to_plane
 from gonio.brdf import frames, models
 from gonio.io.dng import read_dng
-from gonio.rigs.sim.camera import CameraPose, PinholeCamera, VirtualCamera
+from gonio.rigs.sim.camera import CameraPose, HolderLayout, PinholeCamera, VirtualCamera
+from gonio.rigs.sim.sensor import SensorModel
 
 
 class Glossy:
@@ -81,3 +83,83 @@ def test_measured_values_match_truth_within_the_noise_model(tmp_path):
     assert np.median(z) <= 1.0
     assert np.percentile(z, 95) <= 2.5
     assert max(geo) < 0.05
+
+
+class YellowLambert:
+    """A test-only ground truth with no blue at all: f = (0.3, 0.2, 0) / pi."""
+
+    def f(self, wi, wo):
+        shape = np.broadcast_shapes(np.shape(wi), np.shape(wo))[:-1]
+        return np.broadcast_to(np.array([0.3, 0.2, 0.0]) / np.pi, (*shape, 3))
+
+
+def _true_pose(cam_pos):
+    """(rotation, translation) of the holder in the camera for a camera at ``cam_pos``."""
+    pose = CameraPose.looking_at_origin(cam_pos)
+    return pose.rotation, -pose.rotation @ pose.position
+
+
+def test_black_channel_sigma_matches_the_scatter_of_repeated_captures():
+    # One rendered scene, captured again and again with fresh sensor noise (light and dark
+    # frames), merged and measured as the camera does. The blue plane of the sample is black: its
+    # value is pure sensor noise, and the blue pixels sit between red and green ones that saturate
+    # in the long frames, so the merge keeps only the short ones for them (blooming guard).
+    cam = VirtualCamera(truth=YellowLambert(), camera=PinholeCamera(640, 480, 1600), seed=4)
+    s = SensorModel(dark_current=2.0)
+    cam_pos, light_pos = _position(30, 0, 0.5), _position(30, 180, 0.6)
+    rate = s.mosaic(cam.electron_rate(CameraPose.looking_at_origin(cam_pos), light_pos, 4.0))
+    rotation, translation = _true_pose(cam_pos)
+    noise = NoiseModel(s.gain, s.read_noise, s.dark_current)
+    times = [2e-3, 1.6e-2, 0.128, 1.024]
+    lay, plane = cam.layout, s.plane_index(rate.shape)
+    fs, sigmas = [], []
+    for trial in range(48):
+        light = [Bracket(s.expose(rate, t, seed=trial, key=f"l{t}")[0], t,
+                         float(s.black_level), s.white_level) for t in times]  # fmt: skip
+        dark = [s.expose(0 * rate, t, seed=trial, key=f"d{t}")[0] for t in times]
+        hdr = merge_brackets(light, noise, dark=dark)
+        m = measure_brdf(
+            hdr.rate, hdr.variance, plane, cam.camera.matrix, rotation, translation, light_pos,
+            lay.sample_center, lay.sample_radius, lay.reference_center, lay.reference_radius,
+            lay.reference_albedo, spot_radius=0.002, frame_fraction=hdr.frame_fraction,
+            log_time_cov=hdr.log_time_cov,
+        )  # fmt: skip
+        fs.append(m.f)
+        sigmas.append(m.sigma)
+    f, sig = np.array(fs), np.array(sigmas)
+    truth = np.array([0.3, 0.2, 0.0]) / np.pi
+    assert np.all(sig > 0)
+    # Chi-square of the 48 pulls per channel against 48 degrees of freedom, two-sided at 1 %
+    # (Sidak over the three channels): a sigma off by ~25 % either way fails.
+    lo, hi = chi2_dist.ppf([0.005 / 3, 1 - 0.005 / 3], len(f))
+    for c in range(3):
+        q = float(np.sum(((f[:, c] - truth[c]) / sig[:, c]) ** 2))
+        assert lo < q < hi, f"channel {c}: chi-square {q:.1f} outside ({lo:.1f}, {hi:.1f})"
+    # The black value's sigma is the sensor floor of the longest usable frame (16 ms: 1.1 DN
+    # per pixel, light and dark frame, = 71 DN/s, i.e. 1.7e-5 1/sr against the reference's
+    # 1.3e6 DN/s) over the ~32 blue pixels of the spot. The 1 s frame, unusable beside the
+    # saturated red and green pixels, would claim about 60 times less.
+    assert 2e-6 < float(np.median(sig[:, 2])) < 1e-5
+
+
+def test_exactly_zero_signal_keeps_its_noise_floor():
+    # A sample whose pixels are all exactly 0 DN/s (a black patch quantized to zero in one frame)
+    # must get the same sigma as one a hair above zero, not 0 or NaN from a relative error.
+    cam = PinholeCamera(640, 480, 1600)
+    lay = HolderLayout()
+    cam_pos, light_pos = _position(30, 0, 0.5), _position(30, 180, 0.6)
+    rotation, translation = _true_pose(cam_pos)
+    pts, hit = pixel_rays_to_plane((480, 640), cam.matrix, rotation, translation)
+    near_ref = np.hypot(pts[..., 0] - lay.reference_center[0], pts[..., 1]) < lay.reference_radius
+    plane = SensorModel().plane_index((480, 640))
+    variance = np.full((480, 640), 4.0)  # (DN/s)^2
+    sigmas = []
+    for level in (0.0, 1e-9, -1e-9):
+        rate = np.where(hit & near_ref, 1e5, level)
+        m = measure_brdf(rate, variance, plane, cam.matrix, rotation, translation, light_pos,
+                         lay.sample_center, lay.sample_radius, lay.reference_center,
+                         lay.reference_radius, lay.reference_albedo, spot_radius=0.002)  # fmt: skip
+        assert np.all(np.isfinite(m.sigma)) and np.all(m.sigma > 0)
+        sigmas.append(m.sigma)
+    np.testing.assert_allclose(sigmas[0], sigmas[1], rtol=1e-6)
+    np.testing.assert_allclose(sigmas[0], sigmas[2], rtol=1e-6)

@@ -6,7 +6,19 @@ noise model of its sensor (see :class:`NoiseModel`). For a pixel seen in frames 
 with variance ``var_k / t_k^2``; the minimum-variance unbiased combination weights them by
 ``t_k^2 / var_k`` (Robertson et al. 2003; Hasinoff et al. 2010 "Noise-optimal capture"). ``var_k``
 comes from the noise model at a first-pass estimate of the rate, not from the observed value, so
-that the weights are not correlated with the noise. Saturated pixels are excluded.
+that the weights are not correlated with the noise.
+
+The variance never vanishes: a pixel with no signal (or a negative one after dark subtraction)
+still carries the read noise, the ADC's quantization step and the shot noise of the dark current
+it collected, in its own frame and in the dark frame subtracted from it. So the merged rate of a
+black pixel has the standard deviation of its longest usable exposure's noise floor divided by
+that exposure time (DN/s), and that is what propagates through the white reference.
+
+Saturated pixels are excluded, and so are their neighbours (``bloom_guard_px``): a real sensor
+spills the charge of an over-full pixel into the pixels around it (blooming, electrical and
+optical crosstalk), which would corrupt a dark pixel beside a highlight in exactly the long frames
+that would otherwise give it a tiny variance. The longest usable exposure of such a pixel is the
+longest one in which its whole neighbourhood is unsaturated.
 
 Exposure-time *ratios* are estimated from the data (pixels well exposed in two frames), since
 real shutters differ from their nominal times by a few percent; only the overall scale is taken
@@ -20,25 +32,55 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import ndimage
 
 from gonio.errors import ParameterError
 
 
 @dataclass(frozen=True)
 class NoiseModel:
-    """Per-pixel noise of a linear sensor in DN.
+    """Per-pixel noise of a linear sensor in DN (EMVA 1288).
 
-    ``var(DN) = gain * signal_DN + gain^2 * read_noise^2 + 1/12`` where ``signal_DN`` is the
-    mean dark-free signal plus dark current in DN. ``gain`` is DN per electron, ``read_noise`` in
-    electrons RMS.
+    A raw value (DN) whose mean is ``black + signal_DN + dark_DN`` has the variance
+
+        ``gain * (signal_DN + dark_DN) + gain^2 * read_noise^2 + 1/12``  (DN^2):
+
+    shot noise of the collected electrons (signal and dark current), read noise, and the
+    quantization noise of a 1 DN step (uniform; valid while the read noise is a fair fraction of
+    a DN, as on any sensor whose gain is matched to its ADC).
+
+    Attributes
+    ----------
+    gain : conversion gain, DN per electron.
+    read_noise : read noise, electrons RMS.
+    dark_current : dark current, electrons per second per pixel (0: not modelled).
     """
 
     gain: float
     read_noise: float
+    dark_current: float = 0.0
 
-    def variance(self, signal_dn: np.ndarray) -> np.ndarray:
-        """Predicted variance (DN^2) of a raw value with mean signal ``signal_dn`` above black."""
-        return self.gain * np.maximum(signal_dn, 0.0) + (self.gain * self.read_noise) ** 2 + 1 / 12
+    def dark_dn(self, exposure_s: float) -> float:
+        """Mean dark-current signal (DN) collected in ``exposure_s`` seconds."""
+        return self.gain * self.dark_current * float(exposure_s)
+
+    def variance(self, signal_dn: np.ndarray, dark_dn: float = 0.0) -> np.ndarray:
+        """Predicted variance (DN^2) of one raw value, at least ``gain^2 read_noise^2 + 1/12``.
+
+        Parameters
+        ----------
+        signal_dn : mean signal (DN) above what is subtracted from the raw value; a negative
+            value (a noisy estimate of a black pixel) counts as zero signal.
+        dark_dn : mean dark signal (DN) the raw value carries besides ``signal_dn`` (see
+            :meth:`dark_dn`): its shot noise remains when a dark frame removes its mean. Leave
+            it 0 when ``signal_dn`` already includes the dark current (black level subtracted).
+        """
+        shot = self.gain * (np.maximum(signal_dn, 0.0) + max(float(dark_dn), 0.0))
+        return shot + (self.gain * self.read_noise) ** 2 + 1 / 12
+
+    def dark_frame_variance(self, exposure_s: float) -> float:
+        """Variance (DN^2) of one pixel of a dark frame exposed for ``exposure_s`` seconds."""
+        return float(self.variance(np.float64(0.0), self.dark_dn(exposure_s)))
 
 
 @dataclass
@@ -58,8 +100,10 @@ class HDRResult:
     Attributes
     ----------
     rate : (H, W) signal rate in DN/s (dark-subtracted), NaN where no frame was usable.
-    variance : (H, W) variance of ``rate`` in (DN/s)^2 from the noise model.
-    n_used : (H, W) number of frames that contributed.
+    variance : (H, W) variance of ``rate`` in (DN/s)^2 from the noise model; it includes the
+        read, quantization and dark-current noise of every frame used (and of its dark frame),
+        so it is positive for black pixels too.
+    n_used : (H, W) number of frames that contributed (unsaturated, neighbourhood included).
     exposures_s : effective exposure times used (ratios from the data, scale from metadata).
     ratio_source : per frame, "data" or "metadata" (when too few pixels overlapped).
     log_time_cov : (K, K) covariance of the errors of ``log(exposures_s)``; an error common to
@@ -78,7 +122,7 @@ class HDRResult:
 
     @property
     def sigma(self) -> np.ndarray:
-        """Standard deviation of ``rate``, DN/s."""
+        """Standard deviation of ``rate``, DN/s (NaN where ``rate`` is NaN)."""
         return np.sqrt(self.variance)
 
 
@@ -173,6 +217,7 @@ def merge_brackets(
     dark: Sequence[np.ndarray] | None = None,
     estimate_ratios: bool = True,
     shutter_precision: float = 0.01,
+    bloom_guard_px: int = 1,
 ) -> HDRResult:
     """Merge raw brackets into one rate image with noise-optimal weights.
 
@@ -181,10 +226,17 @@ def merge_brackets(
     brackets : frames of one scene, any order.
     noise : the sensor's noise model.
     dark : optional dark frames (raw DN, same exposures, shutter closed), one per bracket; when
-        given they replace the black level and remove dark current and fixed pattern.
+        given they replace the black level and remove dark current and fixed pattern (their
+        noise, and the dark current's shot noise, stay in the variance).
     estimate_ratios : estimate exposure ratios from the data (default) or trust the metadata.
     shutter_precision : relative accuracy of the nominal exposure times (see
         :func:`estimate_exposure_ratios`).
+    bloom_guard_px : a frame is not used for a pixel when any pixel within this Chebyshev
+        distance is saturated in it (blooming and crosstalk, see the module docstring); 0 uses
+        every unsaturated pixel.
+
+    Returns an :class:`HDRResult`: ``rate`` in DN/s, ``variance`` in (DN/s)^2, finite and
+    positive wherever ``rate`` is finite, whatever the signal (zero and negative included).
     """
     if not brackets:
         raise ParameterError("HDR merge needs at least one bracket")
@@ -193,6 +245,8 @@ def merge_brackets(
         raise ParameterError("HDR brackets differ in size")
     if dark is not None and len(dark) != len(brackets):
         raise ParameterError("HDR merge needs one dark frame per bracket")
+    if bloom_guard_px < 0:
+        raise ParameterError(f"bloom_guard_px must be >= 0, got {bloom_guard_px}")
 
     signals, usable, sat_signal = [], [], []
     for k, b in enumerate(brackets):
@@ -200,7 +254,11 @@ def merge_brackets(
         base = dark[k].astype(np.float64) if dark is not None else b.black
         threshold = saturation_threshold(b.white_level, noise)
         signals.append(dn - base)
-        usable.append(dn < threshold)
+        saturated = dn >= threshold
+        if bloom_guard_px > 0 and saturated.any():
+            size = 2 * bloom_guard_px + 1
+            saturated = ndimage.maximum_filter(saturated, size=size, mode="nearest")
+        usable.append(~saturated)
         sat_signal.append(threshold - float(np.median(base)))
     nominal = np.array([b.exposure_s for b in brackets], dtype=np.float64)
     if estimate_ratios and len(brackets) > 1:
@@ -211,12 +269,21 @@ def merge_brackets(
         times, source = nominal, ["metadata"] * len(brackets)
         log_cov = 2.0 * shutter_precision**2 * np.eye(len(brackets))
 
+    # With dark frames the signal has the dark current's mean removed but not its shot noise, and
+    # the subtracted dark frame adds its own read, quantization and dark shot noise. With only a
+    # black level the signal still holds the dark current, whose shot noise the model then counts.
+    if dark is not None:
+        dark_dn = [noise.dark_dn(t) for t in times]
+        dark_var = [noise.dark_frame_variance(t) for t in times]
+    else:
+        dark_dn = dark_var = [0.0] * len(times)
     # Pass 1: weights from the observed signal; pass 2: from the model at the pass-1 rate.
-    rate = _weighted(signals, usable, times, [noise.variance(s) for s in signals])[0]
+    first = [noise.variance(s, d) + v for s, d, v in zip(signals, dark_dn, dark_var, strict=True)]
+    rate = _weighted(signals, usable, times, first)[0]
     rate0 = np.where(np.isfinite(rate), rate, 0.0)
-    # A subtracted dark frame adds its own read and quantization noise.
-    dark_var = (noise.gain * noise.read_noise) ** 2 + 1 / 12 if dark is not None else 0.0
-    variances = [noise.variance(rate0 * t) + dark_var for t in times]
+    variances = [
+        noise.variance(rate0 * t, d) + v for t, d, v in zip(times, dark_dn, dark_var, strict=True)
+    ]
     rate, var, n_used = _weighted(signals, usable, times, variances)
     weights = np.stack(
         [np.where(ok, t * t / v, 0.0) for ok, t, v in zip(usable, times, variances, strict=True)]

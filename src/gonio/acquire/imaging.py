@@ -60,6 +60,8 @@ class ImagingSettings:
     max_rounds : capture rounds per configuration (each may add brackets).
     fit_order : surface fitted through the spot's pixels (1 plane, 2 quadratic: removes the
         lobe-curvature bias of a larger spot).
+    bloom_guard_px : a bracket is not used for pixels within this distance (pixels) of one it
+        saturates (see :func:`gonio.acquire.hdr.merge_brackets`); 0 turns the guard off.
     """
 
     exposure_s: float = 0.01
@@ -72,6 +74,7 @@ class ImagingSettings:
     spot_radius_m: float = 0.002
     max_rounds: int = 5
     fit_order: int = 2
+    bloom_guard_px: int = 1
 
 
 @dataclass
@@ -122,7 +125,8 @@ class ImagingCamera:
         self.hdr_dir = self.run_dir / "hdr"
         self.raw_dir.mkdir(parents=True, exist_ok=True)
         self.hdr_dir.mkdir(parents=True, exist_ok=True)
-        self.noise = NoiseModel(self.sensor.gain, self.sensor.read_noise)
+        sen = self.sensor
+        self.noise = NoiseModel(sen.gain, sen.read_noise, sen.dark_current)
         self._darks: dict[float, np.ndarray] = {}
         self._hint: _Hint | None = self._hint_from_disk()
         self.last_times = FrameTimes()
@@ -271,7 +275,9 @@ class ImagingCamera:
                 raise DeviceError(f"{frames[t]}: frame size differs from its dark frame")
             brackets.append(Bracket(fr.data, t, fr.black_map(), fr.white_level))
             darks.append(self._darks[t])
-        hdr = merge_brackets(brackets, self.noise, dark=darks)
+        hdr = merge_brackets(
+            brackets, self.noise, dark=darks, bloom_guard_px=self.settings.bloom_guard_px
+        )
         self._cfa = "".join("".join(r) for r in fr.cfa)
         return hdr
 
@@ -457,6 +463,8 @@ def settings_from_rig(rig) -> ImagingSettings:
             setattr(s, key, float(c[key]))
     if "planning" in c:
         s.planning = bool(c["planning"])
+    if "bloom_guard_px" in c:
+        s.bloom_guard_px = int(c["bloom_guard_px"])
     if "fixed_brackets" in c:
         s.fixed_brackets = tuple(float(x) for x in c["fixed_brackets"])
     return s

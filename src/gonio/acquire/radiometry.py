@@ -10,8 +10,14 @@ same camera in the same frame, so the unknown light intensity and camera through
 where ``S`` and ``R`` are the mean pixel rates over the sample and the reference after each
 pixel has been divided by its own irradiance (relative to a common light intensity) and its
 ``cos^4`` vignetting. Directions are those from the *actual* sample centre to the actual light
-and camera positions (finite distances), not the nominal servo angles. The uncertainty comes from
-the HDR merge's per-pixel variances (the sensor noise model).
+and camera positions (finite distances), not the nominal servo angles.
+
+The uncertainty comes from the HDR merge's per-pixel variances (the sensor noise model) and is
+propagated in absolute terms, ``var f = (k / R)^2 var S + f^2 (var R / R^2 + ...)`` with
+``k = rho / pi``, not as a relative error times ``|f|``: a black or negative ``S`` still has the
+sensor's noise floor (read noise and quantization of its longest usable exposure, in DN/s) scaled
+into 1/sr by the white reference, while the terms that scale with the signal (reference noise,
+exposure-ratio errors) vanish with it as they should.
 """
 
 from __future__ import annotations
@@ -31,8 +37,9 @@ class RegionMeasurement:
     ----------
     wi, wo : (3,) unit directions from the sample centre toward the light and the camera, in
         the sample frame.
-    f : (C,) BRDF value in 1/sr per colour plane (R, G, B).
-    sigma : (C,) its standard deviation from the sensor noise model.
+    f : (C,) BRDF value in 1/sr per colour plane (R, G, B); may be negative for a black sample
+        (the noise of a dark-subtracted value is not clipped away).
+    sigma : (C,) its standard deviation in 1/sr; positive even where ``f`` is zero.
     n_pixels : (C,) sample pixels used per colour plane.
     """
 
@@ -180,12 +187,14 @@ def measure_brdf(
         R, vR = norm_rate[mr].mean(), norm_var[mr].sum() / nr**2
         if not R > 0:
             raise DeviceError("white reference gives no signal: is the light on?")
-        f[c] = S / R * reference_albedo / np.pi
-        rel_var = vS / max(S * S, 1e-300) + vR / (R * R)
+        k = reference_albedo / np.pi
+        f[c] = S / R * k
+        # Absolute for S (so a black sample keeps its noise floor), relative for what scales f.
+        rel_var = vR / (R * R)
         if frame_fraction is not None and log_time_cov is not None:
             a = frame_fraction[:, ms].mean(axis=1) - frame_fraction[:, mr].mean(axis=1)
             rel_var += float(a @ log_time_cov @ a)
-        sig[c] = abs(f[c]) * np.sqrt(rel_var)
+        sig[c] = np.sqrt((k / R) ** 2 * vS + f[c] ** 2 * rel_var)
         n_px[c] = ns
     p_s = np.array([sample_center[0], sample_center[1], 0.0])
     wi = light_pos - p_s

@@ -151,6 +151,12 @@ SPEC: dict = {
             "description": "Exposures relative to exposure_s when planning is off.",
         },
         "spot_radius_m": _num("Radius of the measured spot on the sample (m).", exclusiveMinimum=0),
+        "bloom_guard_px": _int(
+            "HDR merge: a frame is not used for pixels this close (pixels) to one it saturates"
+            " (blooming and crosstalk); 0 uses every unsaturated pixel.",
+            minimum=0,
+            maximum=8,
+        ),
         "sensor": {
             "__doc__": "Sensor noise model (EMVA 1288), also used for merge weights.",
             "gain": _num("Conversion gain (DN per electron).", exclusiveMinimum=0),
