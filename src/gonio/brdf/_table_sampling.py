@@ -19,22 +19,39 @@ Methods
     by marginal/conditional CDF inversion and the direction is uniform in (cos theta, phi)
     inside it, so the pdf is piecewise constant per unit solid angle: ``P_cell / Omega_cell``.
 ``"alias"``
-    The same density, with the cell drawn from an alias table (O(1) per sample).
+    The same density, with the cell drawn from an alias table (O(1) per sample; one uniform
+    number picks the column, the other decides between the column and its alias, so that
+    float32 keeps every cell's probability to 2^-24).
 ``"rejection"``
-    Exact sampling of ``g cos / rho(wo)``: proposals from a cosine-weighted hemisphere, or from a
-    BRDF model mixed with 10 % cosine sampling, accepted with probability
-    ``g cos / (M q)``. ``M`` is a bound of ``g cos / q`` over the bucket: the table part is
-    rigorous (interval bounds of theta_h and theta_d over each incident-grid cell and the
-    bucket, interval bounds of ``cos theta_o`` and ``cos theta_i`` over each table cell, which
-    say which cells, phi_d included, the bucket can reach at all, and multilinear
-    interpolation never exceeds the largest valid node it uses); for a model proposal the
-    bucket's theta_o range is bounded in 4 parts, and the lower bound of the model's pdf per
-    cell of a 48 x 96 grid comes from evaluating it at 3 x 3 points x 12 outgoing directions
-    per part (the one heuristic part; the cosine part of the mixture keeps the bound
-    finite). ``rho(wo) = int g cos dwi`` is
-    computed by a 128 x 256 midpoint quadrature over the half vector (sqrt-warped theta_h, where
-    the tables put their nodes) at 9 theta_o nodes per bucket (5 x 5 (theta_o, phi_o) nodes for
-    anisotropic tables) and interpolated linearly in between.
+    Exact sampling of ``g cos / rho(wo)`` by rejection, with one of three proposals ``q``:
+
+    ``"majorant"`` (default)
+        Per bucket, a rigorous bound ``m_c`` of ``g cos`` over each cell of the incident grid
+        and every outgoing direction in the bucket; cells are drawn in proportion to
+        ``m_c Omega_c`` from an alias table, the direction is uniform in the cell, and it is
+        accepted with probability ``g cos / m_c`` (using the probability the alias table
+        realizes). Acceptance is ``rho / sum m_c Omega_c``: 0.57 on average over the
+        hemisphere for the benchmark's MERL-grid table, 0.95 near the normal.
+    ``"cosine"``
+        A cosine-weighted hemisphere, accepted with probability ``g cos / (M q)``, ``M`` a bound
+        of ``pi g`` over the bucket. Simple, but a glossy lobe makes ``M`` large (acceptance
+        0.003 on the benchmark table).
+    a BRDF model
+        The model's own sampling mixed with 10 % cosine sampling, ``M`` a bound of
+        ``g cos / q`` over the bucket. The bucket's theta_o range is bounded in 4 parts, and
+        the lower bound of the model's pdf per cell of a 48 x 96 grid comes from evaluating it
+        at 3 x 3 points x 12 outgoing directions per part (the one heuristic part; the cosine
+        part of the mixture keeps the bound finite).
+
+    The table bounds are rigorous: interval bounds of theta_h and theta_d over each
+    incident-grid cell and the bucket, interval bounds of ``cos theta_o`` and ``cos theta_i``
+    over each table cell, which say which cells, phi_d included, the bucket can reach at all,
+    and multilinear interpolation never exceeds the largest valid node it uses.
+    ``rho(wo) = int g cos dwi`` is computed by a 128 x 256 midpoint quadrature over the half
+    vector (sqrt-warped theta_h, where the tables put their nodes) at 9 theta_o nodes per bucket
+    (5 x 5 (theta_o, phi_o) nodes for anisotropic tables) and interpolated linearly in between.
+    Proposals and acceptance tests run in float32; in float32 the table value looked up for
+    the accepted proposal is returned with it, so pdf and weight need no second lookup.
 """
 
 from __future__ import annotations

@@ -530,14 +530,17 @@ def _assemble(n, kept, step, inputs, u, seeds, consts) -> Any:
     """``(n, ...)`` proposals (each leaf of the proposal pytree) from the ``(queries, proposals,
     rows)`` kept by each call, put together on the host (on CPU, reading a device array back
     is free; eager device-side gathers would compile anew for every new number of rows)."""
-    shape = jax.eval_shape(
-        step,
-        tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
-        np.zeros((1024, *u.shape[1:]), u.dtype),
-        np.zeros(1024, seeds.dtype),
-        np.int32(0),
-        consts,
-    )[0]
+    if kept:
+        shape = kept[0][1]
+    else:  # no queries: trace the step for the shapes of a proposal
+        shape = jax.eval_shape(
+            step,
+            tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
+            np.zeros((1024, *u.shape[1:]), u.dtype),
+            np.zeros(1024, seeds.dtype),
+            np.int32(0),
+            consts,
+        )[0]
     leaves, tree = jax.tree.flatten(shape)
     out = [np.zeros((n, *a.shape[1:]), a.dtype) for a in leaves]
     for queries, x, rows in kept:
