@@ -63,7 +63,7 @@ def test_true_model_recovers_ground_truth_within_intervals(demo):
 
 
 def test_true_model_is_preferred_and_renders_closest(demo):
-    _, _, summary = demo
+    out, _, summary = demo
     by = {m.preset: m for m in summary.models}
     assert [m.preset for m in summary.models] == [
         "lambert",
@@ -73,7 +73,12 @@ def test_true_model_is_preferred_and_renders_closest(demo):
     ]
     best_bic = min(summary.models, key=lambda m: m.bic)
     assert best_bic.preset == "lambert+ts"
-    assert set(by["lambert+ts"].truth_check) == set(builtin_material().truth_params["lambert+ts"])
+    tc = by["lambert+ts"].truth_check
+    fixed = json.loads((out / "fits" / "lambert-ts.json").read_text())["fixed"]
+    truth = builtin_material().truth_params["lambert+ts"]
+    assert set(tc.z) == set(truth) - set(fixed)  # every free parameter is compared
+    assert tc.n_scalars == 7 and tc.z_crit == pytest.approx(3.19, abs=0.01)
+    assert tc.consistent  # the same verdict as the independent check of the JSON above
     # the diffuse-only fits cannot show the coat's highlight
     assert by["lambert+ts"].rmse < by["lambert"].rmse / 5
     assert by["lambert+ts"].ssim > by["lambert"].ssim

@@ -87,15 +87,16 @@ def print_summary(summary: Any) -> None:
     from rich.table import Table
 
     quality = Table(title=f"gonio demo: {summary.material['name']}")
-    for col in ("model", "red. chi2", "BIC", "render RMSE", "SSIM", "truth in 95% CI"):
+    for col in ("model", "red. chi2", "BIC", "render RMSE", "SSIM", "truth: max |z|"):
         quality.add_column(col, justify="left" if col == "model" else "right")
     params = Table(title="fitted parameters (95% intervals)")
     for col in ("model", "parameter", "value", "interval"):
         params.add_column(col, justify="left" if col in ("model", "parameter") else "right")
     for m in summary.models:
         chk = "-"
-        if m.truth_check:
-            chk = "yes" if all(m.truth_check.values()) else "NO"
+        if m.truth_check is not None:
+            tc = m.truth_check
+            chk = f"{max(tc.z.values()):.2f} " + ("ok" if tc.consistent else "TOO FAR")
         quality.add_row(
             m.label,
             f"{m.reduced_chi2:.3g}",

@@ -66,10 +66,14 @@ def _models_table(models: list[Any]) -> str:
     rows = []
     for m in models:
         chk = ""
-        if m.truth_check:
-            ok = all(m.truth_check.values())
-            cls = "ok" if ok else "bad"
-            chk = f'<span class="{cls}">{"all" if ok else "not all"} inside</span>'
+        tc = m.truth_check
+        if tc is not None:
+            z = max(tc.z.values())
+            cls, word = ("ok", "consistent") if tc.consistent else ("bad", "inconsistent")
+            chk = (
+                f'<span class="{cls}" title="largest |fit - truth| / std over {tc.n_scalars}'
+                f' values; family-wise 1 % limit {tc.z_crit:.2f}">{word}, max |z| {z:.2f}</span>'
+            )
         rows.append(
             "<tr>"
             f'<td><a href="{_e(m.files["fit"])}">{_e(m.label)}</a></td>'
@@ -82,7 +86,7 @@ def _models_table(models: list[Any]) -> str:
     head = (
         "<tr><th>model (fit JSON)</th><th>reduced &chi;&sup2;</th><th>AIC</th><th>BIC</th>"
         "<th>render RMSE</th><th>render relMSE</th><th>SSIM</th><th>fit time (s)</th>"
-        "<th>true parameters in 95&nbsp;% intervals</th></tr>"
+        "<th>ground truth (family-wise 1&nbsp;%)</th></tr>"
     )
     return f"<table>{head}{''.join(rows)}</table>"
 

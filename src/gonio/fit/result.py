@@ -196,6 +196,11 @@ class FitResult:
             out[key] = np.asarray(vals).reshape(*shape, *tail) if shape else np.asarray(vals[0])
         return out
 
+    def standard_deviations(self) -> dict[str, Any]:
+        """``{key: std}`` of the free parameters, shaped like ``params[key]`` (empty without
+        uncertainty)."""
+        return self._by_key(None if self.uncertainty is None else self.uncertainty.std)
+
     def intervals(self, level: int = 95) -> dict[str, list[Any]]:
         """``{key: [lo, hi]}`` at 95 (or 68) percent; fixed parameters get ``[v, v]``."""
         out: dict[str, list[Any]] = {k: [v, v] for k, v in self.params.items() if k in self.fixed}
@@ -225,7 +230,7 @@ class FitResult:
             "tied": self.tied,
             "intervals": self.intervals(95),
             "intervals68": self.intervals(68),
-            "std": self._by_key(None if unc is None else unc.std),
+            "std": self.standard_deviations(),
             "correlation": None if unc is None else {"names": unc.names, "matrix": unc.correlation},
             "loss": self.loss,
             "metric": self.metric,
