@@ -60,7 +60,7 @@ def bench_merge(quick: bool) -> list[dict]:
     light = d * np.array([np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))])
     cpos = 0.8 * np.array([-np.sin(np.radians(30)), 0.0, np.cos(np.radians(30))])
     rate = sensor.mosaic(cam.electron_rate(CameraPose.looking_at_origin(cpos), light, 3.6))
-    noise = NoiseModel(sensor.gain, sensor.read_noise)
+    noise = NoiseModel(sensor.gain, sensor.read_noise, sensor.dark_current)
     rows = []
     sets = {
         "3 brackets, 8x": [2e-4, 1.6e-3, 1.28e-2],
