@@ -515,7 +515,7 @@ def rejection_sample(
         rounds[pending] = r
         failed = []
         for part, (x, acc) in calls:
-            # only the acceptance flags come back each round; the proposals stay on the device
+            # only the acceptance flags are read each round; proposals are read once, at the end
             acc = np.asarray(acc)[: part.size]
             ok[part[acc]] = True
             rows = np.flatnonzero(acc) if r < max_rounds else np.arange(part.size)
