@@ -58,9 +58,15 @@ def test_dense_table_renders_like_its_model(glossy_pair):
 @needs_samplers
 @pytest.mark.slow
 def test_table_samplers_converge_to_the_same_image(glossy_pair):
-    """Inversion, alias, rejection (cosine and model proposal) and analytic-lobe sampling of a
-    table, with and without MIS, against cosine+MIS: 4x4 block means over 16 seeds, |z| < 6
-    (Student t, 15 dof; < 1% false alarms over all comparisons)."""
+    """Inversion, alias, rejection (majorant and model proposal) and analytic-lobe sampling of
+    a table, with and without MIS, against cosine+MIS: 4x4 block means over 16 seeds (48
+    without MIS), |z| < 6 (Student t; < 1% false alarms over all comparisons).
+
+    Without MIS, BRDF sampling alone finds the studio's small bright panels rarely: a block's
+    mean over seeds is then heavy-tailed, and over 16 seeds that none of them hit is likely
+    enough (a few percent per block) to make the spread, and so the z test, meaningless. 48
+    seeds make that rare; the means themselves agree (e.g. 0.0224 +- 0.0037 against 0.0262
+    for the block where 16 seeds of majorant rejection saw no hit)."""
     model, table = glossy_pair
     lights = [Environment("studio"), SphereLight((-2, 2, 3), 0.5, 5.0)]
     kw = dict(resolution=16, spp=16)
@@ -71,7 +77,8 @@ def test_table_samplers_converge_to_the_same_image(glossy_pair):
     ]  # fmt: skip
     for sampler, extra in cases:
         for mis in (True, False):
-            other = block_means(seed_stack(table, lights, 16, sampler=sampler, mis=mis, **extra,
+            k = 16 if mis else 48
+            other = block_means(seed_stack(table, lights, k, sampler=sampler, mis=mis, **extra,
                                            **kw), 4)  # fmt: skip
             z = z_scores(other, ref)
             assert np.max(np.abs(z)) < 6, (sampler, extra, mis, np.max(np.abs(z)))

@@ -329,7 +329,11 @@ def alias_sample(
     q: Array, alias_flat: Array, probs: Array, base: Array, n: int, u: Array
 ) -> tuple[Array, Array, Array]:
     """Core of :meth:`AliasTable.sample_discrete` on flat arrays (``alias_flat`` holds flat
-    indices); returns ``(index within the row, u_remapped, probability)``."""
+    indices); returns ``(index within the row, u_remapped, probability)``.
+
+    One number picks the column and, with what is left of its bits, keeps the column or takes
+    its alias: fine in float64 or for small ``n``; for thousands of outcomes in float32 use
+    :func:`alias_sample_2d`."""
     s = u * n
     col = jnp.minimum(jnp.floor(s).astype(jnp.int32), n - 1)
     r = s - col.astype(u.dtype)
@@ -495,7 +499,7 @@ def rejection_sample(
     ok = np.zeros(n, bool)
     rounds = np.zeros(n, np.int32)
     pending = np.arange(n)
-    kept: list[tuple[np.ndarray, Array, np.ndarray]] = []  # (queries, proposals, their rows)
+    kept: list[tuple[np.ndarray, Any]] = []  # (queries, their accepted proposals)
     r = 0
     while pending.size:
         calls = []
@@ -515,21 +519,20 @@ def rejection_sample(
         rounds[pending] = r
         failed = []
         for part, (x, acc) in calls:
-            # only the acceptance flags are read each round; proposals are read once, at the end
+            # on the CPU reading a device array back is free; only the accepted rows are kept
             acc = np.asarray(acc)[: part.size]
             ok[part[acc]] = True
             rows = np.flatnonzero(acc) if r < max_rounds else np.arange(part.size)
             if rows.size:  # accepted (or, after the last round, the last proposal)
-                kept.append((part[rows], x, rows))
+                kept.append((part[rows], jax.tree.map(lambda a, rows=rows: np.asarray(a)[rows], x)))
             failed.append(part[~acc])
         pending = np.concatenate(failed) if r < max_rounds else pending[:0]
     return _assemble(n, kept, step, inputs, u, seeds, consts), jnp.asarray(ok), jnp.asarray(rounds)
 
 
 def _assemble(n, kept, step, inputs, u, seeds, consts) -> Any:
-    """``(n, ...)`` proposals (each leaf of the proposal pytree) from the ``(queries, proposals,
-    rows)`` kept by each call, put together on the host (on CPU, reading a device array back
-    is free; eager device-side gathers would compile anew for every new number of rows)."""
+    """``(n, ...)`` proposals (each leaf of the proposal pytree) from the ``(queries,
+    proposals)`` kept from each call."""
     if kept:
         shape = kept[0][1]
     else:  # no queries: trace the step for the shapes of a proposal
@@ -543,9 +546,9 @@ def _assemble(n, kept, step, inputs, u, seeds, consts) -> Any:
         )[0]
     leaves, tree = jax.tree.flatten(shape)
     out = [np.zeros((n, *a.shape[1:]), a.dtype) for a in leaves]
-    for queries, x, rows in kept:
+    for queries, x in kept:
         for o, a in zip(out, jax.tree.leaves(x), strict=True):
-            o[queries] = np.asarray(a)[rows]
+            o[queries] = a
     return jax.tree.unflatten(tree, [jnp.asarray(o) for o in out])
 
 
