@@ -40,10 +40,6 @@ RES = 64
 REF_SPP = 4096
 #: A configuration slower than this (seconds) ends its spp sweep.
 MAX_CONFIG_S = 30.0
-#: Tabulated rejection sampling costs about 4x inversion per sample (exact density: every proposal
-#: needs a table lookup, about 1.8 proposals per sample with the default majorant proposal); its
-#: sweep stops here to keep the run short.
-REJECTION_MAX_SPP = 16
 
 
 def materials() -> dict[str, models.BRDFModel]:
@@ -125,8 +121,6 @@ def convergence(mats, tabs, spps, env, out_rows, images):
                 kw = {"proposal": model} if extra.get("proposal") else {}
                 for mis in (False, True):
                     for spp in spps:
-                        if spp > REJECTION_MAX_SPP and label == "rejection":
-                            break  # see REJECTION_MAX_SPP
 
                         def run(sampler=sampler, kw=kw, mis=mis, spp=spp, mat=mat):
                             return render_sphere(
@@ -355,7 +349,6 @@ def main(argv=None) -> int:
     spps = [4, 16, 64] if args.quick else [4, 16, 64, 256]
     if args.quick:
         REF_SPP = 2048
-        globals()["REJECTION_MAX_SPP"] = 4
     env = [Environment("studio")]
     mats = materials()
     t = time.perf_counter()
