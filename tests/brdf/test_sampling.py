@@ -31,7 +31,7 @@ from tests.brdf.test_tabulated import _GGXLike
 
 HALF = math.pi / 2
 N_DISCRETE = 8  # chi-square tests on discrete outcomes in this module
-N_TABLE = 15  # chi-square tests of table samplers (default + slow)
+N_TABLE = 16  # chi-square tests of table samplers (default + slow)
 SIDAK_DISCRETE = 1 - (1 - 0.01) ** (1 / N_DISCRETE)
 
 
@@ -319,7 +319,7 @@ def test_anisotropic_table_samplers():
         sampling_res=(8, 32, 64),
     )
     wo = np.asarray(frames.spherical_to_direction(math.radians(50), 0.0))
-    for method in ("inversion", "alias"):
+    for method in ("inversion", "alias", "rejection"):
 
         def sample(u, method=method):
             s = t.sample(wo, u, method=method)
