@@ -278,6 +278,21 @@ def test_rejection_on_a_bucket_edge(proposal):
     np.testing.assert_array_equal(np.asarray(after.wi), np.asarray(fresh.wi))
 
 
+@pytest.mark.parametrize("proposal", ["majorant", "cosine"])
+def test_rejection_of_a_black_table_fails_at_once(proposal):
+    """g = 0 everywhere: each query fails (pdf and weight 0) after one proposal, not after
+    max_rounds rejected ones."""
+    t = TabulatedBRDF(
+        np.zeros((12, 12, 12, 3), np.float32), axes=_axes(12), sampling_res=(4, 8, 16)
+    )
+    wo = np.asarray(frames.spherical_to_direction(np.radians([10.0, 50.0, 80.0]), 0.4))
+    u = np.random.default_rng(2).random((3, 2))
+    s = t.sample(wo, u, method="rejection", proposal=proposal)
+    assert np.all(np.asarray(s.pdf) == 0) and np.all(np.asarray(s.weight) == 0)
+    stats = t._sampler().stats
+    assert stats["rejection_proposals"] == stats["rejection_samples"] == 3
+
+
 class _MirrorLobe:
     """A cosine-power lobe about the mirror direction (a stand-in for a fitted analytic lobe)."""
 

@@ -93,6 +93,10 @@ _RHO_RES = (128, 256)
 _BOUND_RES = (16, 32)  # incident cells for the cosine-proposal bound
 _BOUND_RES_MODEL = (48, 96)  # finer: a model proposal's pdf varies within a cell
 _MODEL_BOUND_SPLIT = 4  # theta_o parts per bucket bounded separately for a model proposal
+# Rejection bound of a bucket where g = 0 everywhere: negative, so that the acceptance test
+# (u * bound < g cos) passes at once; the sample's pdf is then 0 (rho = 0) and it fails as it
+# should, after one proposal instead of max_rounds rejected ones.
+_EMPTY = -1.0
 
 
 @dataclass(frozen=True)
@@ -558,7 +562,7 @@ class TableSampler:
                 M = math.pi * min(U.max(), self._bucket_sup(b))
             else:
                 M = self._model_bound(b, proposal)
-            out[b] = {"bound": np.asarray(M), "rho": self._rho_nodes(b)}
+            out[b] = {"bound": np.asarray(M if M > 0 else _EMPTY), "rho": self._rho_nodes(b)}
         return out
 
     def _majorant(self, b: int) -> dict[str, np.ndarray]:
@@ -577,8 +581,8 @@ class TableSampler:
         m = (U * cmax).reshape(-1)
         omega = np.repeat(self.omega, self.geo.n_p)
         w = m * omega
-        if not w.sum() > 0:  # g = 0 for the whole bucket: propose anything, accept nothing
-            w = omega
+        if not w.sum() > 0:  # g = 0 for the whole bucket
+            return {**_alias_arrays(omega), "bound": np.full(m.shape, _EMPTY)}
         arrays = _alias_arrays(w)
         q = arrays["p"] / omega
         with np.errstate(divide="ignore", invalid="ignore"):
