@@ -30,7 +30,7 @@ from gonio.errors import ParameterError
 from tests.brdf.test_tabulated import _GGXLike
 
 HALF = math.pi / 2
-N_DISCRETE = 8  # chi-square tests on discrete outcomes in this module
+N_DISCRETE = 9  # statistical tests on discrete outcomes in this module
 N_TABLE = 16  # chi-square tests of table samplers (default + slow)
 SIDAK_DISCRETE = 1 - (1 - 0.01) ** (1 / N_DISCRETE)
 
@@ -99,6 +99,25 @@ def test_alias_table_chi2(dtype):
     np.testing.assert_allclose(np.asarray(p), (w / w.sum())[k], rtol=1e-5)
     # the remapped number is uniform again (used to place the sample inside its cell)
     assert stats.kstest(np.asarray(r, np.float64), "uniform").pvalue > SIDAK_DISCRETE
+
+
+def test_alias_two_numbers_keep_rare_outcomes_right_in_float32():
+    """8192 outcomes, half of them 1e4 times rarer (keep thresholds 2e-4 < 2**-11): drawn with
+    float32 numbers, the rare half must come up with its probability. Splitting one float32
+    over 8192 columns leaves 11 bits for the keep decision and draws them 2.4x too often."""
+    from gonio.brdf.sampling import alias_sample_2d
+
+    n = 8192
+    w = np.where(np.arange(n) % 2 == 0, 1.0, 1e-4)
+    a = AliasTable(w)
+    u = np.random.default_rng(12).random((1_000_000, 2)).astype(np.float32)
+    base = jnp.zeros(u.shape[0], jnp.int32)
+    k, _, _, _ = alias_sample_2d(
+        a._q[jnp.float32], a._alias, a._p[jnp.float32], base, n, u[:, 0], u[:, 1]
+    )
+    rare = int(np.sum(np.asarray(k) % 2 == 1))
+    p_rare = float(a.probs[1::2].sum())
+    assert stats.binomtest(rare, u.shape[0], p_rare).pvalue > SIDAK_DISCRETE, (rare, p_rare)
 
 
 def test_alias_table_batched():
