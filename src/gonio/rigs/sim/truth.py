@@ -22,6 +22,12 @@ incidence (~5 % of f within 1 degree of ``phi_d`` for the acrylic felt), far sha
 surface: the measured spot (a few tenths of a degree wide) straddles it at every in-plane
 geometry, which biased the simulated measurements by up to ~3 sigma against the truth at the
 spot centre.
+
+Known limit: some RGL files (``vch_golden_yellow``, ``cc_ibiza_sunset``) are singular where the
+light is at the normal: the evaluator conditions on ``wi``'s azimuth, and ``f`` with ``wi`` 0.1
+degree off the normal differs by up to 2.4x between offset azimuths. The reciprocal average takes
+that branch in, so simulated measurements with the light within a spot's width of the normal
+(``theta_i = 0``) disagree with the truth at the spot centre by many sigma on those files.
 """
 
 from __future__ import annotations
