@@ -208,6 +208,27 @@ def test_to_table_nodes_equal_direct_evaluation():
     assert t.mask[0, 0, 0] and not t.mask[-1, -1, 0]
 
 
+def test_to_table_reciprocal_nodes_average_both_directions():
+    from gonio.brdf import frames
+    from gonio.brdf.tabulated import Axis
+
+    b = rgl.read_rgl(shared_file("rgl", "acrylic_felt_green_rgb.bsdf"))
+    axes = (
+        Axis("theta_h", 12, 0, math.pi / 2, "sqrt", False, 0.0),
+        Axis("theta_d", 10, 0, math.pi / 2, "linear", False, 0.0),
+        Axis("phi_d", 8, 0, math.pi, "linear", True, 0.0),
+    )
+    t = b.to_table(axes, reciprocal=True)
+    i = (5, 3, 2)
+    wi, wo = frames.half_diff_to_directions(
+        axes[0].nodes()[5], 0.0, axes[1].nodes()[3], axes[2].nodes()[2]
+    )
+    wi, wo = np.asarray(wi), np.asarray(wo)
+    fwd, back = b.f(wi, wo), b.f(wo, wi)
+    assert np.max(np.abs(fwd - back) / fwd) > 0.01  # the data are measurably non-reciprocal
+    np.testing.assert_allclose(t.values[i], 0.5 * (fwd + back), rtol=1e-6)
+
+
 def test_bad_headers(tmp_path):
     data = shared_file("rgl", "paper_white_rgb.bsdf").read_bytes()
     cases = {

@@ -94,3 +94,17 @@ def test_sim_sample_camera_reads_a_table_truth(tmp_path):
     expected = np.array([0.6, 0.3, 0.1]) / math.pi
     # Gaussian noise of sigma = noise_rel * f + noise_abs (1 % here): within 5 sigma
     assert np.all(np.abs(cap.value - expected) < 5 * cap.sigma)
+
+
+def test_rgl_truth_has_no_ramp_on_the_plane_of_incidence():
+    # The felt is ~5 % non-reciprocal; a table folded from one half of phi_d joins f(pi-) to
+    # f(0) within one cell, so in-plane geometries (phi_d = 0) sat on a one-sided ramp. The
+    # reciprocal (averaged) truth is mirror-symmetric there like the data: f(-d) = f(+d).
+    truth = load_truth({"file": str(shared_file("rgl", "acrylic_felt_green_rgb.bsdf"))}, "t")
+    th, td = np.meshgrid(np.radians([5.0, 12.5, 25.0, 40.0]), np.radians([10.0, 30.0, 57.5]))
+    th, td = th.ravel(), td.ravel()
+    f = {}
+    for d in (-0.2, 0.2):
+        wi, wo = frames.half_diff_to_directions(th, 0.0, td, np.full_like(th, math.radians(d)))
+        f[d] = np.asarray(truth.f(np.asarray(wi), np.asarray(wo)))
+    np.testing.assert_allclose(f[-0.2], f[0.2], rtol=2e-3)

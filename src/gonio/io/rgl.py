@@ -447,6 +447,7 @@ class RGLBSDF:
         chunk: int = 1 << 16,
         progress: Callable[[int, int], None] | None = None,
         min_cos: float = HORIZON_MIN_COS,
+        reciprocal: bool = False,
     ) -> TabulatedBRDF:
         """Tabulate ``f_r`` on a half/diff grid as a gonio :class:`TabulatedBRDF`.
 
@@ -464,6 +465,14 @@ class RGLBSDF:
             tabulated ``f_r cos(theta_o)`` does not vanish at the horizon (it is a bilinear
             interpolant), so ``f_r`` diverges like ``1 / cos(theta_o)`` in the last degree;
             the default ``cos(89 deg)`` keeps that artifact out of the table.
+        reciprocal : bool
+            Store the reciprocal part ``(f(wi, wo) + f(wo, wi)) / 2`` of the measurement. A
+            measured table is not exactly reciprocal (the acrylic felt differs by ~5 % between
+            ``phi_d`` and ``phi_d + pi``), but an isotropic half/diff table folds ``phi_d`` by
+            reciprocity: taken from one half only, its periodic wrap joins ``f(phi_d -> pi)`` to
+            ``f(0)``, a one-cell ramp (a slope discontinuity) on the plane of incidence, where
+            in-plane geometries sit. The average makes the folded table continuous there.
+            Ignored for anisotropic axes (``phi_d`` over ``2 pi`` is not folded).
         """
         from gonio.brdf.tabulated import Axis, TabulatedBRDF
         from gonio.io._geometry import half_diff_to_directions
@@ -492,6 +501,7 @@ class RGLBSDF:
         else:
             raise ValueError("axes must be (theta_h, theta_d, phi_d) or 4 half/diff axes")
         shape = th.shape
+        symmetrize = reciprocal and param == "half_diff_iso"
         flat = [a.ravel() for a in (th, ph, td, pd)]
         total = flat[0].size
         values = np.zeros((total, self.n_channels), dtype=np.float32)
@@ -500,7 +510,10 @@ class RGLBSDF:
             sl = slice(start, min(start + chunk, total))
             wi, wo = half_diff_to_directions(*(a[sl] for a in flat))
             ok = (wi[..., 2] >= min_cos) & (wo[..., 2] >= min_cos)
-            values[sl] = np.where(ok[:, None], self.f(wi, wo), 0.0)
+            val = self.f(wi, wo)
+            if symmetrize:  # phi_d + pi is the swapped pair; ok is symmetric in (wi, wo)
+                val = 0.5 * (val + self.f(wo, wi))
+            values[sl] = np.where(ok[:, None], val, 0.0)
             valid[sl] = ok
             if progress is not None:
                 progress(sl.stop, total)

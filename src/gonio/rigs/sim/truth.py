@@ -14,6 +14,20 @@ or a tabulated BRDF read through :func:`gonio.io.load` (RGL ``.bsdf``, MERL ``.b
 
 Measured RGB tables can hold small negative values where a spectral measurement was converted to
 RGB; a reflectance cannot be negative, so the ground truth clamps them to zero.
+
+An RGL file is tabulated with its reciprocal part, ``(f(wi, wo) + f(wo, wi)) / 2``
+(:meth:`gonio.io.rgl.RGLBSDF.to_table` with ``reciprocal=True``). Taken from one half of ``phi_d``
+only, the folded table of a not-quite-reciprocal measurement has a one-cell ramp on the plane of
+incidence (~5 % of f within 1 degree of ``phi_d`` for the acrylic felt), far sharper than any real
+surface: the measured spot (a few tenths of a degree wide) straddles it at every in-plane
+geometry, which biased the simulated measurements by up to ~3 sigma against the truth at the
+spot centre.
+
+Known limit: some RGL files (``vch_golden_yellow``, ``cc_ibiza_sunset``) are singular where the
+light is at the normal: the evaluator conditions on ``wi``'s azimuth, and ``f`` with ``wi`` 0.1
+degree off the normal differs by up to 2.4x between offset azimuths. The reciprocal average takes
+that branch in, so simulated measurements with the light within a spot's width of the normal
+(``theta_i = 0``) disagree with the truth at the spot centre by many sigma on those files.
 """
 
 from __future__ import annotations
@@ -64,8 +78,14 @@ class ClampedTable:
 @lru_cache(maxsize=4)
 def _load_table(path: str, mtime_ns: int) -> ClampedTable:
     from gonio import io
+    from gonio.io.detect import detect_format
 
-    obj = io.load(path)
+    if detect_format(path) == "rgl":
+        from gonio.io.rgl import read_rgl
+
+        obj = read_rgl(path).to_table(reciprocal=True)
+    else:
+        obj = io.load(path)
     if not hasattr(obj, "values") or not hasattr(obj, "axes"):
         raise FormatError(
             f"{path}: holds scattered samples; a simulated sample needs a tabulated BRDF"
