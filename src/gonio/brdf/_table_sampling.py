@@ -840,15 +840,22 @@ def _inversion_pdf(geo, slot_of, mcdf, ccdf, cos_asc, omega, wi, wo):
 
 @partial(jax.jit, static_argnames=("geo",))
 def _alias_kernel(geo, slot_of, q, alias, p, cos_desc, omega, wo, u):
+    wi, _, k, pk = _alias_direction(geo, slot_of, q, alias, p, cos_desc, wo, u)
+    return wi, pk / jnp.take(omega, k // geo.n_p)
+
+
+def _alias_direction(geo, slot_of, q, alias, p, cos_desc, wo, u):
+    """A cell of the bucket's alias table and a direction uniform in it: ``(wi, base, k, p_k)``
+    with ``k`` the cell within the bucket's table, whose entries start at ``base``."""
     s = jnp.take(slot_of, _bucket_of(geo, wo))
     n = geo.n_t * geo.n_p
     alias_flat = (alias + (jnp.arange(alias.shape[0], dtype=jnp.int32) * n)[:, None]).reshape(-1)
+    base = s * n
     k, ry, rx, pk = alias_sample_2d(
-        q.reshape(-1), alias_flat, p.reshape(-1), s * n, n, u[..., 0], u[..., 1]
+        q.reshape(-1), alias_flat, p.reshape(-1), base, n, u[..., 0], u[..., 1]
     )
-    row, col = k // geo.n_p, k % geo.n_p
-    wi = _direction_in_cell(geo, row, col, ry, rx, cos_desc, wo)
-    return wi, pk / jnp.take(omega, row)
+    wi = _direction_in_cell(geo, k // geo.n_p, k % geo.n_p, ry, rx, cos_desc, wo)
+    return wi, base, k, pk
 
 
 @partial(jax.jit, static_argnames=("geo",))
@@ -910,15 +917,7 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
 def _majorant_round(table, geo, slot_of, q, alias, bound, cos_desc, wo, up, ua):
     """One proposal from the bucket's piecewise-constant majorant (:meth:`TableSampler._majorant`)
     and its acceptance test per query: ``((wi, f), accepted)``."""
-    s = jnp.take(slot_of, _bucket_of(geo, wo))
-    n = geo.n_t * geo.n_p
-    alias_flat = (alias + (jnp.arange(alias.shape[0], dtype=jnp.int32) * n)[:, None]).reshape(-1)
-    base = s * n
-    k, ry, rx, _ = alias_sample_2d(
-        q.reshape(-1), alias_flat, q.reshape(-1), base, n, up[..., 0], up[..., 1]
-    )
-    row, col = k // geo.n_p, k % geo.n_p
-    wi = _direction_in_cell(geo, row, col, ry, rx, cos_desc, wo)
+    wi, base, k, _ = _alias_direction(geo, slot_of, q, alias, q, cos_desc, wo, up)
     f = table.f(wi, wo)
     g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
     accept = ua * jnp.take(bound.reshape(-1), base + k) < g * wi[..., 2]
