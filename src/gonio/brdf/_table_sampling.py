@@ -157,18 +157,38 @@ def _direction_in_cell(
     c0 = jnp.take(cos_desc, row)
     c1 = jnp.take(cos_desc, row + 1)
     ct = c0 - ry * (c0 - c1)
-    phi = (col.astype(ct.dtype) + rx) * (TWO_PI / geo.n_p)
+    cp, sp = _cos_sin_in_column(geo.n_p, col, rx, ct.dtype)
     # stored once: otherwise XLA fuses the gathers above into the loop below, which then runs
-    # as scalar code (cos/sin included), once per output component
-    ct, phi = materialize([ct, phi], ct)
+    # as scalar code, once per output component
+    ct, cp, sp = materialize([ct, cp, sp], ct)
     st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
-    cp, sp = jnp.cos(phi), jnp.sin(phi)
     if geo.iso:  # phi is relative to wo's azimuth: rotate by +phi_o
         c, s = _azimuth_frame(wo)
         cp, sp = c * cp - s * sp, s * cp + c * sp
     # stacked along a new leading axis and transposed: XLA's CPU backend then evaluates each
     # component in its own vectorized loop instead of one scalar loop over (..., 3)
     return jnp.moveaxis(jnp.stack([st * cp, st * sp, ct], 0), 0, -1)
+
+
+def _cos_sin_in_column(n_p: int, col: Array, rx: Array, dtype: Any) -> tuple[Array, Array]:
+    """``cos phi, sin phi`` of ``phi = (col + rx) 2 pi / n_p`` (``rx`` in [0, 1)).
+
+    The column's start angle comes from a table and the offset ``delta = rx 2 pi / n_p`` goes
+    through short Taylor series (error below 1e-8 for ``delta <= pi / 4``): XLA's CPU
+    backend evaluates ``cos``/``sin`` about 10x slower than other elementwise functions, a
+    tenth of a table-rejection round."""
+    width = TWO_PI / n_p
+    if n_p < 8:  # offsets too wide for the series
+        phi = (col.astype(dtype) + rx) * width
+        return jnp.cos(phi), jnp.sin(phi)
+    start = np.arange(n_p) * width
+    c0 = jnp.take(jnp.asarray(np.cos(start), dtype), col)
+    s0 = jnp.take(jnp.asarray(np.sin(start), dtype), col)
+    d = rx * width
+    d2 = d * d
+    cd = 1.0 + d2 * (-1 / 2 + d2 * (1 / 24 + d2 * (-1 / 720 + d2 * (1 / 40320))))
+    sd = d * (1.0 + d2 * (-1 / 6 + d2 * (1 / 120 + d2 * (-1 / 5040 + d2 * (1 / 362880)))))
+    return c0 * cd - s0 * sd, s0 * cd + c0 * sd
 
 
 class _Lazy:
@@ -178,16 +198,36 @@ class _Lazy:
         self._build = build
         self.items: dict[int, dict[str, np.ndarray]] = {}
         self._stack: tuple[Array, dict[str, Array]] | None = None
+        self._cast: dict[Any, dict[str, Array]] = {}
 
     def ensure(self, buckets: np.ndarray) -> None:
-        missing = [int(b) for b in np.unique(buckets) if int(b) not in self.items]
+        # a histogram, not np.unique: no sort of the (possibly 1e6) bucket indices
+        met = np.flatnonzero(np.bincount(np.asarray(buckets, np.int64).reshape(-1)))
+        missing = [int(b) for b in met if int(b) not in self.items]
         if missing:
             # under an outer jit trace, build from the concrete table values, not staged ops
             with jax.ensure_compile_time_eval():
                 self.items.update(self._build(missing))
             self._stack = None
+            self._cast = {}
 
-    def stacked(self, n_buckets: int) -> tuple[Array, dict[str, Array]]:
+    def stacked(self, n_buckets: int, dtype: Any = None) -> tuple[Array, dict[str, Array]]:
+        """``(slot_of, arrays)``: every built bucket's arrays stacked, floating-point ones in
+        ``dtype`` if given (cast once per build, not per call)."""
+        slot_of, arrays = self._stacked(n_buckets)
+        if dtype is None:
+            return slot_of, arrays
+        cast = self._cast.get(dtype)
+        if cast is None:
+            with jax.ensure_compile_time_eval():
+                cast = {
+                    k: v.astype(dtype) if jnp.issubdtype(v.dtype, jnp.floating) else v
+                    for k, v in arrays.items()
+                }
+            self._cast[dtype] = cast
+        return slot_of, cast
+
+    def _stacked(self, n_buckets: int) -> tuple[Array, dict[str, Array]]:
         if self._stack is None:
             keys = sorted(self.items)
             cap = 1 << max(0, (len(keys) - 1).bit_length())
@@ -272,7 +312,9 @@ class TableSampler:
             self._rejection[key] = _Lazy(partial(self._build_rejection, proposal=proposal))
         return self._rejection[key]
 
-    def _prepare(self, method: str, proposal: Any, wo: Array) -> tuple[Array, dict[str, Array]]:
+    def _prepare(
+        self, method: str, proposal: Any, wo: Array, dtype: Any = None
+    ) -> tuple[Array, dict[str, Array]]:
         store = self._store(method, proposal)
         if isinstance(wo, jax.core.Tracer):
             # inside jit the outgoing directions are unknown: build every bucket
@@ -285,7 +327,7 @@ class TableSampler:
                 b32 = np.asarray(_bucket_kernel(self.geo, wo.astype(jnp.float32))).reshape(-1)
                 buckets = np.concatenate([buckets, b32])
             store.ensure(buckets)
-        return store.stacked(self.n_buckets)
+        return store.stacked(self.n_buckets, dtype)
 
     # -- scalar target g cos -------------------------------------------------------------------
     def _g(self, wi: Any, wo: Any) -> np.ndarray:
@@ -644,15 +686,17 @@ class TableSampler:
     def sample(self, wo: Array, u: Array, method: str, rng: Any, proposal: Any):
         """``(wi, pdf, f)``: ``f (..., C)`` is the table at ``(wi, wo)`` when the sampler has
         already looked it up (rejection in float32), else None."""
-        slot_of, arrays = self._prepare(method, proposal, wo)
         dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
+        if method == "rejection":  # proposals and acceptance tests run in float32
+            return self._sample_rejection(wo, u, rng, proposal, dt)
+        slot_of, arrays = self._prepare(method, proposal, wo, dt)
         cos_desc, _cos_asc, omega = self._consts[dt]
         if method == "inversion":
             wi, pdf = _inversion_kernel(
                 self.geo,
                 slot_of,
-                arrays["mcdf"].astype(dt),
-                arrays["ccdf"].astype(dt),
+                arrays["mcdf"],
+                arrays["ccdf"],
                 cos_desc,
                 omega,
                 wo,
@@ -663,36 +707,35 @@ class TableSampler:
             wi, pdf = _alias_kernel(
                 self.geo,
                 slot_of,
-                arrays["q"].astype(dt),
+                arrays["q"],
                 arrays["alias"],
-                arrays["p"].astype(dt),
+                arrays["p"],
                 cos_desc,
                 omega,
                 wo,
                 u,
             )
             return wi, pdf, None
-        return self._sample_rejection(slot_of, arrays, wo, u, rng, proposal, dt)
 
-    def _sample_rejection(self, slot_of, arrays, wo, u, rng, proposal, dt):
+    def _sample_rejection(self, wo, u, rng, proposal, dt):
         shape = wo.shape[:-1]
         wo_f = wo.reshape(-1, 3)
         u_f = u.reshape(-1, 2)
-        seeds = seeds_from_u(u_f) if rng is None else seeds_from_rng(rng, (wo_f.shape[0],))
+        slot_of, arrays = self._prepare("rejection", proposal, wo_f, jnp.float32)
         # proposals and acceptance tests run in float32 whatever the caller's precision (the
         # returned pdf is evaluated afterwards at the returned direction, in the caller's dtype)
-        wo32 = wo_f.astype(jnp.float32)
-        u32 = jnp.clip(u_f.astype(jnp.float32), 0.0, _ONE_MINUS_EPS32)
-        bound = arrays["bound"].astype(jnp.float32)
+        wo32, u32, seeds = _rejection_inputs(wo_f, u_f)
+        if rng is not None:
+            seeds = seeds_from_rng(rng, (wo_f.shape[0],))
         key = _proposal_key(proposal)
         if proposal == "majorant":
             cos_desc = self._consts[jnp.float32][0]
             round_fn = partial(_majorant_round, self.table, self.geo)
-            consts = (slot_of, arrays["q"].astype(jnp.float32), arrays["alias"], bound, cos_desc)
+            consts = (slot_of, arrays["q"], arrays["alias"], arrays["bound"], cos_desc)
         else:
             model = None if proposal == "cosine" else proposal
             round_fn = partial(_rejection_round, self.table, model, self.geo)
-            consts = (slot_of, bound)
+            consts = (slot_of, arrays["bound"])
         if isinstance(wo, jax.core.Tracer) or isinstance(u, jax.core.Tracer):
             x, ok = _rejection_loop_traced(
                 lambda w, a, b: round_fn(*consts, w, a, b), wo32, u32, seeds
@@ -703,45 +746,34 @@ class TableSampler:
                 step = rejection_step(lambda w, a, b, *c: round_fn(*c, w, a, b))
                 self._round_fns[key] = step
             x, ok, rounds = rejection_sample(step, (wo32,), u32, seeds, consts=consts)
-            self.stats["rejection_proposals"] = float(np.asarray(rounds).sum())
+            self.stats["rejection_proposals"] = float(np.sum(rounds, dtype=np.int64))
             self.stats["rejection_samples"] = float(wo_f.shape[0])
         wi, f = x
-        wi = wi.astype(dt)
         if dt == jnp.float32:  # the acceptance test looked f up at (wi, wo) in float32
-            pdf = _rejection_pdf_from_f(self.geo, slot_of, arrays["rho"].astype(dt), f, wi, wo_f)
-            f = f.reshape(*shape, f.shape[-1])
-        else:
-            f = None
-            pdf = self.pdf_rejection(slot_of, arrays, wi, wo_f, dt)
-        pdf = jnp.where(ok, pdf, 0.0)
-        return wi.reshape(*shape, 3), pdf.reshape(shape), f
+            pdf = _rejection_pdf_from_f(self.geo, slot_of, arrays["rho"], f, wi, wo_f, ok)
+            return wi.reshape(*shape, 3), pdf.reshape(shape), f.reshape(*shape, f.shape[-1])
+        wi = wi.astype(dt)
+        _, arrays = self._store("rejection", proposal).stacked(self.n_buckets, dt)
+        pdf = jnp.where(ok, self.pdf_rejection(slot_of, arrays, wi, wo_f), 0.0)
+        return wi.reshape(*shape, 3), pdf.reshape(shape), None
 
-    def pdf_rejection(self, slot_of, arrays, wi, wo, dt):
+    def pdf_rejection(self, slot_of, arrays, wi, wo):
         t = self.table
-        return _rejection_pdf_kernel(
-            self.geo, t._spec, t._data, slot_of, arrays["rho"].astype(dt), wi, wo
-        )
+        return _rejection_pdf_kernel(self.geo, t._spec, t._data, slot_of, arrays["rho"], wi, wo)
 
     def pdf(self, wi: Array, wo: Array, method: str, proposal: Any) -> Array:
-        slot_of, arrays = self._prepare(method, proposal, wo)
         dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
+        slot_of, arrays = self._prepare(method, proposal, wo, dt)
         _cos_desc, cos_asc, omega = self._consts[dt]
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         if method == "inversion":
             p = _inversion_pdf(
-                self.geo,
-                slot_of,
-                arrays["mcdf"].astype(dt),
-                arrays["ccdf"].astype(dt),
-                cos_asc,
-                omega,
-                wi,
-                wo,
+                self.geo, slot_of, arrays["mcdf"], arrays["ccdf"], cos_asc, omega, wi, wo
             )
         elif method == "alias":
-            p = _alias_pdf(self.geo, slot_of, arrays["p"].astype(dt), cos_asc, omega, wi, wo)
+            p = _alias_pdf(self.geo, slot_of, arrays["p"], cos_asc, omega, wi, wo)
         else:
-            p = self.pdf_rejection(slot_of, arrays, wi, wo, dt)
+            p = self.pdf_rejection(slot_of, arrays, wi, wo)
         return jnp.where(ok, p, 0.0)
 
 
@@ -947,12 +979,36 @@ def _rejection_pdf_kernel(geo, spec, data, slot_of, rho, wi, wo):
 
 
 @partial(jax.jit, static_argnames=("geo",))
-def _rejection_pdf_from_f(geo, slot_of, rho, f, wi, wo):
-    """``g cos theta_i / rho(wo)`` from the table's values ``f (..., C)`` at ``(wi, wo)``."""
+def _rejection_pdf_from_f(geo, slot_of, rho, f, wi, wo, accepted=None):
+    """``g cos theta_i / rho(wo)`` from the table's values ``f (..., C)`` at ``(wi, wo)`` (0
+    where ``accepted`` is False)."""
     rho_o = _rho_interp(geo, slot_of, rho, wo)
-    g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
+    g = _g_of(f)
     ok = rho_o > 0
+    if accepted is not None:
+        ok &= accepted
     return jnp.where(ok, g * jnp.maximum(wi[..., 2], 0.0) / jnp.where(ok, rho_o, 1.0), 0.0)
+
+
+@jax.jit
+def _rejection_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
+    """Float32 ``(wo, u)`` for the proposals, and the per-query seeds drawn from ``u``."""
+    return (
+        wo.astype(jnp.float32),
+        jnp.clip(u.astype(jnp.float32), 0.0, _ONE_MINUS_EPS32),
+        seeds_from_u(u),
+    )
+
+
+def _g_of(f: Array) -> Array:
+    """``g = max(mean over channels of f, 0)`` from ``f (..., C)``, the sampled target.
+
+    Kept a reduction on purpose: in a rejection round it is what stops XLA's CPU backend from
+    fusing the table lookup's gathers into each consumer of ``f`` (summing the channels as
+    elementwise adds instead splits the eight corner gathers into separately stored arrays,
+    and the round runs about 25 % slower).
+    """
+    return jnp.maximum(jnp.mean(f, axis=-1), 0.0)
 
 
 def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
@@ -992,7 +1048,7 @@ def _majorant_round(table, geo, slot_of, q, alias, bound, cos_desc, wo, up, ua):
     and its acceptance test per query: ``((wi, f), accepted)``."""
     wi, base, k, _ = _alias_direction(geo, slot_of, q, alias, q, cos_desc, wo, up)
     f = table.f(wi, wo)
-    g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
+    g = _g_of(f)
     accept = ua * jnp.take(bound.reshape(-1), base + k) < g * wi[..., 2]
     return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
 
@@ -1005,7 +1061,7 @@ def _rejection_round(table, model, geo, slot_of, bound, wo, up, ua):
     if model is None:
         wi = warp.square_to_cosine_hemisphere(up).astype(wo.dtype)
         f = table.f(wi, wo)
-        ratio_num = jnp.maximum(jnp.mean(f, axis=-1), 0.0) * jnp.pi
+        ratio_num = _g_of(f) * jnp.pi
         accept = ua * M < ratio_num
         return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
     eps = _PROPOSAL_EPS
@@ -1017,7 +1073,7 @@ def _rejection_round(table, model, geo, slot_of, bound, wo, up, ua):
     wi = jnp.where(use_cos[..., None], wi_c, wi_m)
     q = eps * jnp.maximum(wi[..., 2], 0.0) / jnp.pi + (1 - eps) * model.pdf(wi, wo).astype(wo.dtype)
     f = table.f(wi, wo)
-    g = jnp.maximum(jnp.mean(f, axis=-1), 0.0)
+    g = _g_of(f)
     accept = ua * M * q < g * wi[..., 2]
     return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
 

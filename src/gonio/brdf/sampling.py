@@ -431,40 +431,69 @@ def hash_uniform(seed: Array, counter: int | Array, dtype: Any = jnp.float32) ->
     return ((x >> 8).astype(jnp.float32) * np.float32(2.0**-24)).astype(dtype)
 
 
-def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> Callable[..., Any]:
-    """Wrap a one-proposal function into the jit-compiled step :func:`rejection_sample` runs.
+class RejectionStep:
+    """The jit-compiled proposal rounds that :func:`rejection_sample` runs (see
+    :func:`rejection_step`): ``first`` for every query's first proposal, drawn from the
+    caller's ``u``, and ``later`` for the hashed ones after it. Two functions rather than one
+    with a select: XLA's CPU backend then never computes hashes it throws away, and the
+    proposal fuses as it does alone (about 20 % faster)."""
+
+    def __init__(self, round_fn: Callable[..., tuple[Array, Array]]) -> None:
+        def first(inputs, u, seeds, consts):
+            return round_fn(*inputs, u, hash_uniform(seeds, 2, u.dtype), *consts)
+
+        def later(inputs, seeds, rounds, consts, dtype):
+            r = jnp.asarray(rounds, jnp.uint32)
+            up = jnp.stack(
+                [hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1
+            )
+            return round_fn(*inputs, up, hash_uniform(seeds, 3 * r + 2, dtype), *consts)
+
+        self.first = jax.jit(first)
+        self.later = jax.jit(later, static_argnames=("dtype",))
+
+
+def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> RejectionStep:
+    """Wrap a one-proposal function into the jit-compiled steps :func:`rejection_sample` runs.
 
     ``round_fn(*inputs, u_prop (m, 2), u_acc (m,), *consts) -> (x, accepted (m,))`` draws one
     proposal per query from ``u_prop`` and accepts it when ``u_acc`` is below the acceptance
     ratio; ``x`` is an array ``(m, ...)`` or a tuple of them (a tuple rather than one
     concatenated array: XLA fuses a concatenation's producers into it, several times slower).
     Query ``i``'s ``r``-th proposal uses the caller's ``u`` when ``r = 0`` and
-    :func:`hash_uniform` counters ``3r, 3r + 1`` after that; its acceptance test uses ``3r + 2``.
-    Keep the returned step and reuse it: each new one compiles again.
+    :func:`hash_uniform` counters ``3r, 3r + 1`` after that; its acceptance test uses ``3r + 2``
+    (counter 2 in the first round). Keep the returned step and reuse it: each new one compiles
+    again.
     """
+    return RejectionStep(round_fn)
 
-    def step(inputs, u, seeds, rounds, consts):
-        dtype = u.dtype
-        r = jnp.broadcast_to(rounds, seeds.shape).astype(jnp.uint32)
-        hashed = jnp.stack(
-            [hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1
-        )
-        up = jnp.where((r == 0)[:, None], u, hashed)
-        ua = hash_uniform(seeds, 3 * r + 2, dtype)
-        return round_fn(*inputs, up, ua, *consts)
 
-    return jax.jit(step)
+def _padded_size(m: int) -> int:
+    """1024 times the smallest power of 4 that holds ``m`` rows (few shapes to compile)."""
+    size = 1024
+    while size < m:
+        size *= 4
+    return size
+
+
+def _rows(a: np.ndarray) -> np.ndarray:
+    """A view of a C-contiguous ``a (n, ...)`` as a 1-D array of opaque rows: NumPy gathers and
+    scatters those several times faster than the rows of a 2-D array."""
+    if a.ndim == 1:
+        return a
+    width = a.dtype.itemsize * int(np.prod(a.shape[1:]))
+    return a.reshape(a.shape[0], -1).view(np.dtype((np.void, width)))[:, 0]
 
 
 def rejection_sample(
-    step: Callable[..., tuple[Array, Array]],
+    step: RejectionStep,
     inputs: tuple[Any, ...],
     u: Any,
     seeds: Any,
     max_rounds: int = 4096,
     consts: tuple[Any, ...] = (),
     chunk: int = 1 << 16,
-) -> tuple[Array, Array, Array]:
+) -> tuple[Any, Array, np.ndarray]:
     """Run a vectorized rejection sampler until every query has accepted a proposal.
 
     Parameters
@@ -485,7 +514,7 @@ def rejection_sample(
     x : ``(N, ...)`` accepted proposals, as the step returns them (array or tuple of arrays;
         the last proposal where failed).
     ok : ``(N,)`` bool.
-    rounds : ``(N,)`` int32 number of proposals each query used.
+    rounds : ``(N,)`` int32 NumPy array, the number of proposals each query used.
 
     Each round proposes once for every query still pending (all of them have made the same
     number of proposals), dispatching every chunk before reading any result back so the host
@@ -497,63 +526,70 @@ def rejection_sample(
     seeds = np.asarray(seeds)
     n = u.shape[0]
     ok = np.zeros(n, bool)
-    rounds = np.zeros(n, np.int32)
+    rounds = np.ones(n, np.int32)
+    out: list[np.ndarray] | None = None  # the proposal pytree's leaves, (n, ...) each
+    tree = None
     pending = np.arange(n)
-    kept: list[tuple[np.ndarray, Any]] = []  # (queries, their accepted proposals)
     r = 0
     while pending.size:
         calls = []
         for start in range(0, pending.size, chunk):
             part = pending[start : start + chunk]
             m = part.size
-            size = 1024
-            while size < m:
-                size *= 4
+            size = _padded_size(m)
             if size > m:
                 idx = np.concatenate([part, np.full(size - m, part[0])])
             else:  # in the first round `part` is a range: slice, don't gather
                 idx = slice(start, start + m) if r == 0 else part
-            out = step(tuple(a[idx] for a in inputs), u[idx], seeds[idx], np.int32(r), consts)
-            calls.append((part, out))
+            args = tuple(a[idx] for a in inputs)
+            if r == 0:
+                res = step.first(args, u[idx], seeds[idx], consts)
+            else:
+                res = step.later(args, seeds[idx], np.int32(r), consts, dtype=u.dtype)
+            calls.append((start, part, res))
         r += 1
-        rounds[pending] = r
         failed = []
-        for part, (x, acc) in calls:
-            # on the CPU reading a device array back is free; only the accepted rows are kept
-            acc = np.asarray(acc)[: part.size]
+        for start, part, (x, acc) in calls:
+            # on the CPU reading a device array back is free (no copy)
+            m = part.size
+            acc = np.asarray(acc)[:m]
+            leaves, tree = jax.tree.flatten(x)
+            leaves = [np.asarray(a) for a in leaves]
+            if out is None:
+                out = [np.empty((n, *a.shape[1:]), a.dtype) for a in leaves]
+            if r == 1:  # every query's first proposal: contiguous copies, fixed up later
+                for o, a in zip(out, leaves, strict=True):
+                    o[start : start + m] = a[:m]
+                ok[start : start + m] = acc
+                failed.append(start + np.flatnonzero(~acc))
+                continue
+            # the accepted rows (after the last round, every row)
+            rows = np.flatnonzero(acc) if r < max_rounds else np.arange(m)
+            dest = part[rows]
+            for o, a in zip(out, leaves, strict=True):
+                _rows(o)[dest] = _rows(a)[rows]
             ok[part[acc]] = True
-            rows = np.flatnonzero(acc) if r < max_rounds else np.arange(part.size)
-            if rows.size:  # accepted (or, after the last round, the last proposal)
-                kept.append((part[rows], jax.tree.map(lambda a, rows=rows: np.asarray(a)[rows], x)))
             failed.append(part[~acc])
         pending = np.concatenate(failed) if r < max_rounds else pending[:0]
-    return _assemble(n, kept, step, inputs, u, seeds, consts), jnp.asarray(ok), jnp.asarray(rounds)
-
-
-def _assemble(n, kept, step, inputs, u, seeds, consts) -> Any:
-    """``(n, ...)`` proposals (each leaf of the proposal pytree) from the ``(queries,
-    proposals)`` kept from each call."""
-    if kept:
-        shape = kept[0][1]
-    else:  # no queries: trace the step for the shapes of a proposal
+        rounds[pending] += 1
+    if out is None:  # no queries: trace the step for the shapes of a proposal
         shape = jax.eval_shape(
-            step,
+            step.first,
             tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
             np.zeros((1024, *u.shape[1:]), u.dtype),
             np.zeros(1024, seeds.dtype),
-            np.int32(0),
             consts,
         )[0]
-    leaves, tree = jax.tree.flatten(shape)
-    out = [np.zeros((n, *a.shape[1:]), a.dtype) for a in leaves]
-    for queries, x in kept:
-        for o, a in zip(out, jax.tree.leaves(x), strict=True):
-            o[queries] = a
-    return jax.tree.unflatten(tree, [jnp.asarray(o) for o in out])
+        leaves, tree = jax.tree.flatten(shape)
+        out = [np.zeros((0, *a.shape[1:]), a.dtype) for a in leaves]
+        rounds = rounds[:0]
+    x = jax.tree.unflatten(tree, [jnp.asarray(o) for o in out])
+    return x, jnp.asarray(ok), rounds
 
 
 __all__ = [
     "AliasTable",
+    "RejectionStep",
     "Distribution1D",
     "Distribution2D",
     "alias_sample",

@@ -608,6 +608,34 @@ def _as_dirs(wi: Any, wo: Any) -> tuple[Array, Array]:
     return jnp.broadcast_arrays(wi.astype(dtype), wo.astype(dtype))
 
 
+@jax.jit
+def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
+    """``(wo, wo_s, u)`` broadcast together for :meth:`TabulatedBRDF.sample`: ``wo_s`` has
+    directions on or below the horizon replaced by the normal, ``u`` is clipped below 1."""
+    shape = jnp.broadcast_shapes(wo.shape[:-1], u.shape[:-1])
+    wo = jnp.broadcast_to(wo, (*shape, 3))
+    u = jnp.clip(jnp.broadcast_to(u, (*shape, 2)), 0.0, _one_minus_eps(wo.dtype))
+    wo_s = jnp.where(wo[..., 2:3] > 0, wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+    return wo, wo_s, u
+
+
+@partial(jax.jit, static_argnames=("spec",))
+def _sample_result(spec, data, wo, wo_s, wi, pdf, val) -> BRDFSample:
+    """The :class:`BRDFSample` of sampled ``wi`` with density ``pdf``; ``val`` is the table at
+    ``(wi, wo_s)`` when the sampler looked it up already, else None (looked up here)."""
+    wi = wi.astype(wo.dtype)
+    pdf = pdf.astype(wo.dtype)
+    ok = (wo[..., 2] > 0) & (wi[..., 2] > 0) & (pdf > 0)
+    if val is None:
+        # wi stored once, per component, before the lookup: otherwise XLA fuses the
+        # sampler's arithmetic into the lookup's loops (about 15 % slower)
+        wi = jnp.stack(materialize([wi[..., 0], wi[..., 1], wi[..., 2]], pdf), -1)
+        val = _eval_kernel(data, wi, wo_s, spec)
+    cos_i = jnp.maximum(wi[..., 2:3], 0.0)
+    weight = jnp.where(ok[..., None], val * cos_i / jnp.where(ok, pdf, 1.0)[..., None], 0.0)
+    return BRDFSample(wi, jnp.where(ok, pdf, 0.0), weight, jnp.zeros(ok.shape, bool))
+
+
 # ---------------------------------------------------------------------------------------------
 # TabulatedBRDF
 # ---------------------------------------------------------------------------------------------
@@ -933,23 +961,9 @@ class TabulatedBRDF:
             raise ParameterError(
                 f"sample needs wo (..., 3) and u (..., 2), got {wo.shape}, {u.shape}"
             )
-        shape = jnp.broadcast_shapes(wo.shape[:-1], u.shape[:-1])
-        wo = jnp.broadcast_to(wo, (*shape, 3))
-        u = jnp.clip(jnp.broadcast_to(u, (*shape, 2)), 0.0, _one_minus_eps(wo.dtype))
-        ok_o = wo[..., 2] > 0
-        wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+        wo, wo_s, u = _sample_inputs(wo, u)
         wi, pdf, val = self._sampler().sample(wo_s, u, method, rng, proposal)
-        wi = wi.astype(wo.dtype)
-        pdf = pdf.astype(wo.dtype)
-        ok = ok_o & (wi[..., 2] > 0) & (pdf > 0)
-        if val is None:
-            # wi stored once, per component, before the lookup: otherwise XLA fuses the
-            # sampler's arithmetic into the lookup's loops (about 15 % slower)
-            wi = jnp.stack(materialize([wi[..., 0], wi[..., 1], wi[..., 2]], pdf), -1)
-            val = self.f(wi, wo_s)
-        cos_i = jnp.maximum(wi[..., 2:3], 0.0)
-        weight = jnp.where(ok[..., None], val * cos_i / jnp.where(ok, pdf, 1.0)[..., None], 0.0)
-        return BRDFSample(wi, jnp.where(ok, pdf, 0.0), weight, jnp.zeros(shape, bool))
+        return _sample_result(self._spec, self._data, wo, wo_s, wi, pdf, val)
 
     def pdf(self, wi: Any, wo: Any, method: str = "inversion", proposal: Any = "majorant") -> Array:
         """Density of :meth:`sample` (same ``method``/``proposal``) over ``wi`` per unit solid
