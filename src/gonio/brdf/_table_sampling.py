@@ -975,15 +975,26 @@ def _alias_pdf(geo, slot_of, p, cos_asc, omega, wi, wo):
 def _rejection_pdf_kernel(geo, spec, data, slot_of, rho, wi, wo):
     from gonio.brdf.tabulated import _eval_kernel
 
-    return _rejection_pdf_from_f(geo, slot_of, rho, _eval_kernel(data, wi, wo, spec), wi, wo)
+    g = _g_of(_eval_kernel(data, wi, wo, spec))
+    return _rejection_pdf_of_g(geo, slot_of, rho, g, wi, wo, None)
 
 
 @partial(jax.jit, static_argnames=("geo",))
 def _rejection_pdf_from_f(geo, slot_of, rho, f, wi, wo, accepted=None):
     """``g cos theta_i / rho(wo)`` from the table's values ``f (..., C)`` at ``(wi, wo)`` (0
     where ``accepted`` is False)."""
+    # the channels summed elementwise: here f is an input, not a fused lookup (see _g_of),
+    # and XLA's CPU reduction would be the slowest part of this kernel
+    total = f[..., 0]
+    for c in range(1, f.shape[-1]):
+        total = total + f[..., c]
+    return _rejection_pdf_of_g(
+        geo, slot_of, rho, jnp.maximum(total / f.shape[-1], 0.0), wi, wo, accepted
+    )
+
+
+def _rejection_pdf_of_g(geo, slot_of, rho, g, wi, wo, accepted):
     rho_o = _rho_interp(geo, slot_of, rho, wo)
-    g = _g_of(f)
     ok = rho_o > 0
     if accepted is not None:
         ok &= accepted

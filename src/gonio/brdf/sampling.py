@@ -476,6 +476,23 @@ def _padded_size(m: int) -> int:
     return size
 
 
+def _pieces(m: int, chunk: int) -> list[tuple[int, int]]:
+    """``(start, stop)`` ranges covering ``m`` queries in calls of at most ``chunk``, each
+    padded to :func:`_padded_size` with little waste: a remainder is cut into smaller pieces
+    rather than padded by more than a quarter (every padded row is a wasted proposal)."""
+    out = []
+    start = 0
+    while start < m:
+        left = m - start
+        size = min(chunk, _padded_size(left))
+        if size > left and size > 1024 and size - left > left // 3:
+            size //= 4  # e.g. 17000 left: 16384 now and 616 next, not one 65536 call
+        stop = min(m, start + size)
+        out.append((start, stop))
+        start = stop
+    return out
+
+
 def _rows(a: np.ndarray) -> np.ndarray:
     """A view of a C-contiguous ``a (n, ...)`` as a 1-D array of opaque rows: NumPy gathers and
     scatters those several times faster than the rows of a 2-D array."""
@@ -483,6 +500,13 @@ def _rows(a: np.ndarray) -> np.ndarray:
         return a
     width = a.dtype.itemsize * int(np.prod(a.shape[1:]))
     return a.reshape(a.shape[0], -1).view(np.dtype((np.void, width)))[:, 0]
+
+
+def _take_rows(a: np.ndarray, idx: Any) -> np.ndarray:
+    """``a[idx]`` for a slice or an index array, gathering whole rows at once."""
+    if isinstance(idx, slice) or a.ndim == 1:
+        return a[idx]
+    return _rows(a)[idx].view(a.dtype).reshape(len(idx), *a.shape[1:])
 
 
 def rejection_sample(
@@ -533,15 +557,15 @@ def rejection_sample(
     r = 0
     while pending.size:
         calls = []
-        for start in range(0, pending.size, chunk):
-            part = pending[start : start + chunk]
+        for start, stop in _pieces(pending.size, chunk):
+            part = pending[start:stop]
             m = part.size
             size = _padded_size(m)
             if size > m:
                 idx = np.concatenate([part, np.full(size - m, part[0])])
             else:  # in the first round `part` is a range: slice, don't gather
-                idx = slice(start, start + m) if r == 0 else part
-            args = tuple(a[idx] for a in inputs)
+                idx = slice(start, stop) if r == 0 else part
+            args = tuple(_take_rows(a, idx) for a in inputs)
             if r == 0:
                 res = step.first(args, u[idx], seeds[idx], consts)
             else:
@@ -589,9 +613,9 @@ def rejection_sample(
 
 __all__ = [
     "AliasTable",
-    "RejectionStep",
     "Distribution1D",
     "Distribution2D",
+    "RejectionStep",
     "alias_sample",
     "alias_sample_2d",
     "find_interval",
