@@ -253,9 +253,9 @@ def test_majorant_bounds_g_cos_and_acceptance(glossy):
     from gonio.brdf._table_sampling import _cell_of
 
     smp = glossy._sampler()
-    geo = smp.geo
+    geo = smp.geo_major
     rng = np.random.default_rng(7)
-    cos_asc = jnp.asarray(smp.cos_desc[::-1].copy())
+    cos_asc = jnp.asarray(smp.cos_desc_major[::-1].copy())
     worst = 0.0
     for b in (0, geo.n_to // 2, geo.n_to - 2, geo.n_to - 1):
         maj = smp._majorant(b)

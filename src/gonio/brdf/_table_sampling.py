@@ -59,6 +59,7 @@ Methods
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import partial
@@ -94,6 +95,7 @@ _RHO_NODES = 9
 _RHO_NODES_ANISO = 5
 _RHO_RES = (128, 256)
 _BOUND_RES = (16, 32)  # incident cells for the cosine-proposal bound
+_MAJORANT_REFINE = 2  # the majorant's incident grid is this much finer than sampling_res's
 _BOUND_RES_MODEL = (48, 96)  # finer: a model proposal's pdf varies within a cell
 _MODEL_BOUND_SPLIT = 4  # theta_o parts per bucket bounded separately for a model proposal
 # Rejection bound of a bucket where g = 0 everywhere: negative, so that the acceptance test
@@ -191,6 +193,14 @@ def _cos_sin_in_column(n_p: int, col: Array, rx: Array, dtype: Any) -> tuple[Arr
     return c0 * cd - s0 * sd, s0 * cd + c0 * sd
 
 
+def _incident_grid(n_t: int, n_p: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(cos_desc (n_t + 1,), omega (n_t,))``: the row edges of an incident grid uniform in
+    theta_i, as cosines from 1 down to exactly 0, and each row's cell solid angle (sr)."""
+    cos_desc = np.cos(np.linspace(0.0, HALF_PI, n_t + 1))
+    cos_desc[0], cos_desc[-1] = 1.0, 0.0
+    return cos_desc, (cos_desc[:-1] - cos_desc[1:]) * (TWO_PI / n_p)
+
+
 class _Lazy:
     """Per-bucket structures built on demand and stacked for the vectorized kernels."""
 
@@ -254,12 +264,18 @@ class TableSampler:
         n_to, n_t, n_p = table.sampling_res
         self.geo = _Geo(table.isotropic, n_to, 1 if table.isotropic else 2 * n_to, n_t, n_p)
         self.n_buckets = self.geo.n_to * self.geo.n_po
-        edges = np.linspace(0.0, HALF_PI, n_t + 1)
-        cos_desc = np.cos(edges)
-        cos_desc[0], cos_desc[-1] = 1.0, 0.0
+        cos_desc, self.omega = _incident_grid(n_t, n_p)
         self.cos_desc = cos_desc
-        self.omega = (cos_desc[:-1] - cos_desc[1:]) * (TWO_PI / n_p)
+        # the majorant's cells are finer: its acceptance is limited by how much g cos varies
+        # within a cell (0.77 -> 0.84 on the benchmark table for twice the resolution)
+        self.geo_major = dataclasses.replace(
+            self.geo, n_t=_MAJORANT_REFINE * n_t, n_p=_MAJORANT_REFINE * n_p
+        )
+        self.cos_desc_major, self.omega_major = _incident_grid(
+            self.geo_major.n_t, self.geo_major.n_p
+        )
         with jax.ensure_compile_time_eval():  # the sampler may be created under a jit trace
+            self._major_cos_desc = jnp.asarray(self.cos_desc_major, jnp.float32)
             self._consts = {
                 dt: (
                     jnp.asarray(cos_desc, dt),
@@ -615,9 +631,10 @@ class TableSampler:
         (``bound_c >= m_c``), and accepting with probability ``g cos / bound_c`` samples
         ``g cos`` exactly. The acceptance rate is ``rho / sum_c m_c Omega_c``.
         """
-        _, gcos, _ = self._cell_bounds(b, (self.geo.n_t, self.geo.n_p))
+        geo = self.geo_major
+        _, gcos, _ = self._cell_bounds(b, (geo.n_t, geo.n_p))
         m = gcos.reshape(-1)
-        omega = np.repeat(self.omega, self.geo.n_p)
+        omega = np.repeat(self.omega_major, geo.n_p)
         w = m * omega
         if not w.sum() > 0:  # g = 0 for the whole bucket
             return {**_alias_arrays(omega), "bound": np.full(m.shape, _EMPTY)}
@@ -729,9 +746,8 @@ class TableSampler:
             seeds = seeds_from_rng(rng, (wo_f.shape[0],))
         key = _proposal_key(proposal)
         if proposal == "majorant":
-            cos_desc = self._consts[jnp.float32][0]
-            round_fn = partial(_majorant_round, self.table, self.geo)
-            consts = (slot_of, arrays["q"], arrays["alias"], arrays["bound"], cos_desc)
+            round_fn = partial(_majorant_round, self.table, self.geo_major)
+            consts = (slot_of, arrays["q"], arrays["alias"], arrays["bound"], self._major_cos_desc)
         else:
             model = None if proposal == "cosine" else proposal
             round_fn = partial(_rejection_round, self.table, model, self.geo)
