@@ -211,9 +211,7 @@ class _Lazy:
         self._cast: dict[Any, dict[str, Array]] = {}
 
     def ensure(self, buckets: np.ndarray) -> None:
-        # a histogram, not np.unique: no sort of the (possibly 1e6) bucket indices
-        met = np.flatnonzero(np.bincount(np.asarray(buckets, np.int64).reshape(-1)))
-        missing = [int(b) for b in met if int(b) not in self.items]
+        missing = [int(b) for b in np.unique(buckets) if int(b) not in self.items]
         if missing:
             # under an outer jit trace, build from the concrete table values, not staged ops
             with jax.ensure_compile_time_eval():
@@ -336,13 +334,12 @@ class TableSampler:
             # inside jit the outgoing directions are unknown: build every bucket
             store.ensure(np.arange(self.n_buckets))
         else:
-            buckets = np.asarray(_bucket_kernel(self.geo, wo)).reshape(-1)
+            met = np.asarray(_buckets_met(self.geo, wo))
             if method == "rejection" and wo.dtype != jnp.float32:
                 # proposals run in float32, where a direction on a bucket edge may round into
                 # the neighbouring bucket: build that one too
-                b32 = np.asarray(_bucket_kernel(self.geo, wo.astype(jnp.float32))).reshape(-1)
-                buckets = np.concatenate([buckets, b32])
-            store.ensure(buckets)
+                met = met | np.asarray(_buckets_met(self.geo, wo.astype(jnp.float32)))
+            store.ensure(np.flatnonzero(met))
         return store.stacked(self.n_buckets, dtype)
 
     # -- scalar target g cos -------------------------------------------------------------------
@@ -741,9 +738,12 @@ class TableSampler:
         slot_of, arrays = self._prepare("rejection", proposal, wo_f, jnp.float32)
         # proposals and acceptance tests run in float32 whatever the caller's precision (the
         # returned pdf is evaluated afterwards at the returned direction, in the caller's dtype)
-        wo32, u32, seeds = _rejection_inputs(wo_f, u_f)
         if rng is not None:
             seeds = seeds_from_rng(rng, (wo_f.shape[0],))
+        else:
+            seeds = _seeds_jit(u_f)
+        # the caller's u is already clipped below 1 (in its own dtype)
+        wo32, u32 = (wo_f, u_f) if dt == jnp.float32 else _as_float32(wo_f, u_f)
         key = _proposal_key(proposal)
         if proposal == "majorant":
             round_fn = partial(_majorant_round, self.table, self.geo_major)
@@ -928,8 +928,11 @@ def _cos_range(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @partial(jax.jit, static_argnames=("geo",))
-def _bucket_kernel(geo: _Geo, wo: Array) -> Array:
-    return _bucket_of(geo, wo)
+def _buckets_met(geo: _Geo, wo: Array) -> Array:
+    """``(n_buckets,)`` bool: which outgoing buckets the directions ``wo (..., 3)`` fall in (a
+    histogram on the device: only the flags come back, not a bucket per direction)."""
+    b = _bucket_of(geo, wo).reshape(-1)
+    return jnp.zeros(geo.n_to * geo.n_po, bool).at[b].set(True)
 
 
 @partial(jax.jit, static_argnames=("geo",))
@@ -1017,14 +1020,13 @@ def _rejection_pdf_of_g(geo, slot_of, rho, g, wi, wo, accepted):
     return jnp.where(ok, g * jnp.maximum(wi[..., 2], 0.0) / jnp.where(ok, rho_o, 1.0), 0.0)
 
 
+_seeds_jit = jax.jit(seeds_from_u)
+
+
 @jax.jit
-def _rejection_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
-    """Float32 ``(wo, u)`` for the proposals, and the per-query seeds drawn from ``u``."""
-    return (
-        wo.astype(jnp.float32),
-        jnp.clip(u.astype(jnp.float32), 0.0, _ONE_MINUS_EPS32),
-        seeds_from_u(u),
-    )
+def _as_float32(wo: Array, u: Array) -> tuple[Array, Array]:
+    """Float32 ``(wo, u)`` for the proposals, ``u`` kept below 1 after rounding."""
+    return wo.astype(jnp.float32), jnp.clip(u.astype(jnp.float32), 0.0, _ONE_MINUS_EPS32)
 
 
 def _g_of(f: Array) -> Array:
