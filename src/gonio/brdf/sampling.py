@@ -477,6 +477,9 @@ def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> RejectionSte
     return RejectionStep(round_fn)
 
 
+_TAIL_LANES = 2048  # below this many pending queries, each gets several proposals per call
+
+
 def _padded_size(m: int) -> int:
     """1024 times the smallest power of 4 that holds ``m`` rows (few shapes to compile)."""
     size = 1024
@@ -558,16 +561,20 @@ def rejection_sample(
     u = np.asarray(u)
     seeds = np.asarray(seeds)
     n = u.shape[0]
-    ok = np.zeros(n, bool)
-    rounds = np.ones(n, np.int32)
+    rounds = np.ones(n, np.int32)  # set again when a query accepts after its first proposal
     out: list[np.ndarray] | None = None  # the proposal pytree's leaves, (n, ...) each
     tree = None
     pending = np.arange(n)
-    r = 0
+    r = 0  # proposals made by each pending query so far
     while pending.size:
+        # few queries left: give each of them k proposals (its next k counters) in one call,
+        # then keep the first accepted one, exactly as k rounds would
+        k = 1 if r == 0 else max(1, min(_TAIL_LANES // pending.size, max_rounds - r))
+        lanes = pending if k == 1 else np.repeat(pending, k)
+        lane_r = np.int32(r) if k == 1 else r + np.tile(np.arange(k, dtype=np.int32), pending.size)
         calls = []
-        for start, stop in _pieces(pending.size, chunk):
-            part = pending[start:stop]
+        for start, stop in _pieces(lanes.size, chunk):
+            part = lanes[start:stop]
             m = part.size
             size = _padded_size(m)
             if size > m:
@@ -578,33 +585,47 @@ def rejection_sample(
             if r == 0:
                 res = step.first(args, u[idx], seeds[idx], consts)
             else:
-                res = step.later(args, seeds[idx], np.int32(r), consts, dtype=u.dtype)
-            calls.append((start, part, res))
-        r += 1
-        failed = []
-        for start, part, (x, acc) in calls:
+                rr = lane_r if k == 1 else np.resize(lane_r[start:stop], size)
+                res = step.later(args, seeds[idx], rr, consts, dtype=u.dtype)
+            calls.append((start, m, res))
+        accepted = np.empty(lanes.size, bool)
+        results = []
+        for start, m, (x, acc) in calls:
             # on the CPU reading a device array back is free (no copy)
-            m = part.size
-            acc = np.asarray(acc)[:m]
+            accepted[start : start + m] = np.asarray(acc)[:m]
             leaves, tree = jax.tree.flatten(x)
-            leaves = [np.asarray(a) for a in leaves]
-            if out is None:
-                out = [np.empty((n, *a.shape[1:]), a.dtype) for a in leaves]
-            if r == 1:  # every query's first proposal: contiguous copies, fixed up later
+            results.append((start, m, [np.asarray(a) for a in leaves]))
+        if out is None:
+            out = [np.empty((n, *a.shape[1:]), a.dtype) for a in results[0][2]]
+        if r == 0:  # every query's first proposal: contiguous copies, fixed up later
+            for start, m, leaves in results:
                 for o, a in zip(out, leaves, strict=True):
                     o[start : start + m] = a[:m]
-                ok[start : start + m] = acc
-                failed.append(start + np.flatnonzero(~acc))
-                continue
-            # the accepted rows (after the last round, every row)
-            rows = np.flatnonzero(acc) if r < max_rounds else np.arange(m)
-            dest = part[rows]
+            pending = np.flatnonzero(~accepted)
+            r = 1
+            if max_rounds <= 1:  # the first proposals were the last
+                failed, pending = pending, pending[:0]
+            continue
+        acc_q = accepted.reshape(-1, k)
+        done = acc_q.any(axis=1)
+        first = acc_q.argmax(axis=1)
+        last = r + k >= max_rounds
+        if last:  # queries that never accepted keep their last proposal
+            first = np.where(done, first, k - 1)
+            done[:] = True
+        lane = np.flatnonzero(done) * k + first[done]  # the lane each finished query keeps
+        rounds[pending[done]] = r + first[done] + 1
+        for start, m, leaves in results:
+            sel = lane[(lane >= start) & (lane < start + m)]
             for o, a in zip(out, leaves, strict=True):
-                _rows(o)[dest] = _rows(a)[rows]
-            ok[part[acc]] = True
-            failed.append(part[~acc])
-        pending = np.concatenate(failed) if r < max_rounds else pending[:0]
-        rounds[pending] += 1
+                _rows(o)[lanes[sel]] = _rows(a)[sel - start]
+        if last:
+            failed = pending[~acc_q.any(axis=1)]
+        pending = pending[~done]
+        r += k
+    ok = np.ones(n, bool)
+    if r >= max_rounds and n:
+        ok[failed] = False
     if out is None:  # no queries: trace the step for the shapes of a proposal
         shape = jax.eval_shape(
             step.first,
