@@ -619,15 +619,16 @@ class TableSampler:
     def _majorant(self, b: int) -> dict[str, np.ndarray]:
         """Piecewise-constant proposal of bucket ``b`` on the incident grid, and its bound.
 
-        Cell ``c``'s weight is ``m_c Omega_c`` with ``m_c`` a rigorous bound of ``g cos`` over
-        the cell and every outgoing direction in the bucket (:meth:`_cell_bounds`: the smaller
-        of the table bound times the largest ``cos theta_i`` of the cell and the largest
-        per-table-cell bound of ``g cos theta_i`` over the table cells it reaches). Cells are drawn from an alias
-        table and the direction is uniform in solid angle inside the cell, so the proposal
-        density is ``q = p_c / Omega_c`` with ``p_c`` the probability the table *realizes*.
-        ``bound_c = M q_c`` with ``M = max_c m_c / q_c`` then bounds ``g cos`` in cell ``c``
-        (``bound_c >= m_c``), and accepting with probability ``g cos / bound_c`` samples
-        ``g cos`` exactly. The acceptance rate is ``rho / sum_c m_c Omega_c``.
+        Cell ``c``'s weight is ``m_c Omega_c`` with ``m_c`` a rigorous bound of ``g cos``
+        over the cell and every outgoing direction in the bucket (:meth:`_cell_bounds`: the
+        smaller of the table bound times the largest ``cos theta_i`` of the cell and the
+        largest per-table-cell bound of ``g cos theta_i`` over the table cells it reaches).
+        Cells are drawn from an alias table and the direction is uniform in solid angle
+        inside the cell, so the proposal density is ``q = p_c / Omega_c`` with ``p_c`` the
+        probability the table *realizes*. ``bound_c = M q_c`` with ``M = max_c m_c / q_c``
+        then bounds ``g cos`` in cell ``c`` (``bound_c >= m_c``), and accepting with
+        probability ``g cos / bound_c`` samples ``g cos`` exactly. The acceptance rate is
+        ``rho / sum_c m_c Omega_c``.
         """
         geo = self.geo_major
         _, gcos, _ = self._cell_bounds(b, (geo.n_t, geo.n_p))
