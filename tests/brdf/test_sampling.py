@@ -150,14 +150,15 @@ def test_hash_uniform_is_uniform_and_deterministic():
     assert abs(np.corrcoef(x, y)[0, 1]) < 0.01
 
 
+def _cubic_round(dummy, up, ua):
+    """One uniform proposal on [0, 1), accepted with probability x^2: target 3 x^2."""
+    x = up[:, 0]
+    return x[:, None], ua < x * x
+
+
 def test_rejection_sample_generic():
     """Target density 3 x^2 on [0, 1) from uniform proposals; independent of chunking."""
-
-    def round_fn(dummy, up, ua):
-        x = up[:, 0]
-        return x[:, None], ua < x * x
-
-    step = rejection_step(round_fn)
+    step = rejection_step(_cubic_round)
     n = 300_000
     u = np.random.default_rng(10).random((n, 2))
     seeds = seeds_from_u(jnp.asarray(u))
@@ -199,12 +200,7 @@ def _sequential_reference(u, seeds, max_rounds):
 def test_rejection_sample_matches_sequential_rounds(max_rounds):
     """Chunks, padding and the several-proposals-per-call tail change nothing: every query
     gets exactly the proposal a query-by-query loop accepts (or its last one, failed)."""
-
-    def round_fn(dummy, up, ua):
-        x = up[:, 0]
-        return x[:, None], ua < x * x
-
-    step = rejection_step(round_fn)
+    step = rejection_step(_cubic_round)
     n = 5000
     u = np.random.default_rng(11).random((n, 2))
     seeds = np.asarray(seeds_from_u(jnp.asarray(u)))
