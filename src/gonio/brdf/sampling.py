@@ -18,6 +18,7 @@ random numbers with a given distribution", IEEE TSE 1991.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from functools import partial
 from typing import Any
@@ -478,6 +479,7 @@ def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> RejectionSte
 
 
 _TAIL_LANES = 2048  # below this many pending queries, each gets several proposals per call
+_IN_FLIGHT = 3  # calls dispatched ahead of the one whose results the host is reading
 
 
 def _padded_size(m: int) -> int:
@@ -552,94 +554,151 @@ def rejection_sample(
     ok : ``(N,)`` bool.
     rounds : ``(N,)`` int32 NumPy array, the number of proposals each query used.
 
-    Each round proposes once for every query still pending (all of them have made the same
-    number of proposals), dispatching every chunk before reading any result back so the host
-    work overlaps the device's; queries that accepted leave between rounds. When fewer than
-    ``_TAIL_LANES`` are left, each gets its next several proposals in one call and keeps the
-    first accepted. The total work is about ``N / acceptance`` proposals, and the result is
-    exactly that of query-by-query rounds, whatever the chunking.
+    Calls of up to ``chunk`` proposals are streamed (see ``_RejectionRun``): first proposals
+    for the batch's rows in order, and further proposals for rejected queries as soon as a
+    chunk of them is waiting; when the batch is done and fewer than ``_TAIL_LANES`` queries
+    are left, each gets its next several proposals in one call and keeps the first accepted.
+    The total work is about ``N / acceptance`` proposals, and the result is exactly that of
+    query-by-query rounds, whatever the chunking.
     """
     inputs = tuple(np.asarray(a) for a in inputs)
     u = np.asarray(u)
     seeds = np.asarray(seeds)
-    n = u.shape[0]
-    rounds = np.ones(n, np.int32)  # set again when a query accepts after its first proposal
-    out: list[np.ndarray] | None = None  # the proposal pytree's leaves, (n, ...) each
-    tree = None
-    pending = np.arange(n)
-    failed = pending[:0]  # queries still rejected after max_rounds proposals
-    r = 0  # proposals made by each pending query so far
-    while pending.size:
-        # few queries left: give each of them k proposals (its next k counters) in one call,
-        # then keep the first accepted one, exactly as k rounds would
-        k = 1 if r == 0 else max(1, min(_TAIL_LANES // pending.size, max_rounds - r))
-        lanes = pending if k == 1 else np.repeat(pending, k)
-        lane_r = np.int32(r) if k == 1 else r + np.tile(np.arange(k, dtype=np.int32), pending.size)
-        calls = []
-        for start, stop in _pieces(lanes.size, chunk):
-            part = lanes[start:stop]
-            m = part.size
-            size = _padded_size(m)
-            if size > m:
-                idx = np.concatenate([part, np.full(size - m, part[0])])
-            else:  # in the first round `part` is a range: slice, don't gather
-                idx = slice(start, stop) if r == 0 else part
-            args = tuple(_take_rows(a, idx) for a in inputs)
-            if r == 0:
-                res = step.first(args, u[idx], seeds[idx], consts)
+    run = _RejectionRun(step, inputs, u, seeds, max_rounds, consts, chunk)
+    return run.result()
+
+
+class _RejectionRun:
+    """The bookkeeping of :func:`rejection_sample`, streamed.
+
+    Calls are kept ``_IN_FLIGHT`` deep: the first proposals of the next rows of the batch and,
+    as soon as ``chunk`` of them are waiting, further proposals for rejected queries (each
+    with its own proposal counter) go out while the host retires the oldest call's results,
+    so that neither the device nor the host waits for the other between rounds. A query's
+    proposals depend only on its seed and counter, so the samples are those of query-by-query
+    rounds whatever the order of the calls.
+    """
+
+    def __init__(self, step, inputs, u, seeds, max_rounds, consts, chunk) -> None:
+        self.step, self.inputs, self.u, self.seeds = step, inputs, u, seeds
+        self.max_rounds, self.consts, self.chunk = max_rounds, consts, chunk
+        n = u.shape[0]
+        self.n = n
+        self.rounds = np.ones(n, np.int32)
+        self.ok = np.ones(n, bool)
+        self.out: list[np.ndarray] | None = None
+        self.tree = None
+        # rejected queries waiting for their next proposal, and that proposal's counter
+        self.pool_q: list[np.ndarray] = []
+        self.pool_r: list[np.ndarray] = []
+        self.pool_n = 0
+        in_flight: deque = deque()
+        firsts = deque(_pieces(n, chunk))
+        while True:
+            while len(in_flight) < _IN_FLIGHT:
+                if self.pool_n >= chunk or (self.pool_n and not firsts and not in_flight):
+                    in_flight.append(self._dispatch_later(tail=not firsts and not in_flight))
+                elif firsts:
+                    in_flight.append(self._dispatch_first(*firsts.popleft()))
+                else:
+                    break
+            if not in_flight:
+                break
+            self._retire(*in_flight.popleft())
+
+    # -- calls ---------------------------------------------------------------------------------
+    def _dispatch_first(self, start: int, stop: int):
+        m = stop - start
+        size = _padded_size(m)
+        idx = (
+            slice(start, stop)
+            if size == m
+            else np.concatenate([np.arange(start, stop), np.full(size - m, start)])
+        )
+        args = tuple(_take_rows(a, idx) for a in self.inputs)
+        res = self.step.first(args, self.u[idx], self.seeds[idx], self.consts)
+        return np.arange(start, stop), None, 1, res
+
+    def _dispatch_later(self, tail: bool):
+        q = np.concatenate(self.pool_q)
+        r = np.concatenate(self.pool_r)
+        take = min(q.size, self.chunk)
+        if take < q.size:
+            self.pool_q, self.pool_r = [q[take:]], [r[take:]]
+            q, r = q[:take], r[:take]
+        else:
+            self.pool_q, self.pool_r = [], []
+        self.pool_n -= take
+        k = 1
+        if tail:  # few queries left: each gets its next k counters in this call
+            k = max(1, min(_TAIL_LANES // q.size, int(self.max_rounds - r.max())))
+        lanes = np.repeat(q, k) if k > 1 else q
+        lane_r = (np.repeat(r, k) + np.tile(np.arange(k, dtype=np.int32), q.size)) if k > 1 else r
+        m = lanes.size
+        size = _padded_size(m)
+        if size > m:
+            lanes_p = np.concatenate([lanes, np.full(size - m, lanes[0])])
+            lane_r = np.concatenate([lane_r, np.full(size - m, lane_r[0])])
+        else:
+            lanes_p = lanes
+        args = tuple(_take_rows(a, lanes_p) for a in self.inputs)
+        res = self.step.later(args, self.seeds[lanes_p], lane_r, self.consts, dtype=self.u.dtype)
+        return q, r, k, res
+
+    # -- results -------------------------------------------------------------------------------
+    def _retire(self, q: np.ndarray, r: np.ndarray | None, k: int, res) -> None:
+        x, acc = res
+        leaves, self.tree = jax.tree.flatten(x)
+        leaves = [np.asarray(a) for a in leaves]  # on the CPU: no copy
+        if self.out is None:
+            self.out = [np.empty((self.n, *a.shape[1:]), a.dtype) for a in leaves]
+        acc = np.asarray(acc)[: q.size * k]
+        if r is None:  # first proposals: contiguous rows, the rejected ones fixed up later
+            start = int(q[0])
+            for o, a in zip(self.out, leaves, strict=True):
+                o[start : start + q.size] = a[: q.size]
+            rejected = q[~acc]
+            if self.max_rounds <= 1:  # the first proposals were the last
+                self.ok[rejected] = False
             else:
-                rr = lane_r if k == 1 else np.resize(lane_r[start:stop], size)
-                res = step.later(args, seeds[idx], rr, consts, dtype=u.dtype)
-            calls.append((start, m, res))
-        accepted = np.empty(lanes.size, bool)
-        results = []
-        for start, m, (x, acc) in calls:
-            # on the CPU reading a device array back is free (no copy)
-            accepted[start : start + m] = np.asarray(acc)[:m]
-            leaves, tree = jax.tree.flatten(x)
-            results.append((start, m, [np.asarray(a) for a in leaves]))
-        if out is None:
-            out = [np.empty((n, *a.shape[1:]), a.dtype) for a in results[0][2]]
-        if r == 0:  # every query's first proposal: contiguous copies, fixed up later
-            for start, m, leaves in results:
-                for o, a in zip(out, leaves, strict=True):
-                    o[start : start + m] = a[:m]
-            pending = np.flatnonzero(~accepted)
-            r = 1
-            if max_rounds <= 1:  # the first proposals were the last
-                failed, pending = pending, pending[:0]
-            continue
-        acc_q = accepted.reshape(-1, k)
+                self._requeue(rejected, np.ones(rejected.size, np.int32))
+            return
+        acc_q = acc.reshape(-1, k)
         done = acc_q.any(axis=1)
         first = acc_q.argmax(axis=1)
-        last = r + k >= max_rounds
-        if last:  # queries that never accepted keep their last proposal
-            first = np.where(done, first, k - 1)
-            done[:] = True
-        lane = np.flatnonzero(done) * k + first[done]  # the lane each finished query keeps
-        rounds[pending[done]] = r + first[done] + 1
-        for start, m, leaves in results:
-            sel = lane[(lane >= start) & (lane < start + m)]
-            for o, a in zip(out, leaves, strict=True):
-                _rows(o)[lanes[sel]] = _rows(a)[sel - start]
-        if last:
-            failed = pending[~acc_q.any(axis=1)]
-        pending = pending[~done]
-        r += k
-    ok = np.ones(n, bool)
-    ok[failed] = False
-    if out is None:  # no queries: trace the step for the shapes of a proposal
-        shape = jax.eval_shape(
-            step.first,
-            tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
-            np.zeros((1024, *u.shape[1:]), u.dtype),
-            np.zeros(1024, seeds.dtype),
-            consts,
-        )[0]
-        leaves, tree = jax.tree.flatten(shape)
-        out = [np.zeros((0, *a.shape[1:]), a.dtype) for a in leaves]
-    x = jax.tree.unflatten(tree, [jnp.asarray(o) for o in out])
-    return x, jnp.asarray(ok), rounds
+        used = r + k  # proposals made by each query after this call
+        out_of_rounds = ~done & (used >= self.max_rounds)
+        if out_of_rounds.any():  # keep their last proposal, and fail them
+            self.ok[q[out_of_rounds]] = False
+            first = np.where(out_of_rounds, k - 1, first)
+            done |= out_of_rounds
+        lane = np.flatnonzero(done) * k + first[done]
+        finished = q[done]
+        self.rounds[finished] = r[done] + first[done] + 1
+        for o, a in zip(self.out, leaves, strict=True):
+            _rows(o)[finished] = _rows(a)[lane]
+        self._requeue(q[~done], used[~done])
+
+    def _requeue(self, q: np.ndarray, r: np.ndarray) -> None:
+        if q.size:
+            self.pool_q.append(q)
+            self.pool_r.append(r)
+            self.pool_n += q.size
+
+    def result(self) -> tuple[Any, Array, np.ndarray]:
+        if self.out is None:  # no queries: trace the step for the shapes of a proposal
+            inputs, u, seeds = self.inputs, self.u, self.seeds
+            shape = jax.eval_shape(
+                self.step.first,
+                tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
+                np.zeros((1024, *u.shape[1:]), u.dtype),
+                np.zeros(1024, seeds.dtype),
+                self.consts,
+            )[0]
+            leaves, self.tree = jax.tree.flatten(shape)
+            self.out = [np.zeros((0, *a.shape[1:]), a.dtype) for a in leaves]
+        x = jax.tree.unflatten(self.tree, [jnp.asarray(o) for o in self.out])
+        return x, jnp.asarray(self.ok), self.rounds
 
 
 __all__ = [
