@@ -287,7 +287,6 @@ class TableSampler:
         self._rejection: dict[Any, _Lazy] = {}
         self._node_max: _RangeMax2D | None = None
         self._sup_cache: dict[str, np.ndarray] | None = None
-        self._reach_cache: dict[tuple[float, float], tuple[float, _RangeMax2D, _RangeMax2D]] = {}
         self._round_fns: dict[Any, Any] = {}
         self.stats: dict[str, float] = {}
 
@@ -414,18 +413,16 @@ class TableSampler:
     # -- rejection -----------------------------------------------------------------------------
     def _h_max(self) -> np.ndarray:
         """Largest valid node value (channel mean, at least 0) per (theta_h, theta_d) node."""
-        t = self.table
-        v = np.where(t.mask, t.values.mean(axis=-1, dtype=np.float64), -np.inf)
-        names = [a.name for a in t.axes]
+        v = self._node_means()
+        names = [a.name for a in self.table.axes]
         ih, idd = names.index("theta_h"), names.index("theta_d")
         other = tuple(k for k in range(v.ndim) if k not in (ih, idd))
         return np.maximum(v.max(axis=other), 0.0)
 
-    def _bucket_sup(self, b: int) -> float:
-        """Upper bound of ``g`` over every ``wi`` above the horizon and every ``wo`` in bucket
-        ``b``, aware of phi_d (unlike :meth:`_h_max`); see :meth:`_reachable`."""
-        t0, t1, _, _ = self._bucket_ranges(b)
-        return self._reachable(t0, t1)[0]
+    def _node_means(self) -> np.ndarray:
+        """Channel mean of every node (float64), -inf where the node is invalid."""
+        t = self.table
+        return np.where(t.mask, t.values.mean(axis=-1, dtype=np.float64), -np.inf)
 
     def _reachable(self, t0: float, t1: float) -> tuple[float, _RangeMax2D, _RangeMax2D]:
         """``(sup, g_cells, gcos_cells)`` for outgoing directions with theta_o in ``[t0, t1]``:
@@ -442,11 +439,10 @@ class TableSampler:
         corner of its cell, so the largest corner over the reachable cells bounds ``g``
         (rigorously, up to the small margins below). Bounding ``g cos theta_i`` per table cell
         matters near grazing: there ``g`` peaks where ``cos theta_i`` is smallest.
+
+        Not cached: each outgoing range is bounded once per build, and the two rectangle-max
+        structures take a few MB each.
         """
-        key = (round(t0, 12), round(t1, 12))
-        hit = self._reach_cache.get(key)
-        if hit is not None:
-            return hit
         st = self._sup_static()
         eps = 1e-4  # covers float32 rounding of the lookup's angles and of the bucketing
         reach = (st["wo_hi"] >= math.cos(t1) - eps) & (st["wo_lo"] <= math.cos(t0) + eps)
@@ -457,8 +453,7 @@ class TableSampler:
         cells = _RangeMax2D(m.max(axis=2)[order])
         m *= np.clip(st["wi_hi"] + eps, 0.0, 1.0)
         cos_cells = _RangeMax2D(m.max(axis=2)[order])
-        hit = self._reach_cache[key] = (sup, cells, cos_cells)
-        return hit
+        return sup, cells, cos_cells
 
     def _sup_static(self) -> dict[str, np.ndarray]:
         """Table-only parts of :meth:`_reachable`, computed once."""
@@ -467,7 +462,7 @@ class TableSampler:
         t = self.table
         names = [a.name for a in t.axes]
         ih, idd, ip = names.index("theta_h"), names.index("theta_d"), names.index("phi_d")
-        v = np.where(t.mask, t.values.mean(axis=-1, dtype=np.float64), -np.inf)
+        v = self._node_means()
         if v.ndim == 4:  # anisotropic: theta_o does not depend on phi_h
             v = v.max(axis=names.index("phi_h"))
             ih, idd, ip = (0, 1, 2)
@@ -508,10 +503,11 @@ class TableSampler:
         self,
         th: tuple[np.ndarray, np.ndarray],
         td: tuple[np.ndarray, np.ndarray],
-        theta_o: tuple[float, float],
+        reach: tuple[float, _RangeMax2D, _RangeMax2D],
     ) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``g`` and of ``g cos theta_i`` over boxes of (theta_h, theta_d) angle
-        ranges (arrays of lo, hi), for outgoing directions with theta_o in ``theta_o``."""
+        ranges (arrays of lo, hi), for the outgoing range whose :meth:`_reachable` is
+        ``reach`` (the bound of ``g`` is at most that range's ``sup``)."""
         t = self.table
         ax_h = next(a for a in t.axes if a.name == "theta_h")
         ax_d = next(a for a in t.axes if a.name == "theta_d")
@@ -527,7 +523,7 @@ class TableSampler:
 
         node_bound = self._node_max.query(*node_range(ax_h, *th), *node_range(ax_d, *td))
         # phi_d-aware: the table cells meeting the boxes that the outgoing range can reach
-        _, cells, cos_cells = self._reachable(*theta_o)
+        sup, cells, cos_cells = reach
         st = self._sup_static()
         (hl, hh), (dl, dh) = st["h_cells"], st["d_cells"]
         margin = 1e-6  # radians, beyond the float64 rounding of the boxes
@@ -541,7 +537,7 @@ class TableSampler:
         ch1, cd1 = np.minimum(ch1, len(hh)), np.minimum(cd1, len(dh))
         g = np.where(found, np.minimum(node_bound, cells.query(ch0, ch1, cd0, cd1)), node_bound)
         gcos = np.where(found, cos_cells.query(ch0, ch1, cd0, cd1), np.inf)
-        return g * (1 + 1e-5), gcos * (1 + 1e-5)
+        return np.minimum(g * (1 + 1e-5), sup), gcos * (1 + 1e-5)
 
     def _cell_bounds(
         self, b: int, res: tuple[int, int], theta_o: tuple[float, float] | None = None
@@ -569,8 +565,7 @@ class TableSampler:
             d0, d1 = pi0 - p1, pi1 - p0
         ci = (np.cos(ti1), np.cos(ti0))
         th, td = _half_diff_ranges((ti0, ti1), (d0, d1), (t0, t1))
-        g, gcos = self._table_bound(th, td, (t0, t1))
-        U = np.minimum(g, self._reachable(t0, t1)[0])
+        U, gcos = self._table_bound(th, td, self._reachable(t0, t1))
         return U, np.minimum(U * ci[1], gcos), ci[0]
 
     def _rho_nodes(self, b: int) -> np.ndarray:
@@ -609,8 +604,8 @@ class TableSampler:
                 continue
             if proposal == "cosine":
                 # g cos / (cos / pi) = pi g
-                U, _, _ = self._cell_bounds(b, _BOUND_RES)
-                M = math.pi * min(U.max(), self._bucket_sup(b))
+                U, _, _ = self._cell_bounds(b, _BOUND_RES)  # U <= the bucket's sup of g
+                M = math.pi * U.max()
             else:
                 M = self._model_bound(b, proposal)
             out[b] = {"bound": np.asarray(M if M > 0 else _EMPTY), "rho": self._rho_nodes(b)}
