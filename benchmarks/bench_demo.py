@@ -35,7 +35,7 @@ def run(label: str, material_choice: str, settings: DemoSettings, tmp: Path) -> 
         "plan": settings.plan,
         "configurations": s.acquisition["measured"],
         "render": f"{settings.resolution}px {settings.spp}spp",
-        "truth_max_abs_z": "" if truth is None else round(max(truth.z.values()), 2),
+        "truth_max_abs_z": "" if truth is None else round(truth.max_z, 2),
         "truth_consistent": "" if truth is None else truth.consistent,
         "cpus": os.cpu_count(),
     }

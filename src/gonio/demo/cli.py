@@ -96,7 +96,7 @@ def print_summary(summary: Any) -> None:
         chk = "-"
         if m.truth_check is not None:
             tc = m.truth_check
-            chk = f"{max(tc.z.values()):.2f} " + ("ok" if tc.consistent else "TOO FAR")
+            chk = f"{tc.max_z:.2f} " + ("ok" if tc.consistent else "TOO FAR")
         quality.add_row(
             m.label,
             f"{m.reduced_chi2:.3g}",

@@ -199,9 +199,14 @@ class TruthCheck:
     z_crit: float
 
     @property
+    def max_z(self) -> float:
+        """The largest ``|fit - truth| / std`` over every compared scalar."""
+        return max(self.z.values(), default=0.0)
+
+    @property
     def consistent(self) -> bool:
         """Every scalar within ``z_crit``: the truth is consistent with the fit."""
-        return max(self.z.values(), default=0.0) < self.z_crit
+        return self.max_z < self.z_crit
 
     def to_json(self) -> dict[str, Any]:
         return {
