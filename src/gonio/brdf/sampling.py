@@ -455,12 +455,13 @@ class RejectionStep:
         # one function per dtype of u: a static keyword argument would take jit's slow
         # dispatch path on every call
         self._later = {
-            dt: jax.jit(partial(later, jnp.dtype(dt))) for dt in (jnp.float32, jnp.float64)
+            jnp.dtype(dt): jax.jit(partial(later, jnp.dtype(dt)))
+            for dt in (jnp.float32, jnp.float64)
         }
 
     def later(self, inputs, seeds, rounds, consts, dtype):
         """A proposal round after the first: ``rounds`` is its number (1, 2, ...)."""
-        return self._later[jnp.dtype(dtype).type](inputs, seeds, rounds, consts)
+        return self._later[jnp.dtype(dtype)](inputs, seeds, rounds, consts)
 
 
 def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> RejectionStep:
@@ -564,8 +565,7 @@ def rejection_sample(
     inputs = tuple(np.asarray(a) for a in inputs)
     u = np.asarray(u)
     seeds = np.asarray(seeds)
-    run = _RejectionRun(step, inputs, u, seeds, max_rounds, consts, chunk)
-    return run.result()
+    return _RejectionRun(step, inputs, u, seeds, max_rounds, consts, chunk).run()
 
 
 class _RejectionRun:
@@ -592,8 +592,12 @@ class _RejectionRun:
         self.pool_q: list[np.ndarray] = []
         self.pool_r: list[np.ndarray] = []
         self.pool_n = 0
+
+    def run(self) -> tuple[Any, Array, np.ndarray]:
+        """Propose until every query has accepted or failed: ``(x, ok, rounds)``."""
+        chunk = self.chunk
         in_flight: deque = deque()
-        firsts = deque(_pieces(n, chunk))
+        firsts = deque(_pieces(self.n, chunk))
         while True:
             while len(in_flight) < _IN_FLIGHT:
                 if self.pool_n >= chunk or (self.pool_n and not firsts and not in_flight):
@@ -605,6 +609,7 @@ class _RejectionRun:
             if not in_flight:
                 break
             self._retire(*in_flight.popleft())
+        return self._result()
 
     # -- calls ---------------------------------------------------------------------------------
     def _dispatch_first(self, start: int, stop: int):
@@ -685,7 +690,7 @@ class _RejectionRun:
             self.pool_r.append(r)
             self.pool_n += q.size
 
-    def result(self) -> tuple[Any, Array, np.ndarray]:
+    def _result(self) -> tuple[Any, Array, np.ndarray]:
         if self.out is None:  # no queries: trace the step for the shapes of a proposal
             inputs, u, seeds = self.inputs, self.u, self.seeds
             shape = jax.eval_shape(
