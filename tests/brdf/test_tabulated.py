@@ -159,43 +159,97 @@ def test_nearest_matches_rounding():
     np.testing.assert_allclose(np.asarray(t.f_at(*angles)), t.values[tuple(idx)], rtol=1e-6)
 
 
+def _one_node_axes() -> tuple[Axis, ...]:
+    """Anisotropic axes with a one-node phi_h (isotropic data on a 4-D grid)."""
+    th, _, td, pd = small_aniso_axes()
+    return (th, Axis("phi_h", 1, 0.0, 2 * math.pi, "linear", True, 0.0), td, pd)
+
+
+@pytest.mark.parametrize(
+    "param,axes_of",
+    [
+        ("half_diff_iso", small_iso_axes),
+        ("half_diff_aniso", small_aniso_axes),
+        ("half_diff_aniso", _one_node_axes),
+    ],
+)
 @pytest.mark.parametrize("interp", ["linear", "nearest"])
-def test_mask_never_leaks(interp):
-    axes = small_iso_axes()
+def test_mask_never_leaks(interp, param, axes_of):
+    axes = axes_of()
     rng = np.random.default_rng(7)
     mask = rng.random([a.size for a in axes]) > 0.4
     base = rng.uniform(0.1, 1.0, (*mask.shape, 2)).astype(np.float32)
     garbage1 = np.where(mask[..., None], base, np.nan).astype(np.float32)
     garbage2 = np.where(mask[..., None], base, 1e30).astype(np.float32)
     ch = Channels.spectral([500, 600])
-    t1 = TabulatedBRDF(garbage1, axes, mask=mask, channels=ch, interpolation=interp)
+    t1 = TabulatedBRDF(garbage1, axes, param, mask=mask, channels=ch, interpolation=interp)
     t2 = t1.replace(values=garbage2)
     wi, wo = random_upper(5000, 1), random_upper(5000, 2)
     a, b = np.asarray(t1.f(wi, wo)), np.asarray(t2.f(wi, wo))
     assert np.all(np.isfinite(a))
     np.testing.assert_array_equal(a, b)
     assert a.max() <= base[mask].max() + 1e-6  # a convex combination of valid nodes only
-    if interp == "linear":
-        # independent reference: renormalized multilinear weights over valid corners
-        angles = [np.asarray(x) for x in frames.half_diff(wi, wo)]
-        th, _, td, pd = angles
-        pd = np.where(pd >= math.pi, pd - math.pi, pd)
-        coords = _index_coords(axes, [th, td, pd])
-        num = np.zeros((len(wi), 2))
-        den = np.zeros(len(wi))
-        for bits in np.ndindex(2, 2, 2):
-            idx, w = [], np.ones(len(wi))
-            for c, ax, bit in zip(coords, axes, bits, strict=True):
+    # independent reference, from each corner's own mask entry: multilinear weights
+    # renormalized over the valid corners, or the valid corner of largest weight
+    th, ph, td, pd = (np.asarray(x, np.float64) for x in frames.half_diff(wi, wo))
+    if param == "half_diff_iso":
+        angles = [th, td, np.where(pd >= math.pi, pd - math.pi, pd)]
+    else:
+        angles = [th, ph, td, pd]
+    coords = _index_coords(axes, angles)
+    num = np.zeros((len(wi), 2))
+    den = np.zeros(len(wi))
+    best = np.full(len(wi), -1.0)
+    nearest = np.zeros((len(wi), 2))
+    for bits in np.ndindex(*(2,) * len(axes)):
+        idx, w = [], np.ones(len(wi))
+        for c, ax, bit in zip(coords, axes, bits, strict=True):
+            if ax.size == 1:
+                i0, f = np.zeros(len(wi), int), np.zeros(len(wi))
+            else:
                 i0 = np.minimum(np.floor(c).astype(int), ax.size - (1 if ax.periodic else 2))
                 f = c - i0
-                i = (i0 + bit) % ax.size
-                idx.append(i)
-                w = w * (f if bit else 1 - f)
-            m = mask[tuple(idx)]
-            num += (w * m)[:, None] * np.where(m[:, None], base[tuple(idx)], 0)
-            den += w * m
+            idx.append((i0 + bit) % ax.size)
+            w = w * (f if bit else 1 - f)
+        m = mask[tuple(idx)]
+        v = np.where(m[:, None], base[tuple(idx)], 0)
+        num += (w * m)[:, None] * v
+        den += w * m
+        score = np.where(m, w + 1e-6, -1.0)
+        take = score > best + 1e-5  # ties (equal weights) are left out of the comparison below
+        tie = np.abs(score - best) <= 1e-5
+        nearest = np.where(take[:, None], v, nearest)
+        best = np.where(take, score, best)
+        if bits != (0,) * len(axes):
+            nearest = np.where(tie[:, None] & m[:, None], np.nan, nearest)
+    if interp == "linear":
         ref = np.where(den[:, None] > 0, num / np.where(den > 0, den, 1)[:, None], 0)
         np.testing.assert_allclose(a, ref, rtol=1e-4, atol=1e-6)
+    else:
+        clear = np.isfinite(nearest).all(axis=1)
+        assert clear.mean() > 0.95
+        np.testing.assert_array_equal(a[clear], nearest[clear].astype(np.float32))
+
+
+def test_corner_bits_are_each_corners_mask():
+    """The per-cell corner validity the lookup gathers once is the mask at every corner."""
+    from gonio.brdf.tabulated import _corner_bits
+
+    for axes in (small_iso_axes(), small_aniso_axes(), _one_node_axes()):
+        rng = np.random.default_rng(len(axes))
+        mask = rng.random([a.size for a in axes]) > 0.3
+        bits = _corner_bits(mask, axes)
+        assert bits.shape == mask.shape and bits.dtype.itemsize * 8 >= 2 ** len(axes)
+        for node in np.ndindex(*mask.shape):
+            last = [
+                a.size > 1 and i == a.size - 1 and not a.periodic
+                for i, a in zip(node, axes, strict=True)
+            ]
+            if any(last):
+                continue  # never the first corner of a cell
+            for j, corner in enumerate(np.ndindex(*(2,) * len(axes))):
+                at = tuple((i + c) % a.size for i, c, a in zip(node, corner, axes, strict=True))
+                assert (int(bits[node]) >> j) & 1 == mask[at], (node, corner)
 
 
 def test_no_valid_neighbour_gives_zero():

@@ -533,40 +533,71 @@ def _strides(axes: Sequence[Axis]) -> list[int]:
     return strides
 
 
+def _corner_bits(mask: np.ndarray, axes: Sequence[Axis]) -> np.ndarray:
+    """Per node, which corners of the interpolation cell it starts are valid: bit ``j`` of
+    entry ``flat`` is the mask at corner ``j`` (in :func:`_interpolate`'s order) of the cell
+    whose first corner is node ``flat``. ``(*mask.shape)`` uint8 (3-D tables) or uint16.
+
+    One gather of these bits replaces a gather of the mask per corner in every lookup (a
+    corner's second index is a function of its first: the next node, wrapped on periodic
+    axes); the weights and sums are the same, so lookups are bit for bit those of the mask.
+    """
+    d = mask.ndim
+    dtype = np.uint8 if d <= 3 else np.uint16
+    firsts, seconds = [], []
+    for ax in axes:
+        i0 = np.arange(ax.size)
+        if ax.size == 1:
+            i1 = i0
+        elif ax.periodic:
+            i1 = np.where(i0 + 1 >= ax.size, 0, i0 + 1)
+        else:  # the last node never starts a cell (see _index_corners)
+            i1 = np.minimum(i0 + 1, ax.size - 1)
+        firsts.append(i0)
+        seconds.append(i1)
+    bits = np.zeros(mask.shape, dtype)
+    for j, corner in enumerate(itertools.product((0, 1), repeat=d)):
+        idx = np.ix_(*(s if b else f for f, s, b in zip(firsts, seconds, corner, strict=True)))
+        bits |= mask[idx].astype(dtype) << dtype(j)
+    return bits
+
+
 def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence[Array]) -> Array:
     """Multilinear or nearest lookup at axis angles.
 
-    ``data`` is ``(values, mask)``: values ``(n_nodes, C)`` premultiplied by the mask (invalid
-    nodes hold 0) and the mask ``(n_nodes,)`` as 0/1 floats, or None when every node is valid.
-    Values and mask are separate arrays on purpose: XLA's CPU backend runs fused scalar gathers
-    from two arrays faster than row gathers of ``(C + 1)``-wide rows, whose eight results it
-    materializes (and pages in) before the weighted sum.
+    ``data`` is ``(values, bits)``: values ``(n_nodes, C)`` premultiplied by the mask (invalid
+    nodes hold 0), and per node the validity of the corners of the cell it starts
+    (:func:`_corner_bits`), or None when every node is valid. Invalid corners get no weight:
+    the result is the weighted mean of the valid ones (0 where none is).
     """
-    vals, mask = data
+    vals, bits = data
     strides = _strides(spec.axes)
     dtype = coords[0].dtype
     per_axis = _corner_params(spec, coords)
-    if spec.interpolation == "nearest" and mask is None:
+    if spec.interpolation == "nearest" and bits is None:
         flat = sum(
             jnp.where(frac >= 0.5, i1, i0) * s
             for (i0, i1, frac), s in zip(per_axis, strides, strict=True)
         )
         return jnp.take(vals, flat, axis=0, mode="clip").astype(dtype)
     corners = []
-    for bits in itertools.product((0, 1), repeat=len(per_axis)):
+    for corner in itertools.product((0, 1), repeat=len(per_axis)):
         flat = None
         w = None
-        for (i0, i1, frac), b, s in zip(per_axis, bits, strides, strict=True):
+        for (i0, i1, frac), b, s in zip(per_axis, corner, strides, strict=True):
             idx = (i1 if b else i0) * s
             flat = idx if flat is None else flat + idx
             wa = frac if b else 1 - frac
             w = wa if w is None else w * wa
         corners.append((flat, w))
+    if bits is not None:
+        # the cell's corner validity, one gather (corner 0 is the cell's first node)
+        cell = jnp.take(bits, corners[0][0], axis=0, mode="clip").astype(jnp.int32)
+        valid = [((cell >> j) & 1).astype(dtype) for j in range(len(corners))]
     if spec.interpolation == "nearest":
         best_w = None
         best_flat = None
-        for flat, w in corners:
-            m = jnp.take(mask, flat, axis=0, mode="clip").astype(dtype)
+        for (flat, w), m in zip(corners, valid, strict=True):
             score = w * m + m * 1e-6  # a valid corner always beats an invalid one
             if best_w is None:
                 best_w, best_flat = score, flat
@@ -578,9 +609,9 @@ def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence
         return jnp.where(best_w[..., None] > 0, val, 0.0)
     num = sum(w[..., None] * jnp.take(vals, flat, axis=0, mode="clip") for flat, w in corners)
     num = num.astype(dtype)
-    if mask is None:
+    if bits is None:
         return num
-    den = sum(w * jnp.take(mask, flat, axis=0, mode="clip") for flat, w in corners)
+    den = sum(w * m for (_, w), m in zip(corners, valid, strict=True))
     (den,) = materialize([den.astype(dtype)], coords[0])  # once, not once per channel
     den = den[..., None]
     ok = den > 0
@@ -787,8 +818,8 @@ class TabulatedBRDF:
             fold = 2 if span <= math.pi / 2 + _EPS_ANGLE else (1 if span <= math.pi + 1e-6 else 0)
         self._spec = _Spec(axes, parameterization, interpolation, has_mask, C, fold)
         clean = np.where(m[..., None], vals, np.float32(0.0)).reshape(-1, C)
-        flat_mask = jnp.asarray(m.reshape(-1).astype(np.float32)) if has_mask else None
-        self._data = (jnp.asarray(np.ascontiguousarray(clean, dtype=np.float32)), flat_mask)
+        bits = jnp.asarray(_corner_bits(m, axes).reshape(-1)) if has_mask else None
+        self._data = (jnp.asarray(np.ascontiguousarray(clean, dtype=np.float32)), bits)
         self._host = _Host()
 
     # -- construction helpers ------------------------------------------------------------------
