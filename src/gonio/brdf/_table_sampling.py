@@ -156,6 +156,18 @@ def _cell_of(geo: _Geo, wi: Array, wo: Array, cos_asc: Array) -> tuple[Array, Ar
 def _direction_in_cell(
     geo: _Geo, row: Array, col: Array, ry: Array, rx: Array, cos_desc: Array, wo: Array
 ) -> Array:
+    """A direction ``(..., 3)`` in cell ``(row, col)`` of the incident grid, at ``(ry, rx)``
+    in [0, 1)^2 of the cell uniformly in solid angle."""
+    # stacked along a new leading axis and transposed: XLA's CPU backend then evaluates each
+    # component in its own vectorized loop instead of one scalar loop over (..., 3)
+    x, y, z = _direction_components(geo, row, col, ry, rx, cos_desc, wo)
+    return jnp.moveaxis(jnp.stack([x, y, z], 0), 0, -1)
+
+
+def _direction_components(
+    geo: _Geo, row: Array, col: Array, ry: Array, rx: Array, cos_desc: Array, wo: Array
+) -> tuple[Array, Array, Array]:
+    """:func:`_direction_in_cell` as its three components."""
     c0 = jnp.take(cos_desc, row)
     c1 = jnp.take(cos_desc, row + 1)
     ct = c0 - ry * (c0 - c1)
@@ -167,9 +179,7 @@ def _direction_in_cell(
     if geo.iso:  # phi is relative to wo's azimuth: rotate by +phi_o
         c, s = _azimuth_frame(wo)
         cp, sp = c * cp - s * sp, s * cp + c * sp
-    # stacked along a new leading axis and transposed: XLA's CPU backend then evaluates each
-    # component in its own vectorized loop instead of one scalar loop over (..., 3)
-    return jnp.moveaxis(jnp.stack([st * cp, st * sp, ct], 0), 0, -1)
+    return st * cp, st * sp, ct
 
 
 def _cos_sin_in_column(n_p: int, col: Array, rx: Array, dtype: Any) -> tuple[Array, Array]:
@@ -968,6 +978,14 @@ def _alias_kernel(geo, slot_of, q, alias, p, cos_desc, omega, wo, u):
 def _alias_direction(geo, slot_of, q, alias, p, cos_desc, wo, u):
     """A cell of the bucket's alias table and a direction uniform in it: ``(wi, base, k, p_k)``
     with ``k`` the cell within the bucket's table, whose entries start at ``base``."""
+    base, k, ry, rx, pk = _alias_cell(geo, slot_of, q, alias, p, wo, u)
+    wi = _direction_in_cell(geo, k // geo.n_p, k % geo.n_p, ry, rx, cos_desc, wo)
+    return wi, base, k, pk
+
+
+def _alias_cell(geo, slot_of, q, alias, p, wo, u):
+    """The alias-table draw of :func:`_alias_direction`: ``(base, k, ry, rx, p_k)`` with
+    ``(ry, rx)`` the position inside cell ``k``."""
     s = jnp.take(slot_of, _bucket_of(geo, wo))
     n = geo.n_t * geo.n_p
     alias_flat = (alias + (jnp.arange(alias.shape[0], dtype=jnp.int32) * n)[:, None]).reshape(-1)
@@ -975,8 +993,7 @@ def _alias_direction(geo, slot_of, q, alias, p, cos_desc, wo, u):
     k, ry, rx, pk = alias_sample_2d(
         q.reshape(-1), alias_flat, p.reshape(-1), base, n, u[..., 0], u[..., 1]
     )
-    wi = _direction_in_cell(geo, k // geo.n_p, k % geo.n_p, ry, rx, cos_desc, wo)
-    return wi, base, k, pk
+    return base, k, ry, rx, pk
 
 
 @partial(jax.jit, static_argnames=("geo",))
@@ -1072,7 +1089,10 @@ def _rho_interp(geo: _Geo, slot_of: Array, rho: Array, wo: Array) -> Array:
 def _majorant_round(table, geo, slot_of, q, alias, bound, cos_desc, wo, up, ua):
     """One proposal from the bucket's piecewise-constant majorant (:meth:`TableSampler._majorant`)
     and its acceptance test per query: ``((wi, f), accepted)``."""
-    wi, base, k, _ = _alias_direction(geo, slot_of, q, alias, q, cos_desc, wo, up)
+    base, k, ry, rx, _ = _alias_cell(geo, slot_of, q, alias, q, wo, up)
+    # stacked from its components directly (not :func:`_direction_in_cell`'s transpose): here
+    # XLA then fuses the components into the lookup and stores wi once (about 4 % faster)
+    wi = jnp.stack(_direction_components(geo, k // geo.n_p, k % geo.n_p, ry, rx, cos_desc, wo), -1)
     f = table.f(wi, wo)
     g = _g_of(f)
     accept = ua * jnp.take(bound.reshape(-1), base + k) < g * wi[..., 2]
