@@ -1,0 +1,141 @@
+"""Same-run A/B of table lookup and sampling throughput against an earlier commit.
+
+This machine's speed drifts by 10-25 % over hours, more than most single optimizations of the
+table paths, so a change is judged against the commit before it measured in the same run: the
+script checks the reference commit out into a temporary git worktree and alternates child
+processes running the reference code (``PYTHONPATH=<worktree>/src``) and the working tree's
+code, ``--rounds`` times each. Every child times, on the same 1e6 random float32 queries as
+``bench_throughput.py`` (its MERL-resolution Lambert + Torrance-Sparrow table), the jitted lookup
+``f`` and sampling by inversion, alias and rejection (default majorant proposal), each the
+median of ``--calls`` calls after warm-up, in millions per second.
+
+Writes benchmarks/results/table_ab.csv (one row per child and operation) and prints a Markdown
+table with each side's range over the rounds and the ratio of their medians.
+Run: .venv/bin/python benchmarks/bench_table_ab.py --ref COMMIT [--rounds R] [--calls K]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+RESULTS = HERE / "results"
+OPS = ("lookup", "inversion", "alias", "rejection")
+
+
+def child(batch: int, calls: int) -> dict[str, float]:
+    """Throughput (M/s) of each operation with whichever gonio is importable."""
+    import jax
+    import numpy as np
+
+    sys.path.insert(0, str(HERE))
+    from bench_throughput import benchmark_table, upper_directions
+
+    table, _ = benchmark_table()
+    rng = np.random.default_rng(0)
+    wo = jax.device_put(upper_directions(batch, rng))
+    u = jax.device_put(rng.random((batch, 2)).astype(np.float32))
+    wi = jax.device_put(upper_directions(batch, rng))
+    lookup = jax.jit(lambda a, b: table.f(a, b))
+    rates = {}
+    for op in OPS:
+        if op == "lookup":
+
+            def fn():
+                return jax.block_until_ready(lookup(wi, wo))
+        else:
+
+            def fn(op=op):
+                return jax.block_until_ready(table.sample(wo, u, method=op))
+
+        fn()  # compile and build the sampling structures
+        fn()
+        times = []
+        for _ in range(calls):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        rates[op] = batch / statistics.median(times) / 1e6
+    return rates
+
+
+def run_child(src: Path, batch: int, calls: int) -> dict[str, float]:
+    env = dict(os.environ, PYTHONPATH=str(src))
+    cmd = [sys.executable, __file__, "--child", "--batch", str(batch), "--calls", str(calls)]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        raise SystemExit(f"benchmark child for {src} failed: {out.stderr.strip().splitlines()[-1]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ref", help="commit to compare against (required unless --child)")
+    ap.add_argument("--rounds", type=int, default=3, help="alternations of the two sides")
+    ap.add_argument("--calls", type=int, default=9, help="timed calls per figure (median)")
+    ap.add_argument("--batch", type=float, default=1e6, help="queries per call (default 1e6)")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    batch = int(args.batch)
+    if args.child:
+        print(json.dumps(child(batch, args.calls)))
+        return
+    if not args.ref:
+        ap.error("--ref COMMIT is required")
+    head = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "ref"
+        made = subprocess.run(
+            ["git", "worktree", "add", "--detach", str(tree), args.ref],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+        )
+        if made.returncode != 0:
+            raise SystemExit(f"cannot check out {args.ref!r}: {made.stderr.strip()}")
+        try:
+            for r in range(args.rounds):
+                for side, src in (("ref", tree / "src"), ("new", ROOT / "src")):
+                    rates = run_child(src, batch, args.calls)
+                    print(
+                        f"round {r + 1} {side}: "
+                        + ", ".join(f"{k} {v:.2f}" for k, v in rates.items())
+                    )
+                    rows += [
+                        {"round": r + 1, "side": side, "op": op, "rate_M_per_s": f"{v:.3f}"}
+                        for op, v in rates.items()
+                    ]
+        finally:
+            subprocess.run(
+                ["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False
+            )
+    RESULTS.mkdir(exist_ok=True)
+    with open(RESULTS / "table_ab.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=["round", "side", "op", "rate_M_per_s"])
+        w.writeheader()
+        w.writerows(rows)
+    print(f"\n| M/s (batch {batch:.0e}) | {args.ref} | working tree ({head}+) | ratio of medians |")
+    print("|---|---:|---:|---:|")
+    for op in OPS:
+        ref = [float(x["rate_M_per_s"]) for x in rows if x["op"] == op and x["side"] == "ref"]
+        new = [float(x["rate_M_per_s"]) for x in rows if x["op"] == op and x["side"] == "new"]
+        ratio = statistics.median(new) / statistics.median(ref)
+        span = f"{min(ref):.1f}–{max(ref):.1f} | {min(new):.1f}–{max(new):.1f}"
+        print(f"| {op} | {span} | {ratio:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
