@@ -11,7 +11,7 @@ median of ``--calls`` calls after warm-up, in millions per second.
 
 Writes benchmarks/results/table_ab.csv (one row per child and operation) and prints a Markdown
 table with each side's range over the rounds and the ratio of their medians.
-Run: .venv/bin/python benchmarks/bench_table_ab.py --ref COMMIT [--rounds R] [--calls K]
+Run: .venv/bin/python benchmarks/ab_table.py --ref COMMIT [--rounds R] [--calls K]
 """
 
 from __future__ import annotations
