@@ -536,14 +536,15 @@ def _strides(axes: Sequence[Axis]) -> list[int]:
 def _corner_bits(mask: np.ndarray, axes: Sequence[Axis]) -> np.ndarray:
     """Per node, which corners of the interpolation cell it starts are valid: bit ``j`` of
     entry ``flat`` is the mask at corner ``j`` (in :func:`_interpolate`'s order) of the cell
-    whose first corner is node ``flat``. ``(*mask.shape)`` uint8 (3-D tables) or uint16.
+    whose first corner is node ``flat``. ``(*mask.shape)``, uint8 for 3-D tables (8 corners),
+    uint16 for 4-D.
 
     One gather of these bits replaces a gather of the mask per corner in every lookup (a
     corner's second index is a function of its first: the next node, wrapped on periodic
     axes); the weights and sums are the same, so lookups are bit for bit those of the mask.
     """
     d = mask.ndim
-    dtype = np.uint8 if d <= 3 else np.uint16
+    dtype = np.min_scalar_type(2 ** (2**d) - 1).type  # one bit per corner
     firsts, seconds = [], []
     for ax in axes:
         i0 = np.arange(ax.size)
