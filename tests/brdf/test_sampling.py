@@ -22,6 +22,7 @@ from gonio.brdf.sampling import (
     Distribution2D,
     hash_uniform,
     rejection_sample,
+    rejection_sample_traced,
     rejection_step,
     seeds_from_u,
 )
@@ -210,6 +211,23 @@ def test_rejection_sample_matches_sequential_rounds(max_rounds):
     x_ref, ok_ref, rounds_ref = _sequential_reference(u, seeds, min(max_rounds, 60))
     if max_rounds > 60:  # acceptance 1/3: (2/3)^60 ~ 3e-11, no query runs longer
         assert ok_ref.all()
+    np.testing.assert_array_equal(np.asarray(ok), ok_ref)
+    np.testing.assert_array_equal(np.asarray(rounds), rounds_ref)
+    np.testing.assert_array_equal(np.asarray(x)[:, 0], x_ref)
+
+
+@pytest.mark.parametrize("max_rounds", [1, 3, 4096])
+@pytest.mark.parametrize("n", [700, 5000])
+def test_rejection_sample_traced_matches_sequential_rounds(max_rounds, n):
+    """Under jit the compacting while loop (lanes of pending queries, several proposals each
+    when few are left) gives the same samples, flags and counts as query-by-query rounds."""
+    u = np.random.default_rng(12).random((n, 2))
+    seeds = seeds_from_u(jnp.asarray(u))
+    run = jax.jit(
+        lambda uu, s: rejection_sample_traced(_cubic_round, (jnp.zeros(n),), uu, s, max_rounds)
+    )
+    x, ok, rounds = run(jnp.asarray(u), seeds)
+    x_ref, ok_ref, rounds_ref = _sequential_reference(u, np.asarray(seeds), min(max_rounds, 60))
     np.testing.assert_array_equal(np.asarray(ok), ok_ref)
     np.testing.assert_array_equal(np.asarray(rounds), rounds_ref)
     np.testing.assert_array_equal(np.asarray(x)[:, 0], x_ref)
@@ -500,9 +518,10 @@ def test_sampling_under_jit_builds_every_bucket():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_rejection_under_jit_matches_eager(dtype):
-    """Traced, rejection runs as a while loop over every query instead of the host's
-    streamed calls: the same proposals (same counters), so the same samples up to float
-    rounding (XLA fuses the two programs differently)."""
+    """Traced, rejection runs as a compacting while loop on the device
+    (:func:`rejection_sample_traced`) instead of the host's streamed calls: the same proposals
+    (same counters), so the same samples up to float rounding (XLA fuses the two programs
+    differently)."""
     t = TabulatedBRDF.from_model(_GGXLike(alpha=0.3), axes=_axes(12), sampling_res=(4, 16, 32))
     rng = np.random.default_rng(3)
     wo = np.asarray(frames.spherical_to_direction(rng.uniform(0, 1.4, 500), 0.3), dtype)

@@ -76,8 +76,8 @@ from gonio.brdf.sampling import (
     _sample_discrete_cdf,
     _vose,
     alias_sample_2d,
-    hash_uniform,
     rejection_sample,
+    rejection_sample_traced,
     rejection_step,
     seeds_from_rng,
     seeds_from_u,
@@ -760,8 +760,8 @@ class TableSampler:
             round_fn = partial(_rejection_round, self.table, model, self.geo)
             consts = (slot_of, arrays["bound"])
         if isinstance(wo, jax.core.Tracer) or isinstance(u, jax.core.Tracer):
-            x, ok = _rejection_loop_traced(
-                lambda w, a, b: round_fn(*consts, w, a, b), wo32, u32, seeds
+            x, ok, _ = rejection_sample_traced(
+                lambda w, a, b: round_fn(*consts, w, a, b), (wo32,), u32, seeds
             )
         else:
             step = self._round_fns.get(key)
@@ -1122,27 +1122,3 @@ def _rejection_round(table, model, geo, slot_of, bound, wo, up, ua):
     g = _g_of(f)
     accept = ua * M * q < g * wi[..., 2]
     return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
-
-
-def _rejection_loop_traced(round_fn, wo, u, seeds, max_rounds: int = 4096):
-    """``lax.while_loop`` version of :func:`rejection_sample` for traced inputs (no compaction)."""
-    dtype = u.dtype
-    x0, ok0 = round_fn(wo, u, hash_uniform(seeds, 2, dtype))
-
-    def cond(c):
-        r, _, ok = c
-        return (r < max_rounds) & ~jnp.all(ok)
-
-    def body(c):
-        r, x, ok = c
-        ru = r.astype(jnp.uint32)
-        up = jnp.stack(
-            [hash_uniform(seeds, 3 * ru, dtype), hash_uniform(seeds, 3 * ru + 1, dtype)], -1
-        )
-        w, acc = round_fn(wo, up, hash_uniform(seeds, 3 * ru + 2, dtype))
-        take = acc & ~ok
-        keep = jax.tree.map(lambda new, old: jnp.where(take[:, None], new, old), w, x)
-        return r + 1, keep, ok | acc
-
-    _, x, ok = jax.lax.while_loop(cond, body, (jnp.asarray(1, jnp.int32), x0, ok0))
-    return x, ok
