@@ -6,8 +6,9 @@ script checks the reference commit out into a temporary git worktree and alterna
 processes running the reference code (``PYTHONPATH=<worktree>/src``) and the working tree's
 code, ``--rounds`` times each. Every child times, on the same 1e6 random float32 queries as
 ``bench_throughput.py`` (its MERL-resolution Lambert + Torrance-Sparrow table), the jitted lookup
-``f`` and sampling by inversion, alias and rejection (default majorant proposal), each the
-median of ``--calls`` calls after warm-up, in millions per second.
+``f`` and sampling by inversion, alias and rejection (default majorant proposal; called
+eagerly and under ``jit``), each the median of ``--calls`` calls after warm-up, in millions per
+second.
 
 Writes benchmarks/results/table_ab.csv (one row per child and operation) and prints a Markdown
 table with each side's range over the rounds and the ratio of their medians.
@@ -30,7 +31,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results"
-OPS = ("lookup", "inversion", "alias", "rejection")
+OPS = ("lookup", "inversion", "alias", "rejection", "rejection-jit")
 
 
 def child(batch: int, calls: int) -> dict[str, float]:
@@ -47,12 +48,17 @@ def child(batch: int, calls: int) -> dict[str, float]:
     u = jax.device_put(rng.random((batch, 2)).astype(np.float32))
     wi = jax.device_put(upper_directions(batch, rng))
     lookup = jax.jit(lambda a, b: table.f(a, b))
+    sample_jit = jax.jit(lambda a, b: table.sample(a, b, method="rejection"))
     rates = {}
     for op in OPS:
         if op == "lookup":
 
             def fn():
                 return jax.block_until_ready(lookup(wi, wo))
+        elif op == "rejection-jit":  # the sampler called under jit: no host loop
+
+            def fn():
+                return jax.block_until_ready(sample_jit(wo, u))
         else:
 
             def fn(op=op):
