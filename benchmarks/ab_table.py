@@ -25,7 +25,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -40,7 +39,7 @@ def child(batch: int, calls: int) -> dict[str, float]:
     import numpy as np
 
     sys.path.insert(0, str(HERE))
-    from bench_throughput import benchmark_table, upper_directions
+    from bench_throughput import benchmark_table, median_time, upper_directions
 
     table, _ = benchmark_table()
     rng = np.random.default_rng(0)
@@ -49,29 +48,15 @@ def child(batch: int, calls: int) -> dict[str, float]:
     wi = jax.device_put(upper_directions(batch, rng))
     lookup = jax.jit(lambda a, b: table.f(a, b))
     sample_jit = jax.jit(lambda a, b: table.sample(a, b, method="rejection"))
+    calls_of = {
+        "lookup": lambda: lookup(wi, wo),
+        "rejection-jit": lambda: sample_jit(wo, u),  # the sampler called under jit: no host loop
+    }
     rates = {}
     for op in OPS:
-        if op == "lookup":
-
-            def fn():
-                return jax.block_until_ready(lookup(wi, wo))
-        elif op == "rejection-jit":  # the sampler called under jit: no host loop
-
-            def fn():
-                return jax.block_until_ready(sample_jit(wo, u))
-        else:
-
-            def fn(op=op):
-                return jax.block_until_ready(table.sample(wo, u, method=op))
-
-        fn()  # compile and build the sampling structures
-        fn()
-        times = []
-        for _ in range(calls):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-        rates[op] = batch / statistics.median(times) / 1e6
+        fn = calls_of.get(op, lambda op=op: table.sample(wo, u, method=op))
+        jax.block_until_ready(fn())  # compile and build the sampling structures
+        rates[op] = batch / median_time(fn, calls) / 1e6  # after one more warm-up call
     return rates
 
 

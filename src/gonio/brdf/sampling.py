@@ -433,6 +433,14 @@ def hash_uniform(seed: Array, counter: int | Array, dtype: Any = jnp.float32) ->
     return ((x >> 8).astype(jnp.float32) * np.float32(2.0**-24)).astype(dtype)
 
 
+def _later_uniforms(seeds: Array, rounds: Array, dtype: Any) -> tuple[Array, Array]:
+    """``(u_prop (m, 2), u_acc (m,))`` of proposal number ``rounds`` (1, 2, ...) of each query:
+    :func:`hash_uniform` counters ``3r, 3r + 1`` and ``3r + 2`` (see :func:`rejection_step`)."""
+    r = jnp.asarray(rounds, jnp.uint32)
+    up = jnp.stack([hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1)
+    return up, hash_uniform(seeds, 3 * r + 2, dtype)
+
+
 class RejectionStep:
     """The jit-compiled proposal rounds that :func:`rejection_sample` runs (see
     :func:`rejection_step`): ``first`` for every query's first proposal, drawn from the
@@ -445,11 +453,7 @@ class RejectionStep:
             return round_fn(*inputs, u, hash_uniform(seeds, 2, u.dtype), *consts)
 
         def later(dtype, inputs, seeds, rounds, consts):
-            r = jnp.asarray(rounds, jnp.uint32)
-            up = jnp.stack(
-                [hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1
-            )
-            return round_fn(*inputs, up, hash_uniform(seeds, 3 * r + 2, dtype), *consts)
+            return round_fn(*inputs, *_later_uniforms(seeds, rounds, dtype), *consts)
 
         self.first = jax.jit(first)
         # one function per dtype of u: a static keyword argument would take jit's slow
@@ -617,10 +621,7 @@ def rejection_sample_traced(
         q = query[slot]
         r = rounds[q] + sub
         live = (slot < served) & (r < max_rounds)
-        ru = r.astype(jnp.uint32)
-        sq = seeds[q]
-        up = jnp.stack([hash_uniform(sq, 3 * ru, dtype), hash_uniform(sq, 3 * ru + 1, dtype)], -1)
-        ua = hash_uniform(sq, 3 * ru + 2, dtype)
+        up, ua = _later_uniforms(seeds[q], r, dtype)
         w, acc = round_fn(*(jnp.take(a, q, axis=0) for a in inputs), up, ua)
         acc = acc & live
         first = jax.ops.segment_min(jnp.where(acc, sub, none), slot, num_segments=lanes)
@@ -746,27 +747,23 @@ class _RejectionRun:
                 self._requeue(rejected, np.ones(rejected.size, np.int32))
             return
         used = r + k  # proposals made by each query after this call
-        if k == 1:  # one proposal per query: its lane is its position
-            done = acc
-            out_of_rounds = ~done & (used >= self.max_rounds)
-            if out_of_rounds.any():  # keep their last proposal, and fail them
-                self.ok[q[out_of_rounds]] = False
-                done = done | out_of_rounds
-            sel = np.flatnonzero(done)
-            lane, finished = sel, q[sel]
-            self.rounds[finished] = used[sel]
+        if k == 1:  # one proposal per query: no search for the first accepted lane
+            done, first = acc, 0
         else:
             acc_q = acc.reshape(-1, k)
-            done = acc_q.any(axis=1)
-            first = acc_q.argmax(axis=1)
-            out_of_rounds = ~done & (used >= self.max_rounds)
-            if out_of_rounds.any():
-                self.ok[q[out_of_rounds]] = False
+            done, first = acc_q.any(axis=1), acc_q.argmax(axis=1)
+        out_of_rounds = ~done & (used >= self.max_rounds)
+        if out_of_rounds.any():  # keep their last proposal (lane k - 1), and fail them
+            self.ok[q[out_of_rounds]] = False
+            if k > 1:
                 first = np.where(out_of_rounds, k - 1, first)
-                done |= out_of_rounds
-            lane = np.flatnonzero(done) * k + first[done]
-            finished = q[done]
-            self.rounds[finished] = r[done] + first[done] + 1
+            done = done | out_of_rounds
+        sel = np.flatnonzero(done)
+        if k > 1:
+            first = first[sel]
+        lane = sel * k + first
+        finished = q[sel]
+        self.rounds[finished] = r[sel] + first + 1
         for o, a in zip(self.out, leaves, strict=True):
             _rows(o)[finished] = _rows(a)[lane]
         self._requeue(q[~done], used[~done])
