@@ -637,7 +637,12 @@ def _as_dirs(wi: Any, wo: Any) -> tuple[Array, Array]:
     dtype = jnp.result_type(wi, wo)
     if wi.shape[-1:] != (3,) or wo.shape[-1:] != (3,):
         raise ParameterError(f"directions must have shape (..., 3), got {wi.shape}, {wo.shape}")
-    return jnp.broadcast_arrays(wi.astype(dtype), wo.astype(dtype))
+    wi = wi if wi.dtype == dtype else wi.astype(dtype)
+    wo = wo if wo.dtype == dtype else wo.astype(dtype)
+    if wi.shape == wo.shape:
+        # jnp.broadcast_arrays copies even arrays of one shape (a quarter of a 1e6 lookup)
+        return wi, wo
+    return tuple(jnp.broadcast_arrays(wi, wo))
 
 
 @jax.jit
@@ -651,18 +656,26 @@ def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
     return wo, wo_s, u
 
 
-@partial(jax.jit, static_argnames=("spec",))
-def _sample_result(spec, data, wo, wo_s, wi, pdf, val) -> BRDFSample:
+def _sampled_values(spec: _Spec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
+    """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample` when
+    the sampler has not looked it up. Called eagerly, the lookup is a jit call of its own, not
+    part of :func:`_sample_result`, where XLA's CPU backend fuses the weight arithmetic into
+    the lookup's gather loops (about 1.1x slower)."""
+    if isinstance(wi, jax.core.Tracer):
+        # under an outer jit, wi stored once, per component, before the lookup and used after
+        # it: otherwise XLA fuses the sampler's arithmetic into the lookup's loops (about 5 %
+        # slower; called eagerly, storing it costs 13 %)
+        wi = jnp.stack(materialize([wi[..., 0], wi[..., 1], wi[..., 2]], wi[..., 0]), -1)
+    return wi, _eval_kernel(data, wi, wo_s, spec)
+
+
+@jax.jit
+def _sample_result(wo, wi, pdf, val) -> BRDFSample:
     """The :class:`BRDFSample` of sampled ``wi`` with density ``pdf``; ``val`` is the table at
-    ``(wi, wo_s)`` when the sampler looked it up already, else None (looked up here)."""
+    ``(wi, wo_s)``."""
     wi = wi.astype(wo.dtype)
     pdf = pdf.astype(wo.dtype)
     ok = (wo[..., 2] > 0) & (wi[..., 2] > 0) & (pdf > 0)
-    if val is None:
-        # wi stored once, per component, before the lookup: otherwise XLA fuses the
-        # sampler's arithmetic into the lookup's loops (about 15 % slower)
-        wi = jnp.stack(materialize([wi[..., 0], wi[..., 1], wi[..., 2]], pdf), -1)
-        val = _eval_kernel(data, wi, wo_s, spec)
     cos_i = jnp.maximum(wi[..., 2:3], 0.0)
     weight = jnp.where(ok[..., None], val * cos_i / jnp.where(ok, pdf, 1.0)[..., None], 0.0)
     return BRDFSample(wi, jnp.where(ok, pdf, 0.0), weight, jnp.zeros(ok.shape, bool))
@@ -995,7 +1008,9 @@ class TabulatedBRDF:
             )
         wo, wo_s, u = _sample_inputs(wo, u)
         wi, pdf, val = self._sampler().sample(wo_s, u, method, rng, proposal)
-        return _sample_result(self._spec, self._data, wo, wo_s, wi, pdf, val)
+        if val is None:  # the sampler did not look the table up at wi
+            wi, val = _sampled_values(self._spec, self._data, wo_s, wi.astype(wo.dtype))
+        return _sample_result(wo, wi, pdf, val)
 
     def pdf(self, wi: Any, wo: Any, method: str = "inversion", proposal: Any = "majorant") -> Array:
         """Density of :meth:`sample` (same ``method``/``proposal``) over ``wi`` per unit solid
