@@ -509,11 +509,14 @@ def test_sampling_under_jit_builds_every_bucket():
     t = TabulatedBRDF.from_model(_GGXLike(), axes=_axes(12), sampling_res=(4, 16, 32))
     wo = jnp.asarray(frames.spherical_to_direction(0.4, 0.2))
     u = jnp.asarray(np.random.default_rng(0).random((64, 2)))
-    eager = t.sample(wo, u, method="inversion")
-    jitted = jax.jit(lambda w, uu: t.sample(w, uu, method="inversion"))(wo, u)
-    np.testing.assert_allclose(np.asarray(jitted.wi), np.asarray(eager.wi), rtol=1e-12)
-    np.testing.assert_allclose(np.asarray(jitted.pdf), np.asarray(eager.pdf), rtol=1e-12)
-    assert t.sampling_cache_size("inversion") == 4
+    for method in ("inversion", "alias"):
+        eager = t.sample(wo, u, method=method)
+        jitted = jax.jit(lambda w, uu, m=method: t.sample(w, uu, method=m))(wo, u)
+        np.testing.assert_allclose(np.asarray(jitted.wi), np.asarray(eager.wi), rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(jitted.pdf), np.asarray(eager.pdf), rtol=1e-12)
+        # the table is looked up at the sampled wi by a different path under jit
+        np.testing.assert_allclose(np.asarray(jitted.weight), np.asarray(eager.weight), rtol=1e-12)
+        assert t.sampling_cache_size(method) == 4
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
