@@ -4,11 +4,11 @@ This machine's speed drifts by 10-25 % over hours, more than most single optimiz
 table paths, so a change is judged against the commit before it measured in the same run: the
 script checks the reference commit out into a temporary git worktree and alternates child
 processes running the reference code (``PYTHONPATH=<worktree>/src``) and the working tree's
-code, ``--rounds`` times each. Every child times, on the same 1e6 random float32 queries as
-``bench_throughput.py`` (its MERL-resolution Lambert + Torrance-Sparrow table), the jitted lookup
-``f`` and sampling by inversion, alias and rejection (default majorant proposal; called
-eagerly and under ``jit``), each the median of ``--calls`` calls after warm-up, in millions per
-second.
+code, ``--rounds`` times each, in ABBA order. Every child times, on the same 1e6 random float32
+queries as ``bench_throughput.py`` (its MERL-resolution Lambert + Torrance-Sparrow table), the
+jitted lookup ``f`` and sampling by inversion, alias and rejection (default majorant proposal;
+called eagerly and under ``jit``), each the median of ``--calls`` calls after warm-up, in
+millions per second.
 
 Writes benchmarks/results/table_ab.csv (one row per child and operation) and prints a Markdown
 table with each side's range over the rounds and the ratio of their medians.
@@ -98,8 +98,11 @@ def main() -> None:
         if made.returncode != 0:
             raise SystemExit(f"cannot check out {args.ref!r}: {made.stderr.strip()}")
         try:
+            sides = [("ref", tree / "src"), ("new", ROOT / "src")]
             for r in range(args.rounds):
-                for side, src in (("ref", tree / "src"), ("new", ROOT / "src")):
+                # ABBA order: with a fixed order a steady drift of the machine's speed over
+                # the run would favour whichever side goes first in every round
+                for side, src in sides if r % 2 == 0 else sides[::-1]:
                     rates = run_child(src, batch, args.calls)
                     print(
                         f"round {r + 1} {side}: "
