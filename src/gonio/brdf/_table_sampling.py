@@ -221,7 +221,8 @@ class _Lazy:
         self._cast: dict[Any, dict[str, Array]] = {}
 
     def ensure(self, buckets: np.ndarray) -> None:
-        missing = [int(b) for b in np.unique(buckets) if int(b) not in self.items]
+        """Build the structures of the buckets in ``buckets`` (distinct indices) not built yet."""
+        missing = [int(b) for b in buckets if int(b) not in self.items]
         if missing:
             # under an outer jit trace, build from the concrete table values, not staged ops
             with jax.ensure_compile_time_eval():
