@@ -640,7 +640,7 @@ def _as_dirs(wi: Any, wo: Any) -> tuple[Array, Array]:
     wi = wi if wi.dtype == dtype else wi.astype(dtype)
     wo = wo if wo.dtype == dtype else wo.astype(dtype)
     if wi.shape == wo.shape:
-        # jnp.broadcast_arrays copies even arrays of one shape (a quarter of a 1e6 lookup)
+        # jnp.broadcast_arrays would copy them (two copies of 12 MB for a 1e6 lookup)
         return wi, wo
     return tuple(jnp.broadcast_arrays(wi, wo))
 
