@@ -637,8 +637,7 @@ def _as_dirs(wi: Any, wo: Any) -> tuple[Array, Array]:
     dtype = jnp.result_type(wi, wo)
     if wi.shape[-1:] != (3,) or wo.shape[-1:] != (3,):
         raise ParameterError(f"directions must have shape (..., 3), got {wi.shape}, {wo.shape}")
-    wi = wi if wi.dtype == dtype else wi.astype(dtype)
-    wo = wo if wo.dtype == dtype else wo.astype(dtype)
+    wi, wo = wi.astype(dtype), wo.astype(dtype)  # the same arrays when already of dtype
     if wi.shape == wo.shape:
         # jnp.broadcast_arrays would copy them (two copies of 12 MB for a 1e6 lookup)
         return wi, wo
