@@ -233,6 +233,22 @@ def test_rejection_sample_traced_matches_sequential_rounds(max_rounds, n):
     np.testing.assert_array_equal(np.asarray(x)[:, 0], x_ref)
 
 
+@pytest.mark.parametrize(
+    ("shape", "dtype"),
+    [((1000, 3), np.float32), ((7,), bool), ((0, 3), np.float64), ((5,), np.int32)],
+)
+def test_aligned_host_buffers(shape, dtype):
+    """rejection_sample's host result buffers start on a 64-byte boundary (which XLA's CPU
+    client adopts without a copy) and have the requested shape and dtype."""
+    from gonio.brdf.sampling import _HOST_ALIGN, _aligned_empty
+
+    for _ in range(5):  # several allocations: malloc's own offsets vary
+        a = _aligned_empty(shape, dtype)
+        assert a.shape == shape and a.dtype == np.dtype(dtype)
+        assert a.size == 0 or a.ctypes.data % _HOST_ALIGN == 0  # (an empty one has no data)
+        assert a.flags.c_contiguous and a.flags.writeable
+
+
 def test_bad_weights():
     with pytest.raises(ParameterError):
         Distribution1D([1.0, -1.0])

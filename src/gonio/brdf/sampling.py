@@ -512,6 +512,24 @@ def _pieces(m: int, chunk: int) -> list[tuple[int, int]]:
     return out
 
 
+_HOST_ALIGN = 64  # bytes: XLA's CPU client adopts host arrays aligned to this without a copy
+
+
+def _aligned_empty(shape: tuple[int, ...], dtype: Any) -> np.ndarray:
+    """``np.empty(shape, dtype)`` starting on a ``_HOST_ALIGN``-byte boundary (unless empty).
+
+    ``jax.device_put`` of such an array on the CPU backend wraps its memory instead of copying
+    it (for :func:`rejection_sample`'s results, about 2.5 ms less CPU per 10^6 samples). NumPy
+    has no aligned allocator (large blocks come from ``mmap`` 16 bytes past a page boundary),
+    hence the over-allocation and offset.
+    """
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    raw = np.empty(nbytes + _HOST_ALIGN, np.uint8)
+    start = -raw.ctypes.data % _HOST_ALIGN
+    return raw[start : start + nbytes].view(dtype).reshape(shape)
+
+
 def _rows(a: np.ndarray) -> np.ndarray:
     """A view of a C-contiguous ``a (n, ...)`` as a 1-D array of opaque rows: NumPy scatters
     those about twice as fast as the rows of a 2-D array."""
@@ -663,7 +681,8 @@ class _RejectionRun:
         n = u.shape[0]
         self.n = n
         self.rounds = np.ones(n, np.int32)
-        self.ok = np.ones(n, bool)
+        self.ok = _aligned_empty((n,), bool)
+        self.ok[:] = True
         self.out: list[np.ndarray] | None = None
         self.tree = None
         # rejected queries waiting for their next proposal, and that proposal's counter
@@ -734,7 +753,7 @@ class _RejectionRun:
         leaves, self.tree = jax.tree.flatten(x)
         leaves = [np.asarray(a) for a in leaves]  # on the CPU: no copy
         if self.out is None:
-            self.out = [np.empty((self.n, *a.shape[1:]), a.dtype) for a in leaves]
+            self.out = [_aligned_empty((self.n, *a.shape[1:]), a.dtype) for a in leaves]
         acc = np.asarray(acc)[: q.size * k]
         if r is None:  # first proposals: contiguous rows, the rejected ones fixed up later
             start = int(q[0])
@@ -786,7 +805,7 @@ class _RejectionRun:
             )[0]
             leaves, self.tree = jax.tree.flatten(shape)
             self.out = [np.zeros((0, *a.shape[1:]), a.dtype) for a in leaves]
-        # device_put rather than jnp.asarray: about half the time for these host arrays
+        # aligned host arrays: device_put wraps them without a copy (jnp.asarray would copy)
         x = jax.tree.unflatten(self.tree, [jax.device_put(o) for o in self.out])
         return x, jax.device_put(self.ok), self.rounds
 
