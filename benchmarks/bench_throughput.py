@@ -158,14 +158,12 @@ def main() -> None:
         table.pdf(wo[:1], wo[:1], method=method, proposal=proposal)  # time one lazy build
         one = time.perf_counter() - t0
         batch = n if method != "rejection" or proposal == "majorant" else nr
-        if not under_jit:
 
-            def fn(p=proposal, b=batch):
-                return table.sample(wo[:b], u[:b], method="rejection", proposal=p)
+        def sample(w, uu, m=method, p=proposal):
+            return table.sample(w, uu, method=m, proposal=p)
 
-        else:
-            jitted = jax.jit(lambda w, uu, method=method: table.sample(w, uu, method=method))
-            fn = lambda jitted=jitted: jitted(wo, u)  # noqa: E731
+        call = jax.jit(sample) if under_jit else sample
+        fn = lambda call=call, w=wo[:batch], uu=u[:batch]: call(w, uu)  # noqa: E731
         t0 = time.perf_counter()
         jax.block_until_ready(fn())  # builds the remaining buckets
         build = time.perf_counter() - t0
