@@ -1,0 +1,181 @@
+"""``gonio.export.to_<target>(fit)``: one entry point per renderer, one driver for all.
+
+The driver reads the fit (:mod:`._source`), splits its model into a diffuse and a microfacet lobe
+(:mod:`._lobes`), converts a spectral fit's linear parameters to RGB, and asks the target module
+whether it expresses the result exactly. If it does, the parameters are written unchanged apart
+from the documented renames (``roughness = sqrt(alpha)`` and the like). If not, the target's
+family is refitted to the fit's data (:mod:`._refit`) and exported, with the refit's loss next to
+the original's: parameters are never approximated silently.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from gonio.errors import ParameterError
+from gonio.export import blender, mitsuba, openpbr, pbrt, usd
+from gonio.export._common import Export
+from gonio.export._lobes import Lobes, NotRepresentable, Specular, describe, split
+from gonio.export._refit import refit, refit_data
+from gonio.export._source import FitSource, load, rgb_matrix
+
+#: Target name -> module (``check``, ``refit_template``, ``build``, ``SUFFIXES``, ``FAMILY``).
+TARGETS: dict[str, ModuleType] = {
+    "mitsuba": mitsuba,
+    "pbrt": pbrt,
+    "blender": blender,
+    "openpbr": openpbr,
+    "usd": usd,
+}
+
+REFIT_FROM = ("auto", "measurement", "model")
+
+
+def _rgb_lobes(lobes: Lobes, t: np.ndarray) -> tuple[Lobes, list[str]]:
+    """Spectral lobes in linear sRGB (the linear parameters only; see :mod:`._source`)."""
+    sp = lobes.specular
+    white = np.ones(t.shape[0]) @ t
+    notes = [
+        "spectral fit converted to linear sRGB (CIE 1931 2-degree observer, D65, "
+        "gonio.io.spectral); a flat white spectrum maps to RGB "
+        + ", ".join(f"{x:.4f}" for x in white)
+    ]
+    if lobes.diffuse_scale is not None or (sp is not None and sp.scale is not None):
+        raise NotRepresentable("a spectral lobe scale")
+    if sp is not None and sp.fresnel in ("conductor", "dielectric"):
+        raise NotRepresentable("a spectral index of refraction, which is not linear in RGB")
+    diffuse = None if lobes.diffuse is None else lobes.diffuse @ t
+    if sp is not None and sp.fresnel == "schlick":
+        sp = Specular(sp.alpha, sp.distribution, sp.shadowing, "schlick", f0=sp.f0 @ t)
+        notes.append("Schlick f0 converted as the spectrum's RGB: exact up to the white above")
+    return Lobes(3, diffuse, sp, None), notes
+
+
+def _lobes_of(src: FitSource) -> tuple[Lobes | None, str | None, list[str]]:
+    try:
+        lobes = split(src.model)
+        if src.spectral:
+            lobes, notes = _rgb_lobes(lobes, rgb_matrix(src.wavelengths_nm))  # type: ignore[arg-type]
+            return lobes, None, notes
+        return lobes, None, []
+    except NotRepresentable as exc:
+        return None, str(exc), []
+
+
+def export(fit: Any, target: str, *, refit_from: str = "auto") -> Export:
+    """Export a fit to ``target``.
+
+    Parameters
+    ----------
+    fit : a fit-result JSON path, a :class:`gonio.fit.FitResult` or its ``to_json()`` dict.
+    target : ``"mitsuba"``, ``"pbrt"``, ``"blender"``, ``"openpbr"`` or ``"usd"``.
+    refit_from : where a refit takes its data: ``"auto"`` (the measurement file recorded in the
+        fit when readable, else the fitted model sampled densely), ``"measurement"`` (only the
+        file: an error when it is gone) or ``"model"`` (always the sampled model).
+
+    Returns
+    -------
+    Export: the files' text, the target parameters, ``mapping`` ("exact" or "refit") and, for a
+    refit, both losses.
+
+    Raises
+    ------
+    ParameterError
+        For an unknown target or ``refit_from``, and for a model that has no mapping and no data
+        to refit from.
+    FormatError
+        For a file that is not a fit result of a known schema version.
+    """
+    if target not in TARGETS:
+        raise ParameterError(
+            f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}"
+        )
+    if refit_from not in REFIT_FROM:
+        raise ParameterError(
+            f"refit_from must be one of {', '.join(REFIT_FROM)}, got {refit_from!r}"
+        )
+    mod = TARGETS[target]
+    src = load(fit)
+    lobes, reason, notes = _lobes_of(src)
+    if lobes is not None:
+        reason = mod.check(lobes)
+    source = None if src.path is None else str(src.path)
+    if reason is None:
+        assert lobes is not None
+        out = mod.build(src.name, lobes)
+        out.notes = notes + out.notes
+        out.source = source
+        return out
+    if src.model.is_delta or getattr(src.model, "has_delta", False):
+        raise ParameterError(
+            f"{describe(src.model)} has no {target} mapping ({reason}) and no data to refit from: "
+            "a delta lobe has no values to sample"
+        )
+    rd = _data_for(src, refit_from, target, reason)
+    tmpl, fixed, family = mod.refit_template(src.model, lobes)
+    r = refit(src, tmpl, fixed, family, rd)
+    new = split(r["model"])
+    assert mod.check(new) is None, mod.check(new)
+    out = mod.build(src.name, new)
+    out.mapping = "refit"
+    out.refit = r
+    out.source = source
+    why = f"refitted: {target} cannot express {describe(src.model)} ({reason})"
+    out.notes = [why, *notes, *out.notes]
+    return out
+
+
+def _data_for(src: FitSource, refit_from: str, target: str, reason: str) -> Any:
+    from gonio.export._refit import RefitData, model_samples
+    from gonio.fit.data import FitData, from_arrays
+
+    rd = refit_data(src) if refit_from != "model" else None
+    if refit_from == "measurement" and (rd is None or rd.kind != "measurement"):
+        path = src.record["data"].get("path")
+        where = f"{path} is not readable" if path else "the fit records no measurement file"
+        raise ParameterError(
+            f"{describe(src.model)} has no {target} mapping ({reason}) and no data to refit "
+            f"from: {where} (refit_from='measurement')"
+        )
+    if rd is None:
+        theta = float(src.record["data"].get("theta_max_deg") or 80.0)
+        wi, wo, f = model_samples(src.model, theta)
+        fd = from_arrays(wi, wo, f, theta_max_deg=theta, name="sampled model")
+        fd = FitData(fd.wi, fd.wo, fd.values, None, fd.weights, tuple(src.channels), fd.source)
+        if src.spectral:
+            from gonio.export._refit import to_rgb
+
+            fd = to_rgb(fd, src.wavelengths_nm)  # type: ignore[arg-type]
+        rd = RefitData(fd, "sampled model", None)
+    return rd
+
+
+def to_mitsuba(fit: Any, **kw: Any) -> Export:
+    """Mitsuba 3 ``load_dict`` dictionary (``.data``, ``.files[".json"]``) and XML fragment
+    (``.files[".xml"]``); see :mod:`gonio.export.mitsuba`."""
+    return export(fit, "mitsuba", **kw)
+
+
+def to_pbrt(fit: Any, **kw: Any) -> Export:
+    """pbrt-v4 material block (``.text``); see :mod:`gonio.export.pbrt`."""
+    return export(fit, "pbrt", **kw)
+
+
+def to_blender(fit: Any, **kw: Any) -> Export:
+    """Blender ``bpy`` script building the node tree (``.text``); see
+    :mod:`gonio.export.blender`."""
+    return export(fit, "blender", **kw)
+
+
+def to_openpbr(fit: Any, **kw: Any) -> Export:
+    """MaterialX document with ``open_pbr_surface`` (``.text``); see
+    :mod:`gonio.export.openpbr`."""
+    return export(fit, "openpbr", **kw)
+
+
+def to_usd(fit: Any, **kw: Any) -> Export:
+    """USD layer with a ``UsdPreviewSurface`` (``.text``); see :mod:`gonio.export.usd`."""
+    return export(fit, "usd", **kw)

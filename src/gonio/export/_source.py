@@ -1,0 +1,129 @@
+"""The fit being exported: its JSON record (read through :mod:`gonio.fit.result`), its model,
+and the RGB form of a spectral fit.
+
+Spectral fits (channels named ``"450nm"``, ...) are converted to linear sRGB with gonio's
+documented conversion (:mod:`gonio.io.spectral`: CIE 1931 2-degree observer, illuminant D65,
+normalized so that a flat spectrum of value c has Y = c, IEC 61966-2-1 matrix). The conversion is
+linear, so it is exact for every parameter the BRDF is linear in (albedos, ``rho_d``, a lobe's
+constant ``scale``); Schlick's ``f0`` enters affinely (``F = f0 (1 - m) + m``) and converts
+exactly up to the RGB of the flat white spectrum, which is reported; indices of refraction enter
+non-linearly and are never converted: such a fit is refitted on the RGB-converted data.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gonio.brdf.models import BRDFModel, Node
+from gonio.errors import FormatError, ParameterError
+
+_NM = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*nm\s*$")
+
+
+@dataclass(frozen=True)
+class FitSource:
+    """One fit to export.
+
+    Attributes
+    ----------
+    record : the fit-result JSON (validated against :data:`gonio.fit.result.SCHEMA`).
+    model : the fitted model as stored (channels as fitted).
+    path : the JSON file it came from (None for an in-memory result).
+    wavelengths_nm : the channels' wavelengths for a spectral fit, else None.
+    """
+
+    record: dict[str, Any]
+    model: BRDFModel
+    path: Path | None = None
+    wavelengths_nm: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        """Material name for the exported files (the data's name, else the model's)."""
+        raw = str(self.record.get("data", {}).get("name") or self.record.get("model") or "fit")
+        clean = re.sub(r"[^A-Za-z0-9_]+", "_", raw).strip("_") or "fit"
+        return clean if not clean[0].isdigit() else f"m_{clean}"
+
+    @property
+    def channels(self) -> list[str]:
+        return list(self.record["data"]["channels"])
+
+    @property
+    def spectral(self) -> bool:
+        return self.wavelengths_nm is not None
+
+
+def wavelengths_of(channels: list[str]) -> np.ndarray | None:
+    """Wavelengths (nm) when every channel name reads like ``"450nm"`` (and there are >= 2)."""
+    found = [_NM.match(str(c)) for c in channels]
+    if len(found) < 2 or not all(found):
+        return None
+    return np.array([float(m.group(1)) for m in found if m is not None])
+
+
+def rgb_matrix(wavelengths_nm: np.ndarray) -> np.ndarray:
+    """``T`` (n, 3): linear sRGB = spectrum @ T (gonio.io.spectral, illuminant D65)."""
+    from gonio.io import spectral
+
+    return spectral.spectral_weights(wavelengths_nm, "D65") @ spectral.XYZ_TO_LINEAR_SRGB.T
+
+
+def load(fit: Any) -> FitSource:
+    """A :class:`FitSource` from a fit-result path, a :class:`~gonio.fit.result.FitResult` or its
+    JSON dictionary.
+
+    Raises
+    ------
+    FormatError
+        For a file that is not a fit result, a schema version this gonio does not read, or a
+        model description that cannot be rebuilt.
+    """
+    from gonio.fit.result import SCHEMA_ID, SCHEMA_VERSION, FitResult, read_result
+
+    path: Path | None = None
+    if isinstance(fit, FitResult):
+        record = fit.to_json()
+    elif isinstance(fit, dict):
+        record = fit
+    elif isinstance(fit, (str, Path)):
+        path = Path(fit)
+        try:
+            raw = json.loads(path.read_text())
+        except OSError as exc:
+            raise FormatError(f"{path}: cannot read ({exc.strerror})") from None
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            raise FormatError(f"{path}: not JSON, so not a gonio fit result") from None
+        if isinstance(raw, dict) and raw.get("schema") == SCHEMA_ID:
+            v = raw.get("version")
+            if v != SCHEMA_VERSION:
+                raise FormatError(
+                    f"{path}: fit-result schema version {v!r} is not supported "
+                    f"(this gonio reads version {SCHEMA_VERSION})"
+                )
+        record = read_result(path)
+    else:
+        raise ParameterError(f"cannot export a {type(fit).__name__}: give a fit-result file")
+    if path is None:
+        import jsonschema
+
+        from gonio.fit.result import SCHEMA
+
+        try:
+            jsonschema.validate(record, SCHEMA)
+        except jsonschema.ValidationError as exc:
+            raise FormatError(f"not a fit result ({exc.message[:120]})") from None
+    try:
+        model = Node.from_dict(record["model_spec"])
+    except (ParameterError, TypeError, KeyError) as exc:
+        where = path or "fit result"
+        raise FormatError(f"{where}: model_spec cannot be rebuilt ({exc})") from None
+    if not isinstance(model, BRDFModel):
+        raise FormatError(f"{path or 'fit result'}: model_spec is not a BRDF model")
+    return FitSource(record, model, path, wavelengths_of(list(record["data"]["channels"])))

@@ -1,0 +1,153 @@
+"""Blender: a Python script that builds the material's node tree through ``bpy``.
+
+Run it with ``blender --python FILE.py`` (or ``exec`` it where ``import bpy`` works, e.g. the
+``bpy`` module); it creates (or rebuilds) the material named in ``MATERIAL`` and returns it from
+``build()``. Nothing else in the scene is touched.
+
+Mapping (exact, for Cycles and EEVEE's Principled BSDF with the single-scattering ``GGX``
+distribution): the specular lobe -> Principled BSDF with Roughness = sqrt(alpha) (Blender
+squares it); a Schlick Fresnel term -> Metallic 1, Base Color = f0, Specular Tint white (the
+F82-tint model with a white tint is Schlick's formula); a Dielectric(eta) term with one eta for
+every channel -> Metallic 0, Base Color black, IOR = eta, Specular IOR Level 0.5 (no
+adjustment); the diffuse term -> a Diffuse BSDF (Roughness 0: Lambert) with Color = albedo,
+added to the Principled BSDF by an Add Shader (the Principled BSDF's own base layer would
+darken the diffuse by the specular albedo, which gonio's sum does not). Refitted: every other
+model to Lambert + TorranceSparrow(ggx, smith, Schlick(f0)).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gonio.brdf import models
+from gonio.export._common import Export, family_name, fmt, rgb, template, uniform
+from gonio.export._lobes import Lobes
+
+TARGET = "blender"
+SUFFIXES = (".py",)
+FAMILY = "Lambert + TorranceSparrow(ggx, smith, Schlick | Dielectric)"
+
+
+def check(lobes: Lobes) -> str | None:
+    """None when the Blender node tree expresses ``lobes`` exactly, else the reason."""
+    if lobes.diffuse_scale is not None:
+        return "a scaled diffuse term"
+    sp = lobes.specular
+    if sp is None:
+        return None
+    if sp.distribution != "ggx":
+        return f"the {sp.distribution} distribution (the Principled BSDF is GGX)"
+    if sp.shadowing != "smith":
+        return f"{sp.shadowing} shadowing (Cycles' GGX uses Smith's)"
+    if sp.scale is not None:
+        return "a scaled microfacet lobe"
+    if sp.fresnel == "dielectric" and uniform(sp.eta) is None:
+        return "a per-channel index of refraction (the Principled IOR is one number)"
+    if sp.fresnel not in ("schlick", "dielectric"):
+        return f"{sp.fresnel} Fresnel (the Principled BSDF has Schlick/F82 and dielectric)"
+    return None
+
+
+def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
+    """Lambert + TS(ggx, smith, Schlick) started from ``model``."""
+    tmpl, fixed = template(model, "ggx", models.Schlick(0.04))
+    return tmpl, fixed, "Lambert + TorranceSparrow(ggx, smith, Schlick)"
+
+
+def _color(v: list[float]) -> str:
+    return "(" + ", ".join(fmt(x) for x in v) + ", 1.0)"
+
+
+def build(name: str, lobes: Lobes) -> Export:
+    """The Blender script of representable ``lobes``."""
+    sp = lobes.specular
+    params: dict[str, Any] = {}
+    body = [
+        "    nodes = mat.node_tree.nodes",
+        "    links = mat.node_tree.links",
+        "    nodes.clear()",
+        '    out = nodes.new("ShaderNodeOutputMaterial")',
+        "    out.location = (400, 0)",
+        "    shaders = []",
+    ]
+    if lobes.diffuse is not None:
+        col = rgb(lobes.diffuse)
+        params["Diffuse BSDF"] = {"Color": col, "Roughness": 0.0}
+        body += [
+            '    diffuse = nodes.new("ShaderNodeBsdfDiffuse")',
+            "    diffuse.location = (-300, 200)",
+            f'    diffuse.inputs["Color"].default_value = {_color(col)}',
+            '    diffuse.inputs["Roughness"].default_value = 0.0  # Lambert',
+            "    shaders.append(diffuse)",
+        ]
+    if sp is not None:
+        rough = float(sp.alpha) ** 0.5
+        p: dict[str, Any] = {"distribution": "GGX", "Roughness": rough}
+        body += [
+            '    bsdf = nodes.new("ShaderNodeBsdfPrincipled")',
+            "    bsdf.location = (-300, -200)",
+            '    bsdf.distribution = "GGX"  # single scattering, as the fitted lobe',
+            f'    bsdf.inputs["Roughness"].default_value = {fmt(rough)}  # sqrt(alpha)',
+        ]
+        if sp.fresnel == "schlick":
+            f0 = rgb(sp.f0)
+            p.update({"Metallic": 1.0, "Base Color": f0, "Specular Tint": [1.0, 1.0, 1.0]})
+            body += [
+                '    bsdf.inputs["Metallic"].default_value = 1.0',
+                f'    bsdf.inputs["Base Color"].default_value = {_color(f0)}  # Schlick f0',
+                '    bsdf.inputs["Specular Tint"].default_value = (1.0, 1.0, 1.0, 1.0)',
+            ]
+        else:
+            eta = uniform(sp.eta)
+            assert eta is not None
+            p.update({"Metallic": 0.0, "Base Color": [0.0, 0.0, 0.0], "IOR": eta,
+                      "Specular IOR Level": 0.5})  # fmt: skip
+            body += [
+                '    bsdf.inputs["Metallic"].default_value = 0.0',
+                '    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)',
+                f'    bsdf.inputs["IOR"].default_value = {fmt(eta)}',
+                '    bsdf.inputs["Specular IOR Level"].default_value = 0.5',
+            ]
+        body += [
+            '    for key in ("Coat Weight", "Sheen Weight", "Transmission Weight",',
+            '                "Subsurface Weight", "Emission Strength", "Thin Film Thickness"):',
+            "        if key in bsdf.inputs:",
+            "            bsdf.inputs[key].default_value = 0.0",
+            "    shaders.append(bsdf)",
+        ]
+        params["Principled BSDF"] = p
+    body += [
+        "    if len(shaders) == 2:",
+        '        add = nodes.new("ShaderNodeAddShader")',
+        "        links.new(shaders[0].outputs[0], add.inputs[0])",
+        "        links.new(shaders[1].outputs[0], add.inputs[1])",
+        "        shaders = [add]",
+        '    links.new(shaders[0].outputs[0], out.inputs["Surface"])',
+        "    return mat",
+    ]
+    text = "\n".join(
+        [
+            f'"""gonio export: material {name!r} for Blender ({family_name(lobes)}).',
+            "",
+            "Run with `blender --python THIS_FILE` or exec it where `import bpy` works; build()",
+            "creates or rebuilds the material and returns it. Roughness = sqrt(gonio alpha).",
+            '"""',
+            "",
+            "import bpy",
+            "",
+            f"MATERIAL = {name!r}",
+            "",
+            "",
+            "def build(name=MATERIAL):",
+            "    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)",
+            "    mat.use_nodes = True",
+            *body,
+            "",
+            "",
+            "material = build()",
+            "",
+        ]
+    )
+    notes = ["Roughness = sqrt(alpha); keep the Principled distribution GGX (Multiscatter GGX "
+             "adds energy the fit does not have)"]  # fmt: skip
+    return Export(TARGET, name, {".py": text}, "exact", family_name(lobes), params, notes=notes)
