@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.fit.cli",
     "gonio.render.cli",
     "gonio.demo.cli",
+    "gonio.export.cli",
 )
 
 

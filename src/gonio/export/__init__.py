@@ -12,26 +12,22 @@ fit's data with :func:`gonio.fit.fit` and the refit's loss is reported next to t
 (``mapping == "refit"``, ``Export.refit``).
 """
 
-from gonio.export._api import (
-    REFIT_FROM,
-    TARGETS,
-    export,
-    to_blender,
-    to_mitsuba,
-    to_openpbr,
-    to_pbrt,
-    to_usd,
-)
-from gonio.export._common import Export
+from typing import Any
 
-__all__ = [
-    "REFIT_FROM",
-    "TARGETS",
-    "Export",
-    "export",
-    "to_blender",
-    "to_mitsuba",
-    "to_openpbr",
-    "to_pbrt",
-    "to_usd",
-]
+_API = ("REFIT_FROM", "TARGETS", "export", "to_blender", "to_mitsuba", "to_openpbr", "to_pbrt",
+        "to_usd")  # fmt: skip
+
+__all__ = ["Export", *_API]
+
+
+def __getattr__(name: str) -> Any:
+    # Lazy: ``gonio export --help`` (which imports gonio.export.cli) must not load JAX.
+    if name in _API:
+        from gonio.export import _api
+
+        return getattr(_api, name)
+    if name == "Export":
+        from gonio.export._common import Export
+
+        return Export
+    raise AttributeError(f"module 'gonio.export' has no attribute {name!r}")

@@ -1,0 +1,155 @@
+"""``gonio export FIT.json --to TARGET``: a fit as a renderer's material."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from gonio.errors import ParameterError
+
+TARGET_NAMES = ("mitsuba", "pbrt", "blender", "openpbr", "usd")
+SUFFIX = {
+    "mitsuba": ".xml",
+    "pbrt": ".pbrt",
+    "blender": ".py",
+    "openpbr": ".mtlx",
+    "usd": ".usda",
+}
+
+EPILOG = """\
+targets and parameter mapping (gonio's alpha is its microfacet roughness; models in brackets
+are the families a target expresses exactly):
+
+  mitsuba   Mitsuba 3 XML <bsdf> fragment (.xml) and its load_dict dictionary (.json).
+            [Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor|Dielectric)]
+            diffuse: reflectance = albedo; roughconductor: distribution as fitted,
+            alpha = alpha (unchanged), eta/k = the conductor's index (k = 0 for Dielectric);
+            a sum is a blendbsdf of weight w = min(0.5, 1 - max albedo) with reflectance
+            albedo / (1 - w) and specular_reflectance 1 / w. Mitsuba's Smith term is separable,
+            gonio's height-correlated (0.9 % relative RMSE at GGX alpha 0.5 on a sphere).
+  pbrt      pbrt-v4 MakeNamedMaterial block + NamedMaterial (.pbrt).
+            [Lambert, TorranceSparrow(ggx, smith, Conductor|Dielectric), (1-a) Lambert + a TS]
+            diffuse: reflectance = albedo; conductor: eta, k, roughness = alpha with
+            "bool remaproughness" false; a sum is "mix" with amount a.
+  blender   Python script building the node tree with bpy (.py): blender --python FILE.py.
+            [Lambert + TorranceSparrow(ggx, smith, Schlick|Dielectric)]
+            Diffuse BSDF (Color = albedo, Roughness 0) + Principled BSDF (distribution GGX,
+            Roughness = sqrt(alpha); Schlick: Metallic 1, Base Color = f0, Specular Tint white;
+            Dielectric: Metallic 0, Base Color black, IOR = eta) joined by an Add Shader.
+  openpbr   MaterialX document with open_pbr_surface shaders (.mtlx).
+            [Lambert, TorranceSparrow(ggx, smith, Schlick), (1-m) Lambert + m TS]
+            diffuse: base_color = albedo, specular_weight 0; metal: base_metalness 1,
+            base_color = f0, specular_color (F82 tint) white, specular_roughness = sqrt(alpha);
+            a sum is a MaterialX mix of the two with mix = m.
+  usd       USD layer with a UsdPreviewSurface material (.usda).
+            [Lambert + TorranceSparrow(ggx, smith, Schlick)]
+            useSpecularWorkflow 1, diffuseColor = albedo, specularColor = f0,
+            roughness = sqrt(alpha); read additively (the spec leaves the coupling open).
+
+what is refitted: any fit outside the target's family (Ward, Phong, Blinn-Phong, Oren-Nayar,
+HTSG, Lafortune, Ashikhmin-Shirley, Beckmann or V-cavity outside Mitsuba, a Fresnel term the
+target lacks, an unscaled sum for pbrt/openpbr, a Lambert-only fit for usd). The family is then
+fitted with gonio.fit under the original fit's metric and angle cutoff to the measurement file
+recorded in the fit (data.path), or, when that file is gone, to the fitted model sampled on a
+dense half/difference grid; the output reports the refit loss next to the original fit's loss.
+Spectral fits are exported in linear sRGB (CIE 1931, D65; gonio.io.spectral); their indices of
+refraction are refitted on the RGB-converted data.
+
+Without --out the main file is printed on stdout and the summary on stderr; with --json the
+summary (mapping, target parameters, refit losses, notes) is printed as JSON on stdout.
+"""
+
+
+def register(subparsers: Any) -> None:
+    """Add ``gonio export`` to the top-level parser."""
+    p = subparsers.add_parser(
+        "export",
+        help="write a fit as a Mitsuba, pbrt-v4, Blender, OpenPBR/MaterialX or USD material",
+        description=(
+            "Write a fit result (from 'gonio fit') as a renderer's material. Parameters are "
+            "exact where the target has the fitted model family; otherwise the target's family "
+            "is refitted to the fit's own data and both losses are reported. Nothing is written "
+            "when the input is bad."
+        ),
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("fit", metavar="FIT.json", help="fit result JSON written by 'gonio fit'")
+    p.add_argument(
+        "--to",
+        required=True,
+        metavar="TARGET",
+        help="mitsuba, pbrt, blender, openpbr or usd (see below)",
+    )
+    p.add_argument(
+        "--out",
+        metavar="FILE",
+        help="output file; its suffix is replaced by the target's (Mitsuba writes FILE.xml and "
+        "FILE.json). Default: print the main file on stdout",
+    )
+    p.add_argument(
+        "--refit-from",
+        default="auto",
+        metavar="auto|measurement|model",
+        help="data of a refit: the recorded measurement file, else the sampled model (auto, "
+        "default); only the measurement (an error when it is gone); only the sampled model",
+    )
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def _summary_lines(e: Any) -> list[str]:
+    lines = [f"{e.target}: {e.mapping} mapping of {e.family}"]
+    r = e.refit
+    if r is not None:
+        d = r["data"]
+        where = d["path"] if d["kind"] == "measurement" else "the fitted model, densely sampled"
+        orig = r["original_loss"]
+        lines.append(
+            f"refit {r['family']} on {d['n_samples']} samples of {where}: {r['metric']} loss "
+            f"{r['refit_loss']:.6g} (original fit: {orig if orig is None else format(orig, '.6g')}"
+            + (
+                ""
+                if r["original_loss_on_refit_data"] is None
+                else f"; original model on these data: {r['original_loss_on_refit_data']:.6g}"
+            )
+            + ")"
+        )
+    lines += [f"note: {n}" for n in e.notes]
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``gonio export``."""
+    if args.to not in TARGET_NAMES:
+        raise ParameterError(
+            f"unknown export target {args.to!r}; choose one of {', '.join(TARGET_NAMES)}"
+        )
+    if not Path(args.fit).is_file():
+        raise ParameterError(f"fit file not found: {args.fit}")
+    from gonio.export import export
+
+    e = export(args.fit, args.to, refit_from=args.refit_from)
+    report = e.to_json()
+    if args.out:
+        paths = e.write(args.out)
+        report["files"] = [str(p) for p in paths]
+        if args.json:
+            print(json.dumps(report, indent=2))
+        else:
+            for line in _summary_lines(e):
+                print(line)
+            for p in paths:
+                print(f"wrote {p}")
+        return 0
+    if args.json:
+        report["files"] = e.files
+        print(json.dumps(report, indent=2))
+    else:
+        sys.stdout.write(e.text)
+        for line in _summary_lines(e):
+            print(line, file=sys.stderr)
+    return 0
