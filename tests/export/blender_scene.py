@@ -3,7 +3,9 @@
 Run by tests/export/test_blender.py in a Python that has ``bpy`` (a separate process: bpy pins
 NumPy < 2, which gonio's JAX cannot share), as
 
-    python blender_scene.py MATERIAL.py OUT.npy SIZE SAMPLES LX LY LZ
+    python blender_scene.py SIZE SAMPLES LX LY LZ MATERIAL.py OUT.npy [MATERIAL.py OUT.npy ...]
+
+(or ``blender -b --python blender_scene.py -- ARGS``), one render per material file.
 
 Scene: unit sphere (subdivided icosphere, smooth normals) at the origin; orthographic camera on
 +z looking down -z covering [-1, 1]^2 (image x right, y up); one sun light of irradiance 1 W/m^2
@@ -18,19 +20,17 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-material_py, out, size, samples = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-light = Vector([float(x) for x in sys.argv[5:8]]).normalized()
+argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
+size, samples = int(argv[0]), int(argv[1])
+light = Vector([float(x) for x in argv[2:5]]).normalized()
+jobs = list(zip(argv[5::2], argv[6::2], strict=True))
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 scene = bpy.context.scene
-namespace = {"__name__": "gonio_material"}
-exec(compile(open(material_py).read(), material_py, "exec"), namespace)
-material = namespace["material"]
 
 bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=7, radius=1.0)
 sphere = bpy.context.active_object
 bpy.ops.object.shade_smooth()
-sphere.data.materials.append(material)
 
 cam_data = bpy.data.cameras.new("cam")
 cam_data.type = "ORTHO"
@@ -48,8 +48,9 @@ sun.rotation_euler = light.to_track_quat("Z", "Y").to_euler()  # emits along its
 scene.collection.objects.link(sun)
 
 world = bpy.data.worlds.new("black")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+world.color = (0.0, 0.0, 0.0)
+if world.node_tree is not None and "Background" in world.node_tree.nodes:
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
 scene.world = world
 
 scene.render.engine = "CYCLES"
@@ -70,10 +71,18 @@ scene.view_settings.exposure = 0.0
 scene.view_settings.gamma = 1.0
 scene.render.image_settings.file_format = "OPEN_EXR"
 scene.render.image_settings.color_depth = "32"
-scene.render.filepath = out + ".exr"
-bpy.ops.render.render(write_still=True)
 
-img = bpy.data.images.load(out + ".exr")
-px = np.array(img.pixels[:], dtype=np.float32).reshape(size, size, 4)[::-1, :, :3]
-np.save(out, px)
-print("gonio-blender-scene: rendered", size, "px,", samples, "spp;", math.fsum(px.ravel()))
+for material_py, out in jobs:
+    # The exported script, run as blender --python would run it: it builds the material.
+    namespace = {"__name__": "__main__"}
+    with open(material_py) as fh:
+        exec(compile(fh.read(), material_py, "exec"), namespace)
+    sphere.data.materials.clear()
+    sphere.data.materials.append(namespace["material"])
+    scene.render.filepath = out + ".exr"
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(out + ".exr")
+    px = np.array(img.pixels[:], dtype=np.float32).reshape(size, size, 4)[::-1, :, :3]
+    np.save(out, px)
+    bpy.data.images.remove(img)
+    print("gonio-blender-scene:", out, size, "px,", samples, "spp;", math.fsum(px.ravel()))
