@@ -48,13 +48,18 @@ MODELS = {
 }
 
 
+def _has_bpy(python: str) -> bool:
+    probe = "import importlib.util, sys; sys.exit(importlib.util.find_spec('bpy') is None)"
+    return subprocess.run([python, "-c", probe], capture_output=True, timeout=60).returncode == 0
+
+
 def bpy_command() -> list[str] | None:
     """How to run a script with bpy here, or None."""
     env = os.environ.get("GONIO_BPY_PYTHON")
     if env:
         return [env]
     local = ROOT / ".venv-bpy" / "bin" / "python"
-    if local.exists():
+    if local.exists() and _has_bpy(str(local)):
         return [str(local)]
     if importlib.util.find_spec("bpy") is not None:
         return [sys.executable]

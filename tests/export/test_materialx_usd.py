@@ -13,7 +13,9 @@ SCHLICK = models.Schlick([0.04, 0.05, 0.06])
 
 
 def _ggx(alpha=0.2, fresnel=SCHLICK):
-    return models.TorranceSparrow(alpha=alpha, distribution="ggx", shadowing="smith", fresnel=fresnel)
+    return models.TorranceSparrow(
+        alpha=alpha, distribution="ggx", shadowing="smith", fresnel=fresnel
+    )
 
 
 OPENPBR_CASES = {

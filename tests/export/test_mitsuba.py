@@ -67,7 +67,8 @@ def render_xml(fragment: str, bsdf_id: str) -> np.ndarray:
     <integer name="bsdf_samples" value="0"/></integrator>
   <sensor type="orthographic">
     <transform name="to_world"><lookat origin="0, 0, 2" target="0, 0, 0" up="0, 1, 0"/></transform>
-    <film type="hdrfilm"><integer name="width" value="{SIZE}"/><integer name="height" value="{SIZE}"/>
+    <film type="hdrfilm">
+      <integer name="width" value="{SIZE}"/><integer name="height" value="{SIZE}"/>
       <rfilter type="box"/><string name="pixel_format" value="rgb"/></film>
     <sampler type="stratified"><integer name="sample_count" value="64"/></sampler>
   </sensor>
