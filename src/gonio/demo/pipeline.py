@@ -283,6 +283,13 @@ def run_demo(
     results, models_summary = _fit_all(out, material, settings, progress)
     timings["fit"] = time.monotonic() - t
 
+    console.rule("[bold]export[/]: every fit for Mitsuba 3, pbrt-v4, Blender, OpenPBR and USD")
+    t = time.monotonic()
+    from gonio.demo.exports import export_fits
+
+    export_fits(out, models_summary)
+    timings["export"] = time.monotonic() - t
+
     console.rule(f"[bold]4/5 render[/]: {settings.resolution}^2 px, {settings.spp} spp, studio")
     t = time.monotonic()
     render = _render_all(out, material, results, models_summary, settings, progress)

@@ -183,6 +183,7 @@ def render_html(summary: Any) -> str:
         for p in m.files["plots"]:
             parts.append(f"<figure>{_img(p, Path(p).stem)}</figure>")
         parts.append("</div>")
+    parts += _export_section(summary.models)
     t = summary.timings_s
     parts += [
         "<h2>Timings</h2>",
@@ -193,6 +194,33 @@ def render_html(summary: Any) -> str:
         "</body></html>",
     ]
     return "\n".join(parts) + "\n"
+
+
+def _export_section(models: list[Any]) -> list[str]:
+    """The "Export" section: each fit as a material per renderer (gonio.export)."""
+    rows = [(m, r) for m in models for r in m.files.get("exports", [])]
+    if not rows:
+        return []
+    out = [
+        "<h2>Export</h2>",
+        "<p>Every fit as a renderer's material (<code>gonio export FIT --to TARGET</code>)."
+        " <em>exact</em>: the renderer has the fitted family and gets the fitted values;"
+        " <em>refit</em>: it has not, so its family was fitted to the same data under the same"
+        " metric, with the loss shown next to the original fit's.</p>",
+        "<table><tr><th>model</th><th>target</th><th>mapping</th><th>exported family</th>"
+        "<th>loss (refit / original)</th><th>files</th></tr>",
+    ]
+    for m, r in rows:
+        loss = ""
+        if r["refit_loss"] is not None:
+            loss = f"{_num(r['refit_loss'])} / {_num(r['original_loss'])} ({_e(r['metric'])})"
+        links = " ".join(f'<a href="{_e(f)}">{_e(Path(f).name)}</a>' for f in r["files"])
+        out.append(
+            f"<tr><td>{_e(m.label)}</td><td>{_e(r['target'])}</td><td>{_e(r['mapping'])}</td>"
+            f"<td>{_e(r['family'])}</td><td class='num'>{loss}</td><td>{links}</td></tr>"
+        )
+    out.append("</table>")
+    return out
 
 
 def write_report(path: str | Path, summary: Any) -> Path:

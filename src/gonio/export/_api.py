@@ -65,7 +65,9 @@ def _lobes_of(src: FitSource) -> tuple[Lobes | None, str | None, list[str]]:
         return None, str(exc), []
 
 
-def export(fit: Any, target: str, *, refit_from: str = "auto") -> Export:
+def export(
+    fit: Any, target: str, *, refit_from: str = "auto", cache: dict[Any, Any] | None = None
+) -> Export:
     """Export a fit to ``target``.
 
     Parameters
@@ -75,6 +77,8 @@ def export(fit: Any, target: str, *, refit_from: str = "auto") -> Export:
     refit_from : where a refit takes its data: ``"auto"`` (the measurement file recorded in the
         fit when readable, else the fitted model sampled densely), ``"measurement"`` (only the
         file: an error when it is gone) or ``"model"`` (always the sampled model).
+    cache : a dictionary shared by several calls for the same fit file, so that targets with the
+        same family (Blender and USD) reuse one refit.
 
     Returns
     -------
@@ -114,9 +118,15 @@ def export(fit: Any, target: str, *, refit_from: str = "auto") -> Export:
             f"{describe(src.model)} has no {target} mapping ({reason}) and no data to refit from: "
             "a delta lobe has no values to sample"
         )
-    rd = _data_for(src, refit_from, target, reason)
     tmpl, fixed, family = mod.refit_template(src.model, lobes)
-    r = refit(src, tmpl, fixed, family, rd)
+    key = (source, family, refit_from)
+    if cache is not None and source is not None and key in cache:
+        r = cache[key]
+    else:
+        rd = _data_for(src, refit_from, target, reason)
+        r = refit(src, tmpl, fixed, family, rd)
+        if cache is not None and source is not None:
+            cache[key] = r
     new = split(r["model"])
     assert mod.check(new) is None, mod.check(new)
     out = mod.build(src.name, new)
