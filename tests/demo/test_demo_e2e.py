@@ -236,3 +236,19 @@ def test_auto_material_prefers_rgl_data_and_falls_back_to_builtin(tmp_path, monk
     assert m.is_measured and m.table_path == felt.resolve() and "felt" in m.description.lower()
     monkeypatch.setattr(materials, "data_folders", lambda: [tmp_path])
     assert find_material("auto").name == "builtin-orange-paint"
+
+
+def test_report_exports_every_fit_to_every_renderer(demo):
+    from gonio.export import TARGETS
+
+    out, _, summary = demo
+    text = (out / "index.html").read_text(encoding="utf-8")
+    assert "<h2>Export</h2>" in text
+    for m in summary.models:
+        rows = m.files["exports"]
+        assert [r["target"] for r in rows] == list(TARGETS)
+        for r in rows:
+            assert r["mapping"] in ("exact", "refit")
+            assert (r["refit_loss"] is None) == (r["mapping"] == "exact")
+            for f in r["files"]:
+                assert (out / f).is_file() and f'href="{f}"' in text

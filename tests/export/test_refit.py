@@ -36,8 +36,8 @@ def ward_fit(tmp_path_factory):
 
 
 def test_ward_to_blender_is_refitted_to_ggx(ward_fit):
-    table_path, fit_json, ward = ward_fit
-    e = to_blender(fit_json)
+    table_path, _, ward = ward_fit
+    e = to_blender(ward)  # the FitResult itself (DESIGN.md: export.to_blender(fit_result))
     assert e.mapping == "refit"
     r = e.refit
     assert r["data"]["kind"] == "measurement" and r["data"]["path"] == str(table_path)
