@@ -69,10 +69,10 @@ def register(subparsers: Any) -> None:
         "export",
         help="write a fit as a Mitsuba, pbrt-v4, Blender, OpenPBR/MaterialX or USD material",
         description=(
-            "Write a fit result (from 'gonio fit') as a renderer's material. Parameters are "
-            "exact where the target has the fitted model family; otherwise the target's family "
-            "is refitted to the fit's own data and both losses are reported. Nothing is written "
-            "when the input is bad."
+            "Write a fit result (from 'gonio fit') as a renderer's material. Parameters are\n"
+            "exact where the target has the fitted model family; otherwise the target's family\n"
+            "is refitted to the fit's own data and both losses are reported. Nothing is\n"
+            "written when the input is bad."
         ),
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
