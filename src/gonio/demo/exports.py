@@ -9,7 +9,8 @@ from typing import Any
 
 def export_fits(out: Path, models: list[Any], say: Any = None) -> None:
     """Export each model's fit (``m.files["fit"]``) to every target; records the rows in
-    ``m.files["exports"]``: ``{target, mapping, family, files, refit_loss, original_loss}``."""
+    ``m.files["exports"]``: ``{target, mapping, family, files, metric, refit_data, refit_loss,
+    original_loss}``."""
     from gonio.export import TARGETS, export
 
     folder = out / "export"
@@ -31,6 +32,7 @@ def export_fits(out: Path, models: list[Any], say: Any = None) -> None:
                     "family": e.family,
                     "files": [p.relative_to(out).as_posix() for p in paths],
                     "metric": None if e.refit is None else e.refit["metric"],
+                    "refit_data": None if e.refit is None else e.refit["data"]["kind"],
                     "refit_loss": None if e.refit is None else e.refit["refit_loss"],
                     "original_loss": None if e.refit is None else e.refit["original_loss"],
                 }

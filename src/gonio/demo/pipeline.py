@@ -365,13 +365,13 @@ def _fit_all(
 ) -> tuple[list[Any], list[ModelSummary]]:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from gonio import io
     from gonio.fit import fit
     from gonio.fit.data import prepare
     from gonio.fit.plots import plot_result
 
-    samples = io.load(out / "run" / "table.brdf.h5")
-    data = prepare(samples, name=material.name)
+    # prepared from the path, so that each fit records its measurement (gonio export refits
+    # a renderer's family to it)
+    data = prepare((out / "run" / "table.brdf.h5").resolve(), name=material.name)
     fits_dir = out / "fits"
     fits_dir.mkdir(exist_ok=True)
     results, summaries = [], []

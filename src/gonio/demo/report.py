@@ -205,15 +205,19 @@ def _export_section(models: list[Any]) -> list[str]:
         "<h2>Export</h2>",
         "<p>Every fit as a renderer's material (<code>gonio export FIT --to TARGET</code>)."
         " <em>exact</em>: the renderer has the fitted family and gets the fitted values;"
-        " <em>refit</em>: it has not, so its family was fitted to the same data under the same"
-        " metric, with the loss shown next to the original fit's.</p>",
+        " <em>refit</em>: it has not, so its family was fitted to the measurement under the"
+        " fit's metric (or, where the measurement was not readable, to the fitted model"
+        " sampled densely, whose loss is not comparable with the fit's), with the loss shown"
+        " next to the original fit's.</p>",
         "<table><tr><th>model</th><th>target</th><th>mapping</th><th>exported family</th>"
-        "<th>loss (refit / original)</th><th>files</th></tr>",
+        "<th>loss: refit / original fit</th><th>files</th></tr>",
     ]
     for m, r in rows:
         loss = ""
         if r["refit_loss"] is not None:
             loss = f"{_num(r['refit_loss'])} / {_num(r['original_loss'])} ({_e(r['metric'])})"
+            if r.get("refit_data") != "measurement":
+                loss += " refit to the sampled model"
         links = " ".join(f'<a href="{_e(f)}">{_e(Path(f).name)}</a>' for f in r["files"])
         out.append(
             f"<tr><td>{_e(m.label)}</td><td>{_e(r['target'])}</td><td>{_e(r['mapping'])}</td>"

@@ -27,7 +27,7 @@ from gonio.export._source import FitSource, rgb_matrix
 from gonio.fit.data import FitData, from_arrays, prepare
 
 #: Grid of :func:`model_samples`: theta_h, phi_h, theta_d, phi_d node counts.
-GRID = (32, 4, 24, 16)
+GRID = (24, 3, 16, 12)
 
 
 @dataclass(frozen=True)
