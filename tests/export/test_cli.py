@@ -98,3 +98,23 @@ def test_spectral_fit_exports_rgb(tmp_path):
     want = spectral.spectrum_to_linear_srgb(albedo, wl, "D65")
     assert e.params["Diffuse BSDF"]["Color"] == pytest.approx(want.tolist(), rel=1e-12)
     assert any("linear sRGB" in n for n in e.notes)
+
+
+def test_spectral_conductor_is_refitted_in_rgb():
+    """An index of refraction is not linear in RGB: a spectral conductor fit is refitted on the
+    RGB-converted samples of the model, and the export has three channels."""
+    from gonio.export import to_mitsuba
+
+    wl = np.arange(400.0, 701.0, 50.0)
+    model = models.Lambert(albedo=np.linspace(0.2, 0.5, wl.size)) + models.TorranceSparrow(
+        alpha=0.2,
+        distribution="ggx",
+        shadowing="smith",
+        fresnel=models.Conductor(eta=np.linspace(0.2, 1.2, wl.size), k=np.full(wl.size, 3.0)),
+    )
+    e = to_mitsuba(fit_record(model, channels=[f"{w:g}nm" for w in wl]))
+    assert e.mapping == "refit" and "index of refraction" in e.notes[0]
+    assert e.refit["data"]["kind"] == "sampled model"
+    assert len(e.params["eta"]) == 3 and len(e.params["reflectance"]) == 3
+    # the spectral model's own RGB prediction on its RGB-converted samples: no error
+    assert e.refit["original_loss_on_refit_data"] == pytest.approx(0.0, abs=1e-20)

@@ -135,6 +135,8 @@ def start_values(model: BRDFModel) -> tuple[np.ndarray | float, float]:
         for key in ("alpha", "alpha_x"):
             if alpha is None and key in p:
                 alpha = float(np.mean(np.asarray(p[key], dtype=np.float64)))
+    if np.size(rho) not in (1, 3):  # a spectral fit is refitted in RGB: start from the mean
+        rho = float(np.mean(rho))
     rho = np.clip(rho, 0.02, 0.95)
     alpha = float(np.clip(alpha if alpha is not None else 0.2, 0.01, 0.9))
     return rho, alpha

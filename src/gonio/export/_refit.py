@@ -123,10 +123,10 @@ def refit(
     metric = str(src.record.get("metric") or "wls")
     theta = float(rd.data.source.get("theta_max_deg") or 80.0)
     res = fit(rd.data, model=template, loss=metric, fixed=fixed, theta_max_deg=theta)
-    original = None
-    if not src.spectral:
-        f0 = np.asarray(src.model.f(rd.data.wi, rd.data.wo), np.float64)
-        original = evaluate(metric, f0, rd.data)
+    f0 = np.asarray(src.model.f(rd.data.wi, rd.data.wo), np.float64)
+    if src.spectral:  # the data were converted to RGB: so is the model's prediction
+        f0 = f0 @ rgb_matrix(src.wavelengths_nm)  # type: ignore[arg-type]
+    original = evaluate(metric, f0, rd.data)
     return {
         "family": family,
         "data": {"kind": rd.kind, "path": rd.path, "n_samples": rd.data.n},
