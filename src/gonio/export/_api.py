@@ -139,27 +139,14 @@ def export(
 
 
 def _data_for(src: FitSource, refit_from: str, target: str, reason: str) -> Any:
-    from gonio.export._refit import RefitData, model_samples
-    from gonio.fit.data import FitData, from_arrays
-
-    rd = refit_data(src) if refit_from != "model" else None
-    if refit_from == "measurement" and (rd is None or rd.kind != "measurement"):
+    rd = refit_data(src, measurement=refit_from != "model")
+    if refit_from == "measurement" and rd.kind != "measurement":
         path = src.record["data"].get("path")
         where = f"{path} is not readable" if path else "the fit records no measurement file"
         raise ParameterError(
             f"{describe(src.model)} has no {target} mapping ({reason}) and no data to refit "
             f"from: {where} (refit_from='measurement')"
         )
-    if rd is None:
-        theta = float(src.record["data"].get("theta_max_deg") or 80.0)
-        wi, wo, f = model_samples(src.model, theta)
-        fd = from_arrays(wi, wo, f, theta_max_deg=theta, name="sampled model")
-        fd = FitData(fd.wi, fd.wo, fd.values, None, fd.weights, tuple(src.channels), fd.source)
-        if src.spectral:
-            from gonio.export._refit import to_rgb
-
-            fd = to_rgb(fd, src.wavelengths_nm)  # type: ignore[arg-type]
-        rd = RefitData(fd, "sampled model", None)
     return rd
 
 

@@ -71,13 +71,14 @@ def to_rgb(fd: FitData, wavelengths_nm: np.ndarray) -> FitData:
     return FitData(fd.wi, fd.wo, fd.values @ t, sigma, fd.weights, ("R", "G", "B"), dict(fd.source))
 
 
-def refit_data(src: FitSource) -> RefitData:
-    """The data a refit of ``src`` uses (see the module docstring)."""
+def refit_data(src: FitSource, measurement: bool = True) -> RefitData:
+    """The data a refit of ``src`` uses (see the module docstring); ``measurement=False``
+    skips the recorded file and samples the model."""
     from gonio.errors import GonioError
 
     desc = src.record["data"]
     theta = float(desc.get("theta_max_deg") or 80.0)
-    path = desc.get("path")
+    path = desc.get("path") if measurement else None
     fd = None
     if path:
         p = Path(path)
