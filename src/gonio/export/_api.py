@@ -128,7 +128,14 @@ def export(
         if cache is not None and source is not None:
             cache[key] = r
     new = split(r["model"])
-    assert mod.check(new) is None, mod.check(new)
+    problem = mod.check(new)
+    if problem is not None:  # e.g. a refitted value on a bound the target cannot take
+        from gonio.errors import FitError
+
+        raise FitError(f"the {target} refit of {describe(src.model)} is not exportable: {problem}")
+    if src.spectral and not notes:
+        notes = ["spectral fit refitted in linear sRGB: samples converted with gonio.io.spectral "
+                 "(CIE 1931 2-degree observer, D65)"]  # fmt: skip
     out = mod.build(src.name, new)
     out.mapping = "refit"
     out.refit = r
