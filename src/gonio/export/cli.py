@@ -108,14 +108,14 @@ def _summary_lines(e: Any) -> list[str]:
         d = r["data"]
         where = d["path"] if d["kind"] == "measurement" else "the fitted model, densely sampled"
         orig = r["original_loss"]
+        orig_txt = "unknown" if orig is None else format(orig, ".6g")
+        if d["kind"] != "measurement":
+            orig_txt += " on its measurement, not comparable"
+        on_data = r["original_loss_on_refit_data"]
         lines.append(
             f"refit {r['family']} on {d['n_samples']} samples of {where}: {r['metric']} loss "
-            f"{r['refit_loss']:.6g} (original fit: {orig if orig is None else format(orig, '.6g')}"
-            + (
-                ""
-                if r["original_loss_on_refit_data"] is None
-                else f"; original model on these data: {r['original_loss_on_refit_data']:.6g}"
-            )
+            f"{r['refit_loss']:.6g} (original fit: {orig_txt}"
+            + ("" if on_data is None else f"; original model on these data: {on_data:.6g}")
             + ")"
         )
     lines += [f"note: {n}" for n in e.notes]
