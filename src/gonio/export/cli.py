@@ -55,6 +55,8 @@ target lacks, an unscaled sum for pbrt/openpbr, a Lambert-only fit for usd). The
 fitted with gonio.fit under the original fit's metric and angle cutoff to the measurement file
 recorded in the fit (data.path), or, when that file is gone, to the fitted model sampled on a
 dense half/difference grid; the output reports the refit loss next to the original fit's loss.
+Layered materials (Mitsuba roughplastic/principled, pbrt coateddiffuse, OpenPBR's dielectric
+base) are not used: no gonio model expresses them, so they could be neither exact nor refitted.
 Spectral fits are exported in linear sRGB (CIE 1931, D65; gonio.io.spectral); their indices of
 refraction are refitted on the RGB-converted data.
 

@@ -8,7 +8,9 @@ Dielectric(eta) Fresnel term is the conductor formula with ``k = 0``); a sum -> 
 divided by ``1 - w`` and the conductor's ``specular_reflectance`` = ``1 / w`` (a uniform
 spectrum, which Mitsuba accepts above 1). Refitted: other lobes, V-cavity shadowing, Blinn,
 Schlick or no Fresnel (Mitsuba's conductor has none of them): Lambert + TorranceSparrow(ggx or
-beckmann as fitted, smith, Conductor(eta, k)).
+beckmann as fitted, smith, Conductor(eta, k)). Not used: ``roughplastic`` (its diffuse part
+scatters inside the coating, which no gonio model expresses) and ``principled`` (a blend of
+several lobes with its own energy terms).
 
 Mitsuba's Smith term is the separable product ``G1(wi) G1(wo)``; gonio's is height-correlated.
 They agree at normal incidence and differ toward grazing angles (on the sphere under one

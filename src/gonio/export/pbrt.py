@@ -12,6 +12,8 @@ which pbrt evaluates as ``(1 - a) f_diffuse + a f_conductor``; pbrt's conductor 
 factor, so a sum is exact only in the form ``(1 - a) Lambert(R) + a TS``. Refitted: every
 other model, including an unscaled Lambert + GGX sum, to ``0.5 Lambert(R) + 0.5
 TorranceSparrow(ggx, smith, Conductor(eta, k))`` (``R`` <= 1, as pbrt clamps reflectances).
+pbrt's ``coateddiffuse`` is not used: it is a layered model evaluated by random walks, with no
+closed form that a gonio model (and so a refit) could express.
 """
 
 from __future__ import annotations
