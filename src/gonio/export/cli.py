@@ -50,7 +50,7 @@ are the families a target expresses exactly):
             roughness = sqrt(alpha); read additively (the spec leaves the coupling open).
 
 what is refitted: any fit outside the target's family (Ward, Phong, Blinn-Phong, Oren-Nayar,
-HTSG, Lafortune, Ashikhmin-Shirley, Beckmann or V-cavity outside Mitsuba, a Fresnel term the
+HTSG, Lafortune, Ashikhmin-Shirley, V-cavity shadowing, Beckmann outside Mitsuba, a Fresnel term the
 target lacks, an unscaled sum for pbrt/openpbr, a Lambert-only fit for usd). The family is then
 fitted with gonio.fit under the original fit's metric and angle cutoff to the measurement file
 recorded in the fit (data.path), or, when that file is gone, to the fitted model sampled on a
