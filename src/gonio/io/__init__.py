@@ -17,7 +17,13 @@ from gonio.io.detect import FORMATS, detect_format
 __all__ = ["FORMATS", "detect_format", "load", "save"]
 
 
-def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -> Any:
+def load(
+    path: PathLike,
+    *,
+    color: str | None = None,
+    illuminant: str = "D65",
+    negative: str = "keep",
+) -> Any:
     """Load a BRDF file, detecting its format from its content.
 
     Parameters
@@ -26,17 +32,20 @@ def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -
         A native ``*.brdf.h5`` file, MERL ``.binary``, RGL ``.bsdf``, Cornell ``.brdf`` or ALTA
         text file.
     color : {"rgb", "spectral", "keep"}, optional
-        For spectral sources (Cornell): ``"rgb"`` converts to linear sRGB through CIE 1931 XYZ
-        under ``illuminant``; default keeps the spectrum. For single-channel ALTA data ``"rgb"``
-        replicates the channel.
+        For spectral sources (Cornell, spectral RGL files): ``"rgb"`` converts to linear sRGB
+        through CIE 1931 XYZ under ``illuminant``; default keeps the spectrum. For
+        single-channel ALTA data ``"rgb"`` replicates the channel.
     illuminant : {"D65", "E"}
+    negative : {"keep", "clamp"}
+        RGL files only: keep the file's (few, slightly) negative colour values as the reference
+        reader does, or clamp them at 0 (see :mod:`gonio.io.rgl_measured`).
 
     Returns
     -------
-    TabulatedBRDF or MeasuredSamples
-        Gridded formats (native gridded, MERL, RGL) give a :class:`TabulatedBRDF`; RGL files are
-        tabulated on MERL's half/diff grid (use :func:`gonio.io.rgl.read_rgl` for the exact
-        evaluator). Scattered formats (native scattered, Cornell, ALTA) give
+    TabulatedBRDF, RGLMeasured or MeasuredSamples
+        Gridded formats (native gridded, MERL) give a :class:`TabulatedBRDF`; RGL files give an
+        exact :class:`~gonio.io.rgl_measured.RGLMeasured` (the file's own function and warps,
+        ``to_table()`` resamples it). Scattered formats (native scattered, Cornell, ALTA) give
         :class:`MeasuredSamples`.
 
     Raises
@@ -54,9 +63,9 @@ def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -
 
         return read_merl(path)
     if fmt == "rgl":
-        from gonio.io.rgl import read_rgl
+        from gonio.io.rgl_measured import load_rgl
 
-        return read_rgl(path).to_table()
+        return load_rgl(path, negative=negative, color=color, illuminant=illuminant)
     if fmt == "cornell":
         from gonio.io.cornell import read_cornell
 

@@ -389,10 +389,10 @@ class RGLBSDF:
         return Channels.rgb()
 
     def f_cos(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """The tabulated quantity ``f_r(wi, wo) * cos(theta_o)``, shape ``(..., C)``.
-
-        ``wi`` is the direction the tables are conditioned on (the file's "incident" direction).
-        Zero where either direction is at or below the horizon.
+        """The tabulated quantity ``F(wi, wo) = f_r * cos(theta_o)``, shape ``(..., C)``, in the
+        file's own argument order: ``wi`` is the direction the tables are conditioned on (the
+        file's "incident" direction, Mitsuba's ``si.wi``), ``wo`` the warped one. Zero where
+        either direction is at or below the horizon. (:meth:`f` swaps them: see there.)
         """
         assert self._vndf is not None and self._colour is not None
         wi = np.asarray(wi, dtype=np.float64)
@@ -431,15 +431,18 @@ class RGLBSDF:
         return np.where(active[..., None], out, 0.0)
 
     def f(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """BRDF ``f_r(wi, wo)`` in 1/sr, shape ``(..., C)`` (``f_cos / cos(theta_o)``).
+        """BRDF ``f_r(wi, wo)`` in 1/sr, shape ``(..., C)``: ``f_cos(wo, wi) / cos(theta_i)``.
 
-        Within about a degree of the horizon this grows like ``1 / cos(theta_o)`` because the
-        tabulated ``f_cos`` does not vanish there (see :meth:`to_table`'s ``min_cos``).
+        gonio's ``wi`` (toward the light) is the file's free direction and ``wo`` (toward the
+        viewer) the one its tables are conditioned on, as Mitsuba renders the file (``si.wi``
+        toward the camera); see :mod:`gonio.io.rgl_measured`. Within about a degree of the
+        horizon this grows like ``1 / cos(theta_i)`` because the tabulated ``f_cos`` does not
+        vanish there (see :meth:`to_table`'s ``min_cos``).
         """
-        wo = np.asarray(wo, dtype=np.float64)
-        cos_o = wo[..., 2]
-        val = self.f_cos(wi, wo)
-        return np.where((cos_o > 0)[..., None], val / np.where(cos_o > 0, cos_o, 1.0)[..., None], 0)
+        wi = np.asarray(wi, dtype=np.float64)
+        cos_i = wi[..., 2]
+        val = self.f_cos(wo, wi)
+        return np.where((cos_i > 0)[..., None], val / np.where(cos_i > 0, cos_i, 1.0)[..., None], 0)
 
     def to_table(
         self,
