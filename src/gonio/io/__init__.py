@@ -23,6 +23,7 @@ def load(
     color: str | None = None,
     illuminant: str = "D65",
     negative: str = "keep",
+    merl_cells: str = "centre",
 ) -> Any:
     """Load a BRDF file, detecting its format from its content.
 
@@ -39,6 +40,10 @@ def load(
     negative : {"keep", "clamp"}
         RGL files only: keep the file's (few, slightly) negative colour values as the reference
         reader does, or clamp them at 0 (see :mod:`gonio.io.rgl_measured`).
+    merl_cells : {"centre", "start"}
+        MERL files only: a cell's node (its sample position) at the cell centre in the warped
+        index (default; nearest lookup is then the reference reader's cell) or at its lower
+        edge (fastmerl / Neural-BRDF); see :mod:`gonio.io.merl`.
 
     Returns
     -------
@@ -61,7 +66,7 @@ def load(
     if fmt == "merl":
         from gonio.io.merl import read_merl
 
-        return read_merl(path)
+        return read_merl(path, cells=merl_cells)
     if fmt == "rgl":
         from gonio.io.rgl_measured import load_rgl
 
