@@ -90,9 +90,18 @@ def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
     An object with ``to_table()`` (e.g. :class:`gonio.io.rgl.RGLBSDF`) is tabulated first.
     ``.brdf.h5`` (or ``.h5``): native (``lossy``: guaranteed relative precision, e.g. 0.005);
     ``.binary``: MERL (RGB half/diff tables; others are resampled); ``.exr``: one image per
-    ``phi_d`` slice of a half/diff table (multi-part EXR).
+    ``phi_d`` slice of a half/diff table (multi-part EXR); ``.bsdf``: an RGL tensor file, from
+    any isotropic BRDF (a table, an analytic model; an RGL file is copied unchanged), see
+    :mod:`gonio.io.rgl_write`.
     """
     name = os.fspath(path).lower()
+    if name.endswith(".bsdf"):
+        if lossy is not None:
+            raise ParameterError("lossy encoding is only available for .brdf.h5 output")
+        from gonio.io.rgl_write import write_rgl
+
+        write_rgl(obj, path)
+        return
     if hasattr(obj, "to_table") and not hasattr(obj, "axes"):
         obj = obj.to_table()  # an exact evaluator (RGL BSDF): store its MERL-grid tabulation
     if lossy is not None and not name.endswith((".h5", ".hdf5")):
@@ -111,5 +120,5 @@ def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
         write_table_slices(obj, path)
     else:
         raise ParameterError(
-            f"{os.fspath(path)}: unknown output extension (use .brdf.h5, .binary or .exr)"
+            f"{os.fspath(path)}: unknown output extension (use .brdf.h5, .binary, .exr or .bsdf)"
         )

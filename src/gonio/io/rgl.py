@@ -323,36 +323,63 @@ class RGLBSDF:
         ndf = need("ndf", 2)
         sigma = need("sigma", 2)
         vndf = need("vndf", 4)
+        luminance = need("luminance", 4)
         description = need("description", 1, "u1")
         jac = need("jacobian", 1, "u1")
         spectral = "wavelengths" in fields
         if spectral:
+            colour_name = "spectra"
             colour = need("spectra", 5)
             wavelengths = need("wavelengths", 1).astype(np.float64)
         else:
+            colour_name = "rgb"
             colour = need("rgb", 5)
             wavelengths = np.arange(3.0)
         np_, nt = len(phi_i), len(theta_i)
-        if vndf.shape[:2] != (np_, nt) or colour.shape[:2] != (np_, nt):
-            raise fail(path, f"vndf/colour tables do not match phi_i ({np_}) x theta_i ({nt})")
+        for name, arr in (("vndf", vndf), ("luminance", luminance), (colour_name, colour)):
+            if arr.shape[:2] != (np_, nt):
+                raise fail(
+                    path,
+                    f"field {name!r} has shape {arr.shape}, expected leading axes "
+                    f"({np_}, {nt}) from the lengths of 'phi_i' and 'theta_i'",
+                )
         if colour.shape[2] != len(wavelengths):
             raise fail(
-                path, f"colour table has {colour.shape[2]} channels, expected {len(wavelengths)}"
+                path,
+                f"field {colour_name!r} has {colour.shape[2]} channels, expected "
+                f"{len(wavelengths)}",
             )
-        if min(ndf.shape) < 2 or min(sigma.shape) < 2 or min(vndf.shape[2:]) < 2:
-            raise fail(path, "ndf/sigma/vndf grids must be at least 2 x 2")
-        if min(colour.shape[3:]) < 2:
-            raise fail(path, "colour grid must be at least 2 x 2")
+        if luminance.shape[2:] != colour.shape[3:]:
+            raise fail(
+                path,
+                f"field 'luminance' grid {luminance.shape[2:]} differs from the "
+                f"{colour_name!r} grid {colour.shape[3:]}",
+            )
+        for name, grid in (
+            ("ndf", ndf.shape),
+            ("sigma", sigma.shape),
+            ("vndf", vndf.shape[2:]),
+            ("luminance", luminance.shape[2:]),
+            (colour_name, colour.shape[3:]),
+        ):
+            if min(grid) < 2:
+                raise fail(path, f"field {name!r} grid {grid} must be at least 2 x 2")
         if jac.shape != (1,):
-            raise fail(path, "jacobian field must hold one byte")
+            raise fail(path, "field 'jacobian' must hold one byte")
         for name, arr in (("theta_i", theta_i), ("phi_i", phi_i)):
             if len(arr) > 1 and np.any(np.diff(arr) <= 0):
-                raise fail(path, f"{name} values are not strictly increasing")
-        if np.any(vndf < 0) or np.any(sigma <= 0) or np.any(ndf < 0):
-            raise fail(path, "negative vndf/ndf or non-positive sigma values")
-        slice_sums = vndf.reshape(np_ * nt, -1).sum(axis=1)
-        if np.any(slice_sums <= 0):
-            raise fail(path, "a vndf slice is identically zero")
+                raise fail(path, f"field {name!r} values are not strictly increasing")
+        if spectral and len(wavelengths) > 1 and np.any(np.diff(wavelengths) <= 0):
+            raise fail(path, "field 'wavelengths' values are not strictly increasing")
+        for name, arr in (("vndf", vndf), ("ndf", ndf), ("luminance", luminance)):
+            if np.any(arr < 0):
+                raise fail(path, f"field {name!r} has negative values (min {float(arr.min()):g})")
+        if np.any(sigma <= 0):
+            raise fail(path, "field 'sigma' has non-positive values (projected areas are > 0)")
+        for name, arr in (("vndf", vndf), ("luminance", luminance)):
+            sums = arr.reshape(np_ * nt, -1).sum(axis=1)
+            if np.any(sums <= 0):
+                raise fail(path, f"field {name!r} has an identically zero slice")
         isotropic = np_ <= 2
         reduction = 0
         if not isotropic:
