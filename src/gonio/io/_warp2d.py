@@ -198,7 +198,7 @@ def eval_channels(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> Array:
     n = h * w
     c_count = int(warp.data.shape[1]) // n
     corners = _corners(warp, params, dtype)
-    px, py, fx, fy = _patch(warp, pos)
+    px, py, fx, fy = materialize(_patch(warp, pos), pos[..., 0])
     i = py * w + px
     row = c_count * n
     out = []
@@ -233,7 +233,7 @@ def invert(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> tuple[Array, 
     h, w = _hw(warp)
     n = h * w
     corners = _corners(warp, params, dtype)
-    px, py, x, y = _patch(warp, pos)
+    px, py, x, y = materialize(_patch(warp, pos), pos[..., 0])
     v00, v10, v01, v11 = _patch_values(warp, corners, px, py, dtype)
     c0 = (1 - y) * v00 + y * v01
     c1 = (1 - y) * v10 + y * v11

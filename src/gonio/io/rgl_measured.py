@@ -65,6 +65,7 @@ from gonio.brdf.models._base import (
     masked_outgoing,
     sample_inputs,
 )
+from gonio.brdf.tabulated import atan2 as _atan2  # exact in float64, fast polynomial in float32
 from gonio.errors import ParameterError
 from gonio.io import _warp2d as w2
 from gonio.io._common import PathLike
@@ -92,9 +93,12 @@ class _Static:
 
 
 def _elevation(d: Array) -> Array:
-    """Polar angle of unit vectors, stable near the pole (as the reference reader)."""
-    dist = jnp.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2 + (d[..., 2] - 1.0) ** 2)
-    return 2.0 * jnp.arcsin(jnp.clip(0.5 * dist, -1.0, 1.0))
+    """Polar angle of unit vectors, stable near the pole: the reference reader's formula in
+    float64; in float32 ``atan2(hypot(x, y), z)`` (as stable; XLA's float32 ``asin`` is slow)."""
+    if d.dtype == jnp.float64:
+        dist = jnp.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2 + (d[..., 2] - 1.0) ** 2)
+        return 2.0 * jnp.arcsin(jnp.clip(0.5 * dist, -1.0, 1.0))
+    return _atan2(jnp.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2), d[..., 2])
 
 
 def _theta2u(theta: Array) -> Array:
@@ -208,7 +212,7 @@ class RGLMeasured(BRDFModel):
 
     def _cond(self, wc: Array) -> tuple[Array, Array, Array]:
         theta_c = _elevation(wc)
-        phi_c = jnp.arctan2(wc[..., 1], wc[..., 0])
+        phi_c = _atan2(wc[..., 1], wc[..., 0])
         return theta_c, phi_c, jnp.stack([_theta2u(theta_c), _phi2u(phi_c)], -1)
 
     def _colour_at(self, pos: Array, phi_c: Array, theta_c: Array) -> Array:
@@ -226,7 +230,7 @@ class RGLMeasured(BRDFModel):
         m = m / jnp.maximum(jnp.linalg.norm(m, axis=-1, keepdims=True), 1e-30)
         theta_c, phi_c, u_c = self._cond(wc)
         theta_m = _elevation(m)
-        phi_m = jnp.arctan2(m[..., 1], m[..., 0])
+        phi_m = _atan2(m[..., 1], m[..., 0])
         um1 = _phi2u(phi_m - phi_c if self._static.isotropic else phi_m)
         u_m = jnp.stack([_theta2u(theta_m), um1 - jnp.floor(um1)], -1)
         return m, theta_m, theta_c, phi_c, u_c, u_m
