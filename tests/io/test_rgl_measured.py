@@ -289,3 +289,16 @@ def test_to_table_is_the_explicit_resampling():
     wi, wo = (w.reshape(-1, 3) for w in t.node_directions())
     ok = t.mask.reshape(-1)
     np.testing.assert_allclose(t.values.reshape(-1, 3)[ok], np.asarray(m.f(wi, wo))[ok], rtol=1e-5)
+
+
+def test_cli_render_takes_a_bsdf_file(tmp_path, capsys):
+    import json
+
+    from gonio.cli import main
+
+    path = shared_file("rgl", "paper_white_rgb.bsdf")
+    out = tmp_path / "paper.png"
+    rc = main(["render", "--measured", str(path), "--light", "dir:25,60", "--resolution", "16",
+               "--out", str(out), "--json"])  # fmt: skip
+    assert rc == 0 and out.stat().st_size > 100
+    assert "measured" in json.loads(capsys.readouterr().out)["images"]
