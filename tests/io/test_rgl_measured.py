@@ -128,6 +128,8 @@ def test_float32_evaluation_matches_float64():
 SAMPLED = ["paper_white_rgb.bsdf", "acrylic_felt_green_rgb.bsdf", "vch_golden_yellow_rgb.bsdf"]
 WO_DEG = [0.0, 30.0, 60.0, 80.0]
 N_CHI2 = len(SAMPLED) * len(WO_DEG)
+# the default run keeps normal and grazing incidence; the middle angles run with -m slow
+WO_PARAMS = [d if d in (0.0, 80.0) else pytest.param(d, marks=pytest.mark.slow) for d in WO_DEG]
 
 
 def _wo(deg: float, phi: float = 0.7) -> np.ndarray:
@@ -136,7 +138,7 @@ def _wo(deg: float, phi: float = 0.7) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", SAMPLED)
-@pytest.mark.parametrize("deg", WO_DEG)
+@pytest.mark.parametrize("deg", WO_PARAMS)
 def test_sampling_passes_chi_square(name, deg):
     m = load_rgl(shared_file("rgl", name))
     wo = _wo(deg)
@@ -181,7 +183,7 @@ def _albedo_quadrature(m: RGLMeasured, wo: np.ndarray, n: int = 512) -> np.ndarr
 
 
 @pytest.mark.parametrize("name", SAMPLED)
-@pytest.mark.parametrize("deg", [10.0, 45.0, 75.0])
+@pytest.mark.parametrize("deg", [10.0, pytest.param(45.0, marks=pytest.mark.slow), 75.0])
 def test_mean_weight_matches_quadrature_albedo(name, deg):
     m = load_rgl(shared_file("rgl", name))
     wo = _wo(deg)
