@@ -160,3 +160,14 @@ def test_unwritable_sources_are_refused_and_nothing_is_written(tmp_path):
     with pytest.raises(ParameterError, match="isotropic"):
         io.save(aniso, p)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_clamped_rgl_file_is_written_as_loaded(tmp_path):
+    path = shared_file("rgl", "vch_golden_yellow_rgb.bsdf")
+    q = tmp_path / "clamped.bsdf"
+    io.save(io.load(path, negative="clamp"), q)
+    back = rgl.parse_tensor_file(q.read_bytes())
+    orig = rgl.parse_tensor_file(path.read_bytes())
+    assert back["rgb"].min() >= 0 and orig["rgb"].min() < 0
+    np.testing.assert_array_equal(back["rgb"], np.maximum(orig["rgb"], 0))
+    assert np.array_equal(back["vndf"], orig["vndf"])

@@ -234,17 +234,42 @@ def rgl_fields(src: Any, description: str = "") -> dict[str, np.ndarray]:
     return fields
 
 
+def _loaded_fields(obj: Any, fields: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The fields of a loaded RGL file as loaded: unchanged (a lossless copy), or with its
+    colour table clamped (``negative="clamp"``) or converted to RGB (``color="rgb"``)."""
+    st = obj._static
+    fields = dict(fields)
+    key = "spectra" if st.spectral else "rgb"
+    colour = fields[key]
+    if st.negative == "clamp":
+        colour = np.maximum(colour, np.float32(0.0))
+    if st.to_rgb:
+        matrix = np.asarray(obj._matrix, np.float64)
+        if matrix.shape[1] != 3:
+            raise ParameterError("a channel subset of an RGL file cannot be written as .bsdf")
+        colour = np.einsum("ptcyx,cd->ptdyx", colour.astype(np.float64), matrix)
+        fields.pop("spectra", None)
+        fields.pop("wavelengths", None)
+        key = "rgb"
+    fields[key] = colour.astype(np.float32)
+    return fields
+
+
 def write_rgl(obj: Any, path: PathLike, description: str | None = None) -> None:
     """Write ``obj`` as an RGL ``.bsdf`` tensor file, atomically.
 
-    ``obj`` is an RGL file loaded by gonio (its fields are written back unchanged), or any
+    ``obj`` is an RGL file loaded by gonio (its fields are written back unchanged, or as loaded
+    with ``negative="clamp"`` / ``color="rgb"``), or any
     isotropic BRDF with ``f(wi, wo)``: a table, an acquisition's gridded table, an analytic
     model. Scattered samples and anisotropic tables are refused (grid them first).
     """
     from gonio.io.rgl import RGLBSDF, read_rgl, tensor_file_bytes
+    from gonio.io.rgl_measured import RGLMeasured
 
-    if hasattr(obj, "f_cos") and hasattr(obj, "path") and os.path.exists(str(obj.path)):
-        fields = read_rgl(obj.path).fields  # an RGL file: copy it losslessly
+    if isinstance(obj, RGLMeasured) and os.path.exists(obj.path):
+        fields = _loaded_fields(obj, read_rgl(obj.path).fields)
+    elif hasattr(obj, "f_cos") and hasattr(obj, "fields"):  # a gonio.io.rgl.RGLBSDF
+        fields = dict(obj.fields)
     else:
         if not hasattr(obj, "f"):
             raise ParameterError(
