@@ -116,7 +116,7 @@ def test_f_equals_the_reference_readers(name):
 
 def test_float32_evaluation_matches_float64():
     m = load_rgl(shared_file("rgl", "cc_ibiza_sunset_rgb.bsdf"))
-    wi, wo = _pairs(3000, seed=4)
+    wi, wo = _pairs(2000, seed=4)
     a = np.asarray(m.f(wi.astype(np.float32), wo.astype(np.float32)))
     assert a.dtype == np.float32
     rel = _rel(a.astype(np.float64), np.asarray(m.f(wi, wo)))
@@ -159,8 +159,8 @@ def test_sampling_passes_chi_square(name, deg):
 def test_sample_weight_is_f_cos_over_pdf_and_pdf_is_consistent(name):
     m = load_rgl(shared_file("rgl", name))
     rng = np.random.default_rng(2)
-    wo = _hemi(rng, 4000, math.cos(math.radians(80)))
-    s = m.sample(wo, rng.random((4000, 2)))
+    wo = _hemi(rng, 2000, math.cos(math.radians(80)))  # the shape of other tests: one compile
+    s = m.sample(wo, rng.random((2000, 2)))
     ok = np.asarray(s.pdf) > 0
     assert ok.mean() > 0.9
     wi = np.asarray(s.wi)[ok]
@@ -200,7 +200,7 @@ def test_negative_values_are_kept_by_default_and_clamped_on_request():
     keep = load_rgl(path)
     clamp = load_rgl(path, negative="clamp")
     assert (rgl.read_rgl(path).fields["rgb"] < 0).mean() > 0.01
-    wi, wo = _pairs(20000, seed=5)
+    wi, wo = _pairs(2000, seed=5)
     fk = np.asarray(keep.f(wi, wo))
     fc = np.asarray(clamp.f(wi, wo))
     assert (fk < 0).any() and (fc >= 0).all()
@@ -209,8 +209,8 @@ def test_negative_values_are_kept_by_default_and_clamped_on_request():
     assert np.all(fc >= fk - 1e-12)
     assert np.mean(np.isclose(fc, fk, rtol=1e-12, atol=0)) > 0.8
     # sampling does not depend on the colour table: same directions and pdf
-    u = np.random.default_rng(0).random((1000, 2))
-    a, b = keep.sample(wo[:1000], u), clamp.sample(wo[:1000], u)
+    u = np.random.default_rng(0).random((2000, 2))
+    a, b = keep.sample(wo, u), clamp.sample(wo, u)
     np.testing.assert_array_equal(np.asarray(a.wi), np.asarray(b.wi))
     np.testing.assert_array_equal(np.asarray(a.pdf), np.asarray(b.pdf))
     assert (np.asarray(b.weight) >= 0).all()
