@@ -16,9 +16,12 @@ reference implementation accompanying the paper), re-implemented here in NumPy:
    conditioned on ``(phi_i, theta_i, channel)``;
 4. if ``jacobian`` is set the value is multiplied by ``ndf(u(wm)) / (4 sigma(u(wi)))``.
 
-The result is ``f_r * cos(theta_o)``; :meth:`RGLBSDF.f` divides by ``cos(theta_o)``. Here the
-file's "incident" direction (the one the tables are conditioned on) is gonio's ``wi`` (toward the
-light) and the cosine belongs to ``wo``.
+The result is ``F = f_r * cos(theta_o)`` in the file's own order (:meth:`RGLBSDF.f_cos`; the
+file's "incident" direction is the one the tables are conditioned on). gonio's :meth:`RGLBSDF.f`
+follows Mitsuba's rendering convention, where that direction is the viewer's (``si.wi`` points to
+the camera): ``f(wi, wo) = F(wo, wi) / cos(theta_i)``, see :mod:`gonio.io.rgl_measured`, whose
+JAX :class:`~gonio.io.rgl_measured.RGLMeasured` is what :func:`gonio.io.load` returns. This
+NumPy evaluator is its independent reference and the source of :meth:`RGLBSDF.to_table`.
 """
 
 from __future__ import annotations
