@@ -39,8 +39,9 @@ def test_table_axes_are_merl_bins(tmp_path):
     p = tmp_path / "m.binary"
     p.write_bytes(_handmade({}))
     t = load(p)
-    th, td, pd = (a.nodes() for a in t.axes)
-    # README: theta_h bin edges (i/90)^2 pi/2; theta_d i/90 pi/2; phi_d i/180 pi
+    # README: theta_h bin edges (i/90)^2 pi/2; theta_d i/90 pi/2; phi_d i/180 pi; the default
+    # nodes sit at the cells' centres (tests/io/test_merl_cells.py)
+    th, td, pd = (a.nodes() for a in load(p, merl_cells="start").axes)
     np.testing.assert_allclose(th[:4], (np.arange(4) / 90) ** 2 * math.pi / 2)
     np.testing.assert_allclose(td[[0, 45]], [0, math.pi / 4])
     np.testing.assert_allclose(pd[[0, 90]], [0, math.pi / 2])

@@ -603,7 +603,7 @@ def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence
             if best_w is None:
                 best_w, best_flat = score, flat
             else:
-                better = score > best_w
+                better = score >= best_w  # ties go to the upper node: floor of the index
                 best_w = jnp.where(better, score, best_w)
                 best_flat = jnp.where(better, flat, best_flat)
         val = jnp.take(vals, best_flat, axis=0, mode="clip").astype(dtype)

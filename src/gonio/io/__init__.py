@@ -17,7 +17,14 @@ from gonio.io.detect import FORMATS, detect_format
 __all__ = ["FORMATS", "detect_format", "load", "save"]
 
 
-def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -> Any:
+def load(
+    path: PathLike,
+    *,
+    color: str | None = None,
+    illuminant: str = "D65",
+    negative: str = "keep",
+    merl_cells: str = "centre",
+) -> Any:
     """Load a BRDF file, detecting its format from its content.
 
     Parameters
@@ -26,17 +33,24 @@ def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -
         A native ``*.brdf.h5`` file, MERL ``.binary``, RGL ``.bsdf``, Cornell ``.brdf`` or ALTA
         text file.
     color : {"rgb", "spectral", "keep"}, optional
-        For spectral sources (Cornell): ``"rgb"`` converts to linear sRGB through CIE 1931 XYZ
-        under ``illuminant``; default keeps the spectrum. For single-channel ALTA data ``"rgb"``
-        replicates the channel.
+        For spectral sources (Cornell, spectral RGL files): ``"rgb"`` converts to linear sRGB
+        through CIE 1931 XYZ under ``illuminant``; default keeps the spectrum. For
+        single-channel ALTA data ``"rgb"`` replicates the channel.
     illuminant : {"D65", "E"}
+    negative : {"keep", "clamp"}
+        RGL files only: keep the file's (few, slightly) negative colour values as the reference
+        reader does, or clamp them at 0 (see :mod:`gonio.io.rgl_measured`).
+    merl_cells : {"centre", "start"}
+        MERL files only: a cell's node (its sample position) at the cell centre in the warped
+        index (default; nearest lookup is then the reference reader's cell) or at its lower
+        edge (fastmerl / Neural-BRDF); see :mod:`gonio.io.merl`.
 
     Returns
     -------
-    TabulatedBRDF or MeasuredSamples
-        Gridded formats (native gridded, MERL, RGL) give a :class:`TabulatedBRDF`; RGL files are
-        tabulated on MERL's half/diff grid (use :func:`gonio.io.rgl.read_rgl` for the exact
-        evaluator). Scattered formats (native scattered, Cornell, ALTA) give
+    TabulatedBRDF, RGLMeasured or MeasuredSamples
+        Gridded formats (native gridded, MERL) give a :class:`TabulatedBRDF`; RGL files give an
+        exact :class:`~gonio.io.rgl_measured.RGLMeasured` (the file's own function and warps,
+        ``to_table()`` resamples it). Scattered formats (native scattered, Cornell, ALTA) give
         :class:`MeasuredSamples`.
 
     Raises
@@ -52,11 +66,11 @@ def load(path: PathLike, *, color: str | None = None, illuminant: str = "D65") -
     if fmt == "merl":
         from gonio.io.merl import read_merl
 
-        return read_merl(path)
+        return read_merl(path, cells=merl_cells)
     if fmt == "rgl":
-        from gonio.io.rgl import read_rgl
+        from gonio.io.rgl_measured import load_rgl
 
-        return read_rgl(path).to_table()
+        return load_rgl(path, negative=negative, color=color, illuminant=illuminant)
     if fmt == "cornell":
         from gonio.io.cornell import read_cornell
 
@@ -76,9 +90,18 @@ def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
     An object with ``to_table()`` (e.g. :class:`gonio.io.rgl.RGLBSDF`) is tabulated first.
     ``.brdf.h5`` (or ``.h5``): native (``lossy``: guaranteed relative precision, e.g. 0.005);
     ``.binary``: MERL (RGB half/diff tables; others are resampled); ``.exr``: one image per
-    ``phi_d`` slice of a half/diff table (multi-part EXR).
+    ``phi_d`` slice of a half/diff table (multi-part EXR); ``.bsdf``: an RGL tensor file, from
+    any isotropic BRDF (a table, an analytic model; an RGL file is copied unchanged), see
+    :mod:`gonio.io.rgl_write`.
     """
     name = os.fspath(path).lower()
+    if name.endswith(".bsdf"):
+        if lossy is not None:
+            raise ParameterError("lossy encoding is only available for .brdf.h5 output")
+        from gonio.io.rgl_write import write_rgl
+
+        write_rgl(obj, path)
+        return
     if hasattr(obj, "to_table") and not hasattr(obj, "axes"):
         obj = obj.to_table()  # an exact evaluator (RGL BSDF): store its MERL-grid tabulation
     if lossy is not None and not name.endswith((".h5", ".hdf5")):
@@ -97,5 +120,5 @@ def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
         write_table_slices(obj, path)
     else:
         raise ParameterError(
-            f"{os.fspath(path)}: unknown output extension (use .brdf.h5, .binary or .exr)"
+            f"{os.fspath(path)}: unknown output extension (use .brdf.h5, .binary, .exr or .bsdf)"
         )

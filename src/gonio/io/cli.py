@@ -29,11 +29,12 @@ def register(subparsers: Any) -> None:
         help="convert between BRDF formats",
         description="Convert a BRDF file. The input format is detected from its content; the "
         "output format comes from OUT's extension: .brdf.h5 (native HDF5), .binary (MERL, RGB "
-        "tables; other grids are resampled) or .exr (one image per phi_d slice). Output is "
-        "written atomically: on any error nothing is written.",
+        "tables; other grids are resampled), .exr (one image per phi_d slice) or .bsdf (RGL "
+        "tensor file for Mitsuba's measured BSDF, from any isotropic table; an RGL input is "
+        "copied unchanged). Output is written atomically: on any error nothing is written.",
     )
     c.add_argument("input", metavar="IN", help="input file")
-    c.add_argument("output", metavar="OUT", help="output file (.brdf.h5, .binary or .exr)")
+    c.add_argument("output", metavar="OUT", help="output file (.brdf.h5, .binary, .exr or .bsdf)")
     c.add_argument(
         "--lossy",
         metavar="PRECISION",
@@ -160,9 +161,9 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if os.path.abspath(args.input) == os.path.abspath(args.output):
         raise ParameterError("IN and OUT are the same file")
     out_name = args.output.lower()
-    if not out_name.endswith((".h5", ".hdf5", ".binary", ".exr")):
+    if not out_name.endswith((".h5", ".hdf5", ".binary", ".exr", ".bsdf")):
         raise ParameterError(
-            f"{args.output}: unknown output extension (use .brdf.h5, .binary or .exr)"
+            f"{args.output}: unknown output extension (use .brdf.h5, .binary, .exr or .bsdf)"
         )
     if lossy is not None and not out_name.endswith((".h5", ".hdf5")):
         raise ParameterError("--lossy applies to .brdf.h5 output only")
@@ -179,7 +180,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     )
     with progress:
         task = progress.add_task(f"reading {fmt}", total=1)
-        if fmt == "rgl":
+        if fmt == "rgl" and not out_name.endswith(".bsdf"):
             from gonio.io.rgl import read_rgl
 
             progress.update(task, description="tabulating RGL BSDF")

@@ -6,9 +6,30 @@ then three blocks of ``n`` float64 values (all red, then all green, then all blu
 BRDF in 1/sr is ``stored * scale`` with scales (1/1500, 1.15/1500, 1.66/1500) for (R, G, B).
 Negative values mark cells that were not measured (below the horizon); they become invalid cells.
 
-Cell ``i`` of each axis starts at the node of :meth:`TabulatedBRDF.merl_axes` (node offset 0):
-``theta_h = (i / 90)^2 * pi/2``, ``theta_d = i / 90 * pi/2``, ``phi_d = i / 180 * pi`` where
-``phi_d`` is folded to ``[0, pi)`` by reciprocity.
+Cells and lookups
+-----------------
+Cell ``i`` of each axis spans the warped index ``[i, i + 1)`` of the reference reader
+(BRDFRead.cpp): ``floor(sqrt(theta_h / (pi/2)) * 90)``, ``floor(theta_d / (pi/2) * 90)`` and
+``floor(phi_d / pi * 180)`` with ``phi_d += pi`` where negative (reciprocity), each clamped to
+the grid. Its edges are ``theta_h = (i / 90)^2 pi/2``, ``theta_d = i / 90 * pi/2``,
+``phi_d = i / 180 * pi``.
+
+By default (``cells="centre"``) a cell's node, the position that stands for it wherever cells are
+used as sample positions (fitting, conversion, plots, resampling on write), is its centre in the
+warped index: ``theta_h = ((i + 1/2) / 90)^2 pi/2``, ``theta_d = (i + 1/2) / 90 * pi/2``,
+``phi_d = (i + 1/2) / 180 * pi`` (axes with ``node_offset = 0.5``). Then the table's nearest
+lookup (``interpolation="nearest"``, the default for MERL files) returns the cell the reference
+reader returns, and multilinear interpolation interpolates between cell centres.
+``cells="start"`` places nodes at the cells' lower edges (``node_offset = 0``), the convention of
+fastmerl and of the Neural-BRDF code, for results that must match those; its nearest lookup
+rounds to the closest lower edge, which is not the reference reader's cell.
+
+Two limits of "the reference's cell": directions within rounding of a cell edge can fall on
+either side, since gonio and BRDFRead.cpp compute the half/difference angles with different
+formulas (the reference's ``acos(h_z)`` is accurate to ~1e-12 rad near the pole, about 2e-9 of
+the first ``theta_h`` cell's width; elsewhere the two agree far closer); and for invalid
+(unmeasured) cells the reference returns the stored negative marker, where gonio's nearest
+lookup returns the nearest valid node instead.
 """
 
 from __future__ import annotations
@@ -81,32 +102,51 @@ def read_merl_arrays(path: PathLike) -> MerlArrays:
     return parse_merl_bytes(read_bytes(path), path)
 
 
-def merl_axes(dims: tuple[int, int, int] = MERL_DIMS) -> tuple[Any, Any, Any]:
-    """The ``(theta_h, theta_d, phi_d)`` axes of a MERL file of resolution ``dims``."""
+#: Node offset of each cell convention (see the module docstring).
+CELL_CONVENTIONS = {"centre": 0.5, "start": 0.0}
+
+
+def _node_offset(cells: str) -> float:
+    if cells not in CELL_CONVENTIONS:
+        from gonio.errors import ParameterError
+
+        raise ParameterError(f"cells must be 'centre' or 'start', got {cells!r}")
+    return CELL_CONVENTIONS[cells]
+
+
+def merl_axes(
+    dims: tuple[int, int, int] = MERL_DIMS, cells: str = "centre"
+) -> tuple[Any, Any, Any]:
+    """The ``(theta_h, theta_d, phi_d)`` axes of a MERL file of resolution ``dims``, with nodes
+    at the cell centres (``cells="centre"``) or lower edges (``"start"``) in the warped index."""
     from gonio.brdf.tabulated import Axis
 
     half_pi = math.pi / 2
+    off = _node_offset(cells)
     return (
-        Axis("theta_h", int(dims[0]), 0.0, half_pi, "sqrt", False, 0.0),
-        Axis("theta_d", int(dims[1]), 0.0, half_pi, "linear", False, 0.0),
-        Axis("phi_d", int(dims[2]), 0.0, math.pi, "linear", True, 0.0),
+        Axis("theta_h", int(dims[0]), 0.0, half_pi, "sqrt", False, off),
+        Axis("theta_d", int(dims[1]), 0.0, half_pi, "linear", False, off),
+        Axis("phi_d", int(dims[2]), 0.0, math.pi, "linear", True, off),
     )
 
 
-def read_merl(path: PathLike) -> TabulatedBRDF:
-    """Read a MERL ``.binary`` file as a ``half_diff_iso`` :class:`TabulatedBRDF` (RGB, 1/sr)."""
+def read_merl(path: PathLike, cells: str = "centre") -> TabulatedBRDF:
+    """Read a MERL ``.binary`` file as a ``half_diff_iso`` :class:`TabulatedBRDF` (RGB, 1/sr),
+    nodes at the cell centres (default) or, with ``cells="start"``, at their lower edges (see
+    the module docstring)."""
     from gonio.brdf.tabulated import Channels, TabulatedBRDF
 
+    axes = merl_axes(MERL_DIMS, cells)  # checks ``cells`` before reading
     arrays = read_merl_arrays(path)
     return TabulatedBRDF(
         values=arrays.values.astype(np.float32),
-        axes=merl_axes(arrays.mask.shape),
+        axes=merl_axes(arrays.mask.shape, cells) if arrays.mask.shape != MERL_DIMS else axes,
         parameterization="half_diff_iso",
         mask=arrays.mask,
         sigma=None,
         counts=None,
         channels=Channels.rgb(),
-        meta={"source": {"format": "merl", "file": str(path)}},
+        meta={"source": {"format": "merl", "file": str(path), "cells": cells}},
         interpolation="nearest",
     )
 
@@ -134,7 +174,8 @@ def _on_merl_grid(table: TabulatedBRDF) -> bool:
     want = merl_axes(tuple(a.size for a in table.axes))
     for a, b in zip(table.axes, want, strict=True):
         same = (a.size, a.warp, a.periodic) == (b.size, b.warp, b.periodic)
-        close = np.allclose([a.lo, a.hi, a.node_offset], [b.lo, b.hi, b.node_offset])
+        # either node convention names the same cells
+        close = np.allclose([a.lo, a.hi], [b.lo, b.hi]) and a.node_offset in (0.0, 0.5)
         if not (same and close):
             return False
     return True
@@ -145,7 +186,7 @@ def write_merl(table: Any, path: PathLike) -> None:
 
     A table already on a MERL-like half/diff grid is written cell for cell; anything else (another
     grid, an anisotropic table, an analytic model with ``f``) is resampled by evaluating
-    ``table.f`` at the MERL nodes. Invalid cells are written as -1.
+    ``table.f`` at the MERL cell centres. Invalid cells are written as -1.
     """
     from gonio.brdf import frames
 

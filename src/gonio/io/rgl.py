@@ -16,9 +16,12 @@ reference implementation accompanying the paper), re-implemented here in NumPy:
    conditioned on ``(phi_i, theta_i, channel)``;
 4. if ``jacobian`` is set the value is multiplied by ``ndf(u(wm)) / (4 sigma(u(wi)))``.
 
-The result is ``f_r * cos(theta_o)``; :meth:`RGLBSDF.f` divides by ``cos(theta_o)``. Here the
-file's "incident" direction (the one the tables are conditioned on) is gonio's ``wi`` (toward the
-light) and the cosine belongs to ``wo``.
+The result is ``F = f_r * cos(theta_o)`` in the file's own order (:meth:`RGLBSDF.f_cos`; the
+file's "incident" direction is the one the tables are conditioned on). gonio's :meth:`RGLBSDF.f`
+follows Mitsuba's rendering convention, where that direction is the viewer's (``si.wi`` points to
+the camera): ``f(wi, wo) = F(wo, wi) / cos(theta_i)``, see :mod:`gonio.io.rgl_measured`, whose
+JAX :class:`~gonio.io.rgl_measured.RGLMeasured` is what :func:`gonio.io.load` returns. This
+NumPy evaluator is its independent reference and the source of :meth:`RGLBSDF.to_table`.
 """
 
 from __future__ import annotations
@@ -323,36 +326,63 @@ class RGLBSDF:
         ndf = need("ndf", 2)
         sigma = need("sigma", 2)
         vndf = need("vndf", 4)
+        luminance = need("luminance", 4)
         description = need("description", 1, "u1")
         jac = need("jacobian", 1, "u1")
         spectral = "wavelengths" in fields
         if spectral:
+            colour_name = "spectra"
             colour = need("spectra", 5)
             wavelengths = need("wavelengths", 1).astype(np.float64)
         else:
+            colour_name = "rgb"
             colour = need("rgb", 5)
             wavelengths = np.arange(3.0)
         np_, nt = len(phi_i), len(theta_i)
-        if vndf.shape[:2] != (np_, nt) or colour.shape[:2] != (np_, nt):
-            raise fail(path, f"vndf/colour tables do not match phi_i ({np_}) x theta_i ({nt})")
+        for name, arr in (("vndf", vndf), ("luminance", luminance), (colour_name, colour)):
+            if arr.shape[:2] != (np_, nt):
+                raise fail(
+                    path,
+                    f"field {name!r} has shape {arr.shape}, expected leading axes "
+                    f"({np_}, {nt}) from the lengths of 'phi_i' and 'theta_i'",
+                )
         if colour.shape[2] != len(wavelengths):
             raise fail(
-                path, f"colour table has {colour.shape[2]} channels, expected {len(wavelengths)}"
+                path,
+                f"field {colour_name!r} has {colour.shape[2]} channels, expected "
+                f"{len(wavelengths)}",
             )
-        if min(ndf.shape) < 2 or min(sigma.shape) < 2 or min(vndf.shape[2:]) < 2:
-            raise fail(path, "ndf/sigma/vndf grids must be at least 2 x 2")
-        if min(colour.shape[3:]) < 2:
-            raise fail(path, "colour grid must be at least 2 x 2")
+        if luminance.shape[2:] != colour.shape[3:]:
+            raise fail(
+                path,
+                f"field 'luminance' grid {luminance.shape[2:]} differs from the "
+                f"{colour_name!r} grid {colour.shape[3:]}",
+            )
+        for name, grid in (
+            ("ndf", ndf.shape),
+            ("sigma", sigma.shape),
+            ("vndf", vndf.shape[2:]),
+            ("luminance", luminance.shape[2:]),
+            (colour_name, colour.shape[3:]),
+        ):
+            if min(grid) < 2:
+                raise fail(path, f"field {name!r} grid {grid} must be at least 2 x 2")
         if jac.shape != (1,):
-            raise fail(path, "jacobian field must hold one byte")
+            raise fail(path, "field 'jacobian' must hold one byte")
         for name, arr in (("theta_i", theta_i), ("phi_i", phi_i)):
             if len(arr) > 1 and np.any(np.diff(arr) <= 0):
-                raise fail(path, f"{name} values are not strictly increasing")
-        if np.any(vndf < 0) or np.any(sigma <= 0) or np.any(ndf < 0):
-            raise fail(path, "negative vndf/ndf or non-positive sigma values")
-        slice_sums = vndf.reshape(np_ * nt, -1).sum(axis=1)
-        if np.any(slice_sums <= 0):
-            raise fail(path, "a vndf slice is identically zero")
+                raise fail(path, f"field {name!r} values are not strictly increasing")
+        if spectral and len(wavelengths) > 1 and np.any(np.diff(wavelengths) <= 0):
+            raise fail(path, "field 'wavelengths' values are not strictly increasing")
+        for name, arr in (("vndf", vndf), ("ndf", ndf), ("luminance", luminance)):
+            if np.any(arr < 0):
+                raise fail(path, f"field {name!r} has negative values (min {float(arr.min()):g})")
+        if np.any(sigma <= 0):
+            raise fail(path, "field 'sigma' has non-positive values (projected areas are > 0)")
+        for name, arr in (("vndf", vndf), ("luminance", luminance)):
+            sums = arr.reshape(np_ * nt, -1).sum(axis=1)
+            if np.any(sums <= 0):
+                raise fail(path, f"field {name!r} has an identically zero slice")
         isotropic = np_ <= 2
         reduction = 0
         if not isotropic:
@@ -389,10 +419,10 @@ class RGLBSDF:
         return Channels.rgb()
 
     def f_cos(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """The tabulated quantity ``f_r(wi, wo) * cos(theta_o)``, shape ``(..., C)``.
-
-        ``wi`` is the direction the tables are conditioned on (the file's "incident" direction).
-        Zero where either direction is at or below the horizon.
+        """The tabulated quantity ``F(wi, wo) = f_r * cos(theta_o)``, shape ``(..., C)``, in the
+        file's own argument order: ``wi`` is the direction the tables are conditioned on (the
+        file's "incident" direction, Mitsuba's ``si.wi``), ``wo`` the warped one. Zero where
+        either direction is at or below the horizon. (:meth:`f` swaps them: see there.)
         """
         assert self._vndf is not None and self._colour is not None
         wi = np.asarray(wi, dtype=np.float64)
@@ -431,15 +461,18 @@ class RGLBSDF:
         return np.where(active[..., None], out, 0.0)
 
     def f(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        """BRDF ``f_r(wi, wo)`` in 1/sr, shape ``(..., C)`` (``f_cos / cos(theta_o)``).
+        """BRDF ``f_r(wi, wo)`` in 1/sr, shape ``(..., C)``: ``f_cos(wo, wi) / cos(theta_i)``.
 
-        Within about a degree of the horizon this grows like ``1 / cos(theta_o)`` because the
-        tabulated ``f_cos`` does not vanish there (see :meth:`to_table`'s ``min_cos``).
+        gonio's ``wi`` (toward the light) is the file's free direction and ``wo`` (toward the
+        viewer) the one its tables are conditioned on, as Mitsuba renders the file (``si.wi``
+        toward the camera); see :mod:`gonio.io.rgl_measured`. Within about a degree of the
+        horizon this grows like ``1 / cos(theta_i)`` because the tabulated ``f_cos`` does not
+        vanish there (see :meth:`to_table`'s ``min_cos``).
         """
-        wo = np.asarray(wo, dtype=np.float64)
-        cos_o = wo[..., 2]
-        val = self.f_cos(wi, wo)
-        return np.where((cos_o > 0)[..., None], val / np.where(cos_o > 0, cos_o, 1.0)[..., None], 0)
+        wi = np.asarray(wi, dtype=np.float64)
+        cos_i = wi[..., 2]
+        val = self.f_cos(wo, wi)
+        return np.where((cos_i > 0)[..., None], val / np.where(cos_i > 0, cos_i, 1.0)[..., None], 0)
 
     def to_table(
         self,

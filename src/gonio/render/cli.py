@@ -60,7 +60,7 @@ def load_table(path: str | Path) -> Any:
     if load is None:
         raise FormatError("this gonio build cannot read measured tables (gonio.io.load missing)")
     obj = load(p)
-    if not hasattr(obj, "values"):
+    if not hasattr(obj, "values") and not hasattr(obj, "sample"):  # RGL files sample themselves
         raise FormatError(f"{p}: holds scattered samples, not a table; tabulate it first")
     return obj
 

@@ -109,8 +109,12 @@ def restrict_model_channels(model: BRDFModel, idx: np.ndarray) -> BRDFModel:
     """The model with every per-channel parameter cut down to channels ``idx``.
 
     Evaluating only the channels asked for: per-channel parameters of length C become length
-    ``len(idx)``; scalar (grey) parameters stay.
+    ``len(idx)``; scalar (grey) parameters stay. Models whose channels are not parameters
+    (a measured file, :class:`gonio.io.rgl_measured.RGLMeasured`) cut themselves
+    (``select_channels``).
     """
+    if hasattr(model, "select_channels"):
+        return model.select_channels(idx)
     specs = model.param_specs()
     new = {}
     for key, value in model.params().items():

@@ -1,0 +1,284 @@
+"""RGL tensor files: gonio's exact evaluator and sampler against Mitsuba 3's ``measured`` plugin,
+and the exact path against the resampled (MERL-grid table) one in fitting and rendering.
+
+1. Load time of :func:`gonio.io.rgl_measured.load_rgl` (parse, validate, build the warps), and
+   throughput, same run, same files (``../shared/data/rgl``), same random queries: ``f`` and
+   ``sample`` of :class:`gonio.io.rgl_measured.RGLMeasured` (jitted JAX on the CPU, float32 and
+   float64) against ``eval`` and ``sample`` of Mitsuba's ``measured`` BSDF in the ``llvm_ad_rgb``
+   variant (vectorized; needs Debian's ``libllvm19``), or ``scalar_rgb`` (a Python loop over
+   scalar calls, far slower, measured on fewer queries) when LLVM is not available. Warm
+   timings: best of three after an untimed call of the same size (JIT compilation excluded).
+   Mitsuba's time includes moving the results to NumPy, gonio's too.
+2. Fit: ``gonio.fit.fit(..., "lambert+ward", loss="ngan")`` on the exact file (its own nodes,
+   :meth:`RGLMeasured.to_samples`) and on its MERL-grid resampling (``to_table()``, whose
+   tabulation time is reported separately).
+3. Render: 64 x 64 sphere under the studio environment at ``SPP`` spp, MIS with the material's
+   sampler (the file's own warps for the exact path, tabulated inversion for the resampled
+   table); warm wall time (best of three after an identical untimed render) and MSE against a
+   ``REF_SPP``-spp render of the exact file; efficiency 1 / (time x MSE). The resampled table's
+   MSE includes its resampling bias, which is the point: it renders another function.
+
+Writes benchmarks/results/rgl_throughput.csv, rgl_fit_render.csv and rgl.png; prints Markdown.
+Run: PYTHONPATH=src python benchmarks/bench_rgl.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rgl"
+FILES = [
+    "paper_white_rgb.bsdf",
+    "acrylic_felt_green_rgb.bsdf",
+    "cc_ibiza_sunset_rgb.bsdf",
+    "vch_golden_yellow_rgb.bsdf",
+]
+SPP = 32
+REF_SPP = 1024
+RES = 64
+
+
+def _queries(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+
+    def hemi():
+        u = rng.random((n, 2))
+        z = math.cos(math.radians(85)) + (1 - math.cos(math.radians(85))) * u[:, 0]
+        r = np.sqrt(1 - z * z)
+        p = 2 * math.pi * u[:, 1]
+        return np.stack([r * np.cos(p), r * np.sin(p), z], -1)
+
+    return hemi(), hemi(), rng.random((n, 2))
+
+
+def _best(fn, repeat: int = 3) -> float:
+    fn()  # warm: compile
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _mitsuba():
+    """(variant, module) of the fastest Mitsuba variant that runs here, or (None, None)."""
+    try:
+        import mitsuba as mi
+    except ImportError:
+        return None, None
+    for variant in ("llvm_ad_rgb", "scalar_rgb"):
+        try:
+            mi.set_variant(variant)
+            mi.load_dict({"type": "diffuse"})
+            return variant, mi
+        except Exception:
+            continue
+    return None, None
+
+
+def _mitsuba_ops(mi, variant: str, path: Path, wi, wo, u):
+    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
+    ctx = mi.BSDFContext()
+    if variant.startswith("llvm"):
+        import drjit as dr
+
+        si = dr.zeros(mi.SurfaceInteraction3f, wo.shape[0])
+        si.wi = mi.Vector3f(wo[:, 0], wo[:, 1], wo[:, 2])  # the file's conditioning direction
+        d = mi.Vector3f(wi[:, 0], wi[:, 1], wi[:, 2])
+        s1 = mi.Float(u[:, 0])
+        s2 = mi.Point2f(u[:, 0], u[:, 1])
+
+        def ev():
+            return np.asarray(bsdf.eval(ctx, si, d))
+
+        def sa():
+            bs, w = bsdf.sample(ctx, si, s1, s2)
+            return np.asarray(bs.wo), np.asarray(w)
+
+        return ev, sa
+
+    def ev():
+        out = []
+        for k in range(wo.shape[0]):
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wo[k])
+            out.append(bsdf.eval(ctx, si, mi.Vector3f(*wi[k])))
+        return out
+
+    def sa():
+        out = []
+        for k in range(wo.shape[0]):
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wo[k])
+            out.append(bsdf.sample(ctx, si, float(u[k, 0]), mi.Point2f(*u[k])))
+        return out
+
+    return ev, sa
+
+
+def throughput(n: int, files: list[str]) -> list[dict]:
+    import jax
+
+    from gonio.io.rgl_measured import load_rgl
+
+    variant, mi = _mitsuba()
+    rows = []
+    for name in files:
+        path = DATA / name
+        t_load = _best(lambda: load_rgl(path))  # noqa: B023
+        m = load_rgl(path)
+        f_jit = jax.jit(lambda m, a, b: m.f(a, b))
+        s_jit = jax.jit(lambda m, a, b: m.sample(a, b).weight)
+        for dtype in (np.float32, np.float64):
+            wi, wo, u = (x.astype(dtype) for x in _queries(n))
+            t_f = _best(lambda: np.asarray(f_jit(m, wi, wo)))  # noqa: B023
+            t_s = _best(lambda: np.asarray(s_jit(m, wo, u)))  # noqa: B023
+            row = {"file": name, "load_ms": 1e3 * t_load, "gonio_dtype": np.dtype(dtype).name,
+                   "n": n, "gonio_f_Mps": n / t_f / 1e6,
+                   "gonio_sample_Mps": n / t_s / 1e6}  # fmt: skip
+            if mi is not None:
+                k = n if variant.startswith("llvm") else min(n, 2000)
+                wi64, wo64, u64 = _queries(k)
+                ev, sa = _mitsuba_ops(mi, variant, path, wi64, wo64, u64)
+                t_me, t_ms = _best(ev, 2), _best(sa, 2)
+                row.update(
+                    mitsuba_variant=variant,
+                    mitsuba_n=k,
+                    mitsuba_eval_Mps=k / t_me / 1e6,
+                    mitsuba_sample_Mps=k / t_ms / 1e6,
+                )
+                row["ratio_f"] = row["gonio_f_Mps"] / row["mitsuba_eval_Mps"]
+                row["ratio_sample"] = row["gonio_sample_Mps"] / row["mitsuba_sample_Mps"]
+            rows.append(row)
+            print(row, flush=True)
+    return rows
+
+
+def fit_render(files: list[str], spp: int, ref_spp: int, res: int) -> list[dict]:
+    import gonio.fit as gf
+    from gonio.io.rgl_measured import load_rgl
+    from gonio.render import render_sphere
+
+    rows = []
+    for name in files:
+        m = load_rgl(DATA / name)
+        t0 = time.perf_counter()
+        table = m.to_table()
+        t_tab = time.perf_counter() - t0
+        for label, data in (("exact", m), ("resampled", table)):
+            t0 = time.perf_counter()
+            res_fit = gf.fit(data, model="lambert+ward", loss="ngan")
+            t_fit = time.perf_counter() - t0
+            rows.append({"file": name, "path": label, "what": "fit", "seconds": t_fit,
+                         "tabulate_s": t_tab if label == "resampled" else 0.0,
+                         "loss": float(res_fit.loss), "mse": "", "efficiency": ""})  # fmt: skip
+        ref = render_sphere(m, None, resolution=res, spp=ref_spp, seed=7)
+        hit = ref.sum(-1) > 0
+        for label, mat in (("exact", m), ("resampled", table)):
+            render_sphere(mat, None, resolution=res, spp=spp, seed=1)  # warm: compile, build
+            t_r = float("inf")
+            for _ in range(3):  # best of three: the machine is shared
+                t0 = time.perf_counter()
+                img = render_sphere(mat, None, resolution=res, spp=spp, seed=2)
+                t_r = min(t_r, time.perf_counter() - t0)
+            mse = float(np.mean((img[hit] - ref[hit]) ** 2))
+            rows.append({"file": name, "path": label, "what": f"render {spp} spp", "seconds": t_r,
+                         "tabulate_s": t_tab if label == "resampled" else 0.0, "loss": "",
+                         "mse": mse, "efficiency": 1.0 / (mse * t_r)})  # fmt: skip
+        for r in rows[-4:]:
+            print(r, flush=True)
+    return rows
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def plot(tp: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in tp if r["gonio_dtype"] == "float32"]
+    names = [r["file"].replace("_rgb.bsdf", "") for r in rows]
+    x = np.arange(len(rows))
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    ax.bar(x - 0.3, [r["gonio_f_Mps"] for r in rows], 0.2, label="gonio f (f32)")
+    ax.bar(x - 0.1, [r["gonio_sample_Mps"] for r in rows], 0.2, label="gonio sample (f32)")
+    if "mitsuba_eval_Mps" in rows[0]:
+        v = rows[0]["mitsuba_variant"]
+        ax.bar(x + 0.1, [r["mitsuba_eval_Mps"] for r in rows], 0.2, label=f"Mitsuba eval ({v})")
+        ax.bar(x + 0.3, [r["mitsuba_sample_Mps"] for r in rows], 0.2, label=f"Mitsuba sample ({v})")
+    ax.set_xticks(x, names, fontsize=7)
+    ax.set_ylabel("million queries / s")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def markdown(tp: list[dict], fr: list[dict]) -> str:
+    lines = ["| file | load (ms) | dtype | gonio f (M/s) | Mitsuba eval (M/s) | ratio "
+             "| gonio sample (M/s) | Mitsuba sample (M/s) | ratio |",
+             "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in tp:
+        lines.append(
+            f"| {r['file']} | {r['load_ms']:.0f} | {r['gonio_dtype']} | {r['gonio_f_Mps']:.2f} | "
+            f"{r.get('mitsuba_eval_Mps', float('nan')):.2f} | {r.get('ratio_f', float('nan')):.2f} "
+            f"| {r['gonio_sample_Mps']:.2f} | {r.get('mitsuba_sample_Mps', float('nan')):.2f} | "
+            f"{r.get('ratio_sample', float('nan')):.2f} |"
+        )
+    lines += ["", "| file | path | what | seconds | tabulation s | fit loss | MSE | 1/(MSE t) |",
+              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in fr:
+        loss = f"{r['loss']:.4g}" if r["loss"] != "" else ""
+        mse = f"{r['mse']:.3g}" if r["mse"] != "" else ""
+        eff = f"{r['efficiency']:.3g}" if r["efficiency"] != "" else ""
+        lines.append(
+            f"| {r['file']} | {r['path']} | {r['what']} | {r['seconds']:.2f} | "
+            f"{r['tabulate_s']:.2f} | {loss} | {mse} | {eff} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer queries, two files, small renders")
+    ap.add_argument("--skip-fit-render", action="store_true", help="throughput only")
+    args = ap.parse_args(argv)
+    RESULTS.mkdir(exist_ok=True)
+    files = [f for f in FILES if (DATA / f).exists()]
+    if not files:
+        print(f"no RGL files in {DATA}")
+        return 1
+    n = 1 << 16 if args.quick else 1 << 18
+    tp = throughput(n, files[:2] if args.quick else files)
+    write_csv(RESULTS / "rgl_throughput.csv", tp)
+    plot(tp, RESULTS / "rgl.png")
+    fr: list[dict] = []
+    if not args.skip_fit_render:
+        chosen = [files[1]] if args.quick else [files[1], files[-1]]
+        fr = fit_render(
+            chosen, SPP, REF_SPP // 4 if args.quick else REF_SPP, 32 if args.quick else RES
+        )
+        write_csv(RESULTS / "rgl_fit_render.csv", fr)
+    print(markdown(tp, fr))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
