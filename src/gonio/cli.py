@@ -13,7 +13,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from gonio import __version__
+from gonio import interrupts
 from gonio.errors import GonioError
 
 #: Modules that contribute subcommands, in the order they appear in ``--help``.
@@ -37,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
             "Run 'gonio COMMAND --help' for each command's options."
         ),
     )
+    from gonio import __version__
+
     parser.add_argument("--version", action="version", version=f"gonio {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
@@ -44,22 +46,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(exc: BaseException, default: str = "") -> str:
+    """``gonio: message; note; ...`` (notes say, e.g., whether the rig was parked)."""
+    parts = [str(exc) or default, *getattr(exc, "__notes__", ())]
+    return "gonio: " + "; ".join(p for p in parts if p)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``gonio`` console script; returns the process exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    func = getattr(args, "func", None)
-    if func is None:
-        parser.print_help()
-        return 0
+    """Entry point of the ``gonio`` console script; returns the process exit status.
+
+    SIGINT and SIGTERM are routed to :data:`gonio.interrupts.FLAG` before any command module
+    is imported: an interrupt at any moment is one line on stderr and exit status 128 + signal
+    number, never a traceback.
+    """
+    interrupts.install()
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        func = getattr(args, "func", None)
+        if func is None:
+            parser.print_help()
+            return 0
         return int(func(args) or 0)
     except GonioError as exc:
-        print(f"gonio: {exc}", file=sys.stderr)
+        print(_one_line(exc), file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("gonio: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(_one_line(exc, "interrupted"), file=sys.stderr)
+        return 128 + int(getattr(exc, "signum", 2))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -69,7 +69,13 @@ def register(sub) -> None:
             " log; RUN/table.brdf.h5 is written when the run completes (needs gonio.io)."
         ),
     )
-    a.add_argument("--rig", default="sim", help="rig name or rig TOML path (default: sim)")
+    a.add_argument(
+        "--rig",
+        help=(
+            "rig name or rig TOML path (default: sim). With --resume the run continues on the rig"
+            " recorded in its journal; a --rig that differs from it is refused"
+        ),
+    )
     a.add_argument("--plan", help=_plan_help() + " (required unless --resume)")
     a.add_argument("--out", help="new run directory (must not exist or be empty)")
     a.add_argument(
@@ -175,32 +181,32 @@ def _plan(args: argparse.Namespace) -> int:
 
 
 def _acquire(args: argparse.Namespace) -> int:
+    import functools
+
     from gonio.acquire.engine import acquire
+    from gonio.rigs.session import open_rig
     from gonio.rigs.sim.bus import parse_faults
 
     faults = parse_faults(args.sim_faults) if args.sim_faults else None
     if args.time_scale is not None and not args.time_scale > 0:
         raise ParameterError("--time-scale must be > 0")
+
+    def devices(rig, run_dir):
+        # --sim-faults and --time-scale are the simulated rig's; hardware ignores them
+        return open_rig(rig, faults=faults, time_scale=args.time_scale, log_dir=run_dir)
+
+    run = functools.partial(acquire, progress=not args.no_progress, open_devices=devices)
     if args.resume:
         if args.out and args.out != args.resume:
             raise ParameterError("give either --out (new run) or --resume RUN, not both")
-        summary = acquire(
-            args.resume,
-            resume=True,
-            faults=faults,
-            progress=not args.no_progress,
-            time_scale=args.time_scale,
-        )
+        summary = run(args.resume, args.rig, resume=True)
     else:
         if not args.out or not args.plan:
             raise ParameterError("a new run needs --plan and --out (or --resume RUN)")
-        summary = acquire(
+        summary = run(
             args.out,
-            args.rig,
+            args.rig or "sim",
             args.plan,
-            faults=faults,
-            progress=not args.no_progress,
-            time_scale=args.time_scale,
             strict=args.strict,
             exposure_planning=False if args.no_exposure_planning else None,
         )

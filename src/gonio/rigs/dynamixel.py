@@ -25,9 +25,10 @@ import dynamixel_sdk as sdk
 import numpy as np
 import serial
 
-from gonio.errors import DeviceError, PlanError
+from gonio.errors import DeviceError, Interrupted, PlanError
 from gonio.rigs import control_table as ct
 from gonio.rigs.config import BusConfig, JointConfig, RigConfig
+from gonio.rigs.guard import GoalGuard
 
 log = logging.getLogger("gonio.rigs.dynamixel")
 
@@ -41,6 +42,10 @@ class HardwareFault(DeviceError):
         self.faults = dict(faults)
         text = "; ".join(f"{j}: {ct.hardware_error_text(b)}" for j, b in self.faults.items())
         super().__init__(f"servo hardware error ({text})")
+
+
+class BusLost(DeviceError):
+    """The serial port itself failed (adapter unplugged, port closed): no retry can help."""
 
 
 class _PortHandler(sdk.PortHandler):
@@ -121,6 +126,9 @@ class DynamixelBus:
         self.stats = BusStats()
         self._port: sdk.PortHandler | None = None
         self._ph = sdk.PacketHandler(2.0)
+        #: called with ``{servo id: ticks}`` before any Goal Position packet is written; raises
+        #: to refuse it (:class:`gonio.rigs.guard.GoalGuard` on a :class:`ServoChain`)
+        self.goal_guard: Callable[[Mapping[int, int]], object] | None = None
         #: ids whose last status packet carried the alert bit (hardware error pending)
         self.alerts: set[int] = set()
 
@@ -179,7 +187,16 @@ class DynamixelBus:
                 time.sleep(delay)
                 delay = min(delay * 2.0, 0.2)
             self.stats.transactions += 1
-            value, comm, error = fn()
+            try:
+                value, comm, error = fn()
+            except (serial.SerialException, OSError) as exc:
+                # the adapter was unplugged or the port went away: not a fault a retry fixes
+                self._release()
+                raise BusLost(f"{what}: servo bus {self.port_name} lost ({exc})") from None
+            except BaseException:
+                # interrupted mid-transaction (a signal): leave the port usable for parking
+                self._release()
+                raise
             if comm in _RETRY_COMM:
                 if comm == sdk.COMM_RX_TIMEOUT:
                     self.stats.timeouts += 1
@@ -202,6 +219,10 @@ class DynamixelBus:
             f"{what}: {culprit + ' ' if culprit else ''}no valid reply after"
             f" {self.retries + 1} attempts ({last})"
         )
+
+    def _release(self) -> None:
+        if self._port is not None:
+            self._port.is_using = False
 
     def _note_alert(self, servo_id: int, error: int) -> None:
         if error & sdk.ERRBIT_ALERT:
@@ -233,6 +254,8 @@ class DynamixelBus:
     def write(self, servo_id: int, reg: tuple[int, int], value: int) -> None:
         """Write a 1, 2 or 4-byte register and wait for the servo's acknowledgement."""
         addr, n = reg
+        if reg == ct.GOAL_POSITION and self.goal_guard is not None:
+            self.goal_guard({servo_id: value})
         data = list(int(value & ((1 << (8 * n)) - 1)).to_bytes(n, "little"))
 
         def call():
@@ -245,6 +268,8 @@ class DynamixelBus:
     def sync_write(self, reg: tuple[int, int], values: Mapping[int, int]) -> None:
         """One Sync Write packet setting ``reg`` on every servo in ``values`` (no reply)."""
         addr, n = reg
+        if reg == ct.GOAL_POSITION and self.goal_guard is not None:
+            self.goal_guard(values)
         group = sdk.GroupSyncWrite(self.port, self._ph, addr, n)
         for sid, v in values.items():
             group.addParam(sid, list(int(v & ((1 << (8 * n)) - 1)).to_bytes(n, "little")))
@@ -350,7 +375,11 @@ class ServoChain:
         self.rig = rig
         self.joints: tuple[JointConfig, ...] = rig.joints
         self.bus = DynamixelBus.from_config(rig.bus, port)
+        self.guard = GoalGuard(rig)
+        self.bus.goal_guard = self.guard.check
         self.ids = [j.id for j in self.joints]
+        #: polled while a move settles; True aborts it (:class:`gonio.errors.Interrupted`)
+        self.should_abort: Callable[[], bool] = lambda: False
         self._by_id = {j.id: j for j in self.joints}
         self.last_goal_ticks: dict[int, int] = {}
         #: moves split in two because the arms would have come too close on the way
@@ -408,7 +437,12 @@ class ServoChain:
         self.bus.write(j.id, ct.TORQUE_ENABLE, 1)
 
     def initialize(self) -> None:
-        """Identify every servo, clear hardware errors (reboot), set mode/profile, torque on."""
+        """Identify every servo, clear hardware errors (reboot), set mode/profile, torque on.
+
+        Every servo is identified before any is written to: a wrong model anywhere in the
+        chain refuses the rig with no torque on. If configuring fails part-way, torque is
+        switched off again on every servo.
+        """
         for j in self.joints:
             model = self.bus.ping(j.id)
             if model != ct.MODELS[j.model]:
@@ -416,9 +450,19 @@ class ServoChain:
                 raise DeviceError(
                     f"joint {j.name}: servo {j.id} is {name}, rig file says {j.model}"
                 )
-            if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
-                self._reboot(j)
-            self._configure(j)
+        try:
+            for j in self.joints:
+                if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
+                    self._reboot(j)
+                self._configure(j)
+        except BaseException as exc:
+            try:
+                self.torque_off()
+            except Exception:
+                pass
+            else:
+                exc.add_note("torque off")
+            raise
 
     def _reboot(self, j: JointConfig) -> None:
         bits = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
@@ -459,7 +503,8 @@ class ServoChain:
                 if k.joint != j.name:
                     continue
                 park = self.rig.park_deg.get(j.name, j.zero_offset_deg)
-                if k.min_deg <= a <= k.max_deg or (a > k.max_deg) != (park > k.max_deg):
+                side = (a < k.min_deg and park < k.min_deg) or (a > k.max_deg and park > k.max_deg)
+                if not side:  # also refuses NaN
                     raise PlanError(
                         f"joint {j.name}: {a:.3f} deg in or across the keep-out sector"
                         f" [{k.min_deg}, {k.max_deg}] ({k.reason})"
@@ -540,8 +585,26 @@ class ServoChain:
         """Move to the park pose."""
         return self.move(self.park_pose())
 
-    def torque_off(self) -> None:
+    def torque_off(self) -> list[int]:
+        """Torque off on every servo: one Sync Write, then a write each servo acknowledges.
+
+        Returns the ids of servos that did not acknowledge; raises DeviceError only when the
+        bus itself is gone.
+        """
         self.bus.sync_write(ct.TORQUE_ENABLE, dict.fromkeys(self.ids, 0))
+        silent = []
+        for sid in self.ids:
+            try:
+                self.bus.write(sid, ct.TORQUE_ENABLE, 0)
+            except BusLost:
+                raise
+            except DeviceError:
+                silent.append(sid)
+        return silent
+
+    def bus_stats(self) -> dict[str, int]:
+        """Counters of this bus session (transactions, retries, timeouts, recoveries, ...)."""
+        return dict(vars(self.bus.stats))
 
     def arm_transit_hold(
         self, start_deg: Mapping[str, float], goal_deg: Mapping[str, float]
@@ -597,7 +660,8 @@ class ServoChain:
         if hold is not None:
             j = self.rig.joint(hold)
             first = dict(goals)
-            first[j.id] = _field(start[j.id], ct.PRESENT_POSITION)
+            # the held arm keeps its last (checked) goal; it rests within tolerance of it
+            first[j.id] = self.last_goal_ticks.get(j.id, _field(start[j.id], ct.PRESENT_POSITION))
             log.info("two-phase move: %s waits for the other arm", hold)
             self.two_phase_moves += 1
             self._move_once(first, None, poll_s, split=False)
@@ -608,6 +672,7 @@ class ServoChain:
             timeout_s = self.predicted_time(start_deg, goal_deg) + self.rig.bus.motion_timeout_s
         if poll_s is None:
             poll_s = self.rig.bus.poll_interval_ms / 1000.0
+        self.guard.check(goals, start_deg)  # the whole pose; the bus checks each goal again
         self.bus.sync_write(ct.GOAL_POSITION, goals)
         self.last_goal_ticks = dict(goals)
         t_sent = time.monotonic()
@@ -615,6 +680,8 @@ class ServoChain:
         polls = 0
         deadline = t_sent + timeout_s
         while True:
+            if self.should_abort():
+                raise Interrupted("move abandoned on a second interrupt")
             data = self.bus.sync_read(a, n, self.ids)
             polls += 1
             if self.bus.alerts & set(self.ids):

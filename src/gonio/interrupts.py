@@ -1,0 +1,118 @@
+"""SIGINT and SIGTERM as a flag: installed first thing by the command line, read by the run engine.
+
+Python delivers a signal by running its handler between two bytecodes of the main thread; a
+handler that raises ``KeyboardInterrupt`` can therefore land anywhere, including inside a
+library callback that swallows it (JAX's ``_xla_gc_callback`` prints "Exception ignored" and
+carries on). So the handler here always *records* the signal in :data:`FLAG` first, and code
+that must stop reliably (the acquisition loop, a move waiting to settle) checks the flag rather
+than relying on the exception.
+
+Two modes:
+
+* normal (start-up, imports, any command): the handler records the signal and raises
+  :class:`gonio.errors.Interrupted` (a ``KeyboardInterrupt``), so a command stops at once; the
+  CLI prints one line and exits with 128 + the signal number;
+* deferred (:meth:`StopFlag.deferred`, the run engine's loop over configurations): the first
+  signal only sets the flag (the engine finishes the configuration in progress and parks); a
+  second one also raises, and sets :attr:`StopFlag.count` to 2, which a move polls, so the run
+  stops at once even when the exception is swallowed.
+
+:func:`install` is idempotent and imports only the standard library, so that
+``gonio/__main__.py`` can call it before anything heavy is imported.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class StopFlag:
+    """Signals received (:attr:`count`, last :attr:`signum`) and the handler's mode."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.signum = 0
+        self.defer = False
+        self.shield = False
+        self.installed = False
+
+    @property
+    def requested(self) -> bool:
+        """A stop was asked for (at least one signal since the last :meth:`reset`)."""
+        return self.count > 0
+
+    def reset(self) -> None:
+        self.count = 0
+        self.signum = 0
+
+    def message(self) -> str:
+        name = signal.Signals(self.signum).name if self.signum else "signal"
+        return f"interrupted ({name})"
+
+    def interrupted(self):
+        """The exception to raise for the signals recorded so far."""
+        from gonio.errors import Interrupted
+
+        return Interrupted(self.message(), self.signum or signal.SIGINT)
+
+    def handler(self, signum, frame) -> None:
+        self.count += 1
+        self.signum = signum
+        if self.shield or (self.defer and self.count == 1):
+            return
+        raise self.interrupted()
+
+    @contextmanager
+    def deferred(self):
+        """Within the block the first signal only sets the flag (see the module docstring)."""
+        old = self.defer
+        self.defer = True
+        try:
+            yield self
+        finally:
+            self.defer = old
+
+    @contextmanager
+    def shielded(self):
+        """Within the block signals are only recorded, never raised (switching torque off)."""
+        old = self.shield
+        self.shield = True
+        try:
+            yield self
+        finally:
+            self.shield = old
+
+
+#: The process's flag (one per process: signal handlers are process-wide).
+FLAG = StopFlag()
+
+
+def install() -> StopFlag:
+    """Route SIGINT and SIGTERM to :data:`FLAG` (main thread only; otherwise a no-op)."""
+    if not FLAG.installed and threading.current_thread() is threading.main_thread():
+        for sig in SIGNALS:
+            signal.signal(sig, FLAG.handler)
+        FLAG.installed = True
+    return FLAG
+
+
+@contextmanager
+def installed():
+    """:func:`install` for the duration of the block when no one has yet (library use: the
+    previous handlers come back, and signals recorded are forgotten, at the end)."""
+    if FLAG.installed or threading.current_thread() is not threading.main_thread():
+        yield FLAG
+        return
+    old = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    install()
+    try:
+        yield FLAG
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        FLAG.installed = False
+        FLAG.reset()
