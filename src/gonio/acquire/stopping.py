@@ -14,9 +14,12 @@ import json
 import time
 
 from gonio.interrupts import StopFlag
+from gonio.rigs.dynamixel import BusLost
 
 
 def _short(exc: BaseException) -> str:
+    if isinstance(exc, BusLost):
+        return "servo bus lost"
     text = str(exc) or type(exc).__name__
     return text if len(text) <= 160 else text[:157] + "..."
 
@@ -43,7 +46,10 @@ def bring_to_rest(chain, flag: StopFlag) -> tuple[bool, str]:
         with flag.shielded():
             silent = chain.torque_off()
     except BaseException as exc:
-        return False, f"rig not parked ({why}) and torque off failed ({_short(exc)})"
+        return (
+            False,
+            f"rig not parked ({why}) and torque off failed ({_short(exc)}): torque state unknown",
+        )
     if silent:
         ids = ", ".join(map(str, silent))
         return False, f"rig not parked ({why}), torque off sent (servo {ids} did not confirm)"

@@ -466,6 +466,10 @@ def key_line(text: str, path: tuple) -> int | None:
                 if count == idx_in_array:
                     start = n
                     break
+        else:
+            # no [[name]] tables: an inline array value, whose key line is the answer
+            cut = path.index(idx_in_array)
+            return key_line(text, path[:cut]) if cut else None
         # end at the next header
         for n in range(start + 1, len(lines)):
             if header_re.match(lines[n]):

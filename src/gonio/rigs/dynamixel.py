@@ -32,6 +32,25 @@ from gonio.rigs.guard import GoalGuard
 
 log = logging.getLogger("gonio.rigs.dynamixel")
 
+try:  # pyserial's POSIX backend lets termios.error (not an OSError) through from tcflush
+    from termios import error as _TermiosError
+except ImportError:  # pragma: no cover - Windows
+
+    class _TermiosError(Exception):
+        pass
+
+
+_PORT_ERRORS = (serial.SerialException, OSError, _TermiosError)
+
+
+def _port_error_text(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    if isinstance(exc, _TermiosError) and len(exc.args) == 2:
+        return str(exc.args[1])
+    return str(exc) or type(exc).__name__
+
+
 _RETRY_COMM = {sdk.COMM_RX_TIMEOUT, sdk.COMM_RX_CORRUPT, sdk.COMM_RX_FAIL, sdk.COMM_TX_FAIL}
 
 
@@ -189,10 +208,12 @@ class DynamixelBus:
             self.stats.transactions += 1
             try:
                 value, comm, error = fn()
-            except (serial.SerialException, OSError) as exc:
+            except _PORT_ERRORS as exc:
                 # the adapter was unplugged or the port went away: not a fault a retry fixes
                 self._release()
-                raise BusLost(f"{what}: servo bus {self.port_name} lost ({exc})") from None
+                raise BusLost(
+                    f"{what}: servo bus {self.port_name} lost ({_port_error_text(exc)})"
+                ) from None
             except BaseException:
                 # interrupted mid-transaction (a signal): leave the port usable for parking
                 self._release()
