@@ -59,15 +59,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     is imported: an interrupt at any moment is one line on stderr and exit status 128 + signal
     number, never a traceback.
     """
-    interrupts.install()
+    # signals are only recorded while the command modules are imported (an exception raised
+    # inside the import of a native module can abort the interpreter), then checked
+    with interrupts.installed(hold=True) as flag:
+        return _run(argv, flag)
+
+
+def _run(argv: Sequence[str] | None, flag: interrupts.StopFlag) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
+        if flag.requested:
+            raise flag.interrupted()
+        # a command that checks the flag itself (acquire) keeps the hold; others may be
+        # interrupted anywhere from here on
+        flag.shield = bool(getattr(args, "checks_interrupts", False))
         func = getattr(args, "func", None)
         if func is None:
             parser.print_help()
             return 0
-        return int(func(args) or 0)
+        status = int(func(args) or 0)
+        if flag.requested:
+            raise flag.interrupted()
+        return status
     except GonioError as exc:
         print(_one_line(exc), file=sys.stderr)
         return exc.exit_code

@@ -23,6 +23,8 @@ Two modes:
 
 from __future__ import annotations
 
+import _thread
+import gc
 import signal
 import threading
 from contextlib import contextmanager
@@ -39,6 +41,7 @@ class StopFlag:
         self.defer = False
         self.shield = False
         self.installed = False
+        self._redeliver = False
 
     @property
     def requested(self) -> bool:
@@ -60,25 +63,39 @@ class StopFlag:
         return Interrupted(self.message(), self.signum or signal.SIGINT)
 
     def handler(self, signum, frame) -> None:
-        self.count += 1
-        self.signum = signum
+        if self._redeliver:
+            self._redeliver = False  # the same signal, delivered again (below)
+        else:
+            self.count += 1
+            self.signum = signum
         if self.shield or (self.defer and self.count == 1):
+            return
+        if _swallowing(frame):
+            # raising here would be printed as "Exception ignored" and lost: deliver the signal
+            # again shortly, from another thread (from here it would re-enter this handler
+            # before the callback has returned)
+            self._redeliver = True
+            threading.Timer(0.002, _thread.interrupt_main, (signum,)).start()
             return
         raise self.interrupted()
 
     @contextmanager
     def deferred(self):
-        """Within the block the first signal only sets the flag (see the module docstring)."""
-        old = self.defer
-        self.defer = True
+        """Within the block the first signal only sets the flag and a second one raises (see
+        the module docstring), also inside a :meth:`shielded` block."""
+        old = self.defer, self.shield
+        self.defer, self.shield = True, False
         try:
             yield self
         finally:
-            self.defer = old
+            self.defer, self.shield = old
 
     @contextmanager
     def shielded(self):
-        """Within the block signals are only recorded, never raised (switching torque off)."""
+        """Within the block signals are only recorded, never raised: code in it checks
+        :attr:`requested` at points where stopping is safe. (An exception raised by a handler
+        lands at any bytecode: inside an import of a native module it can abort the
+        interpreter, and half-way through a bus transaction it would leave the port busy.)"""
         old = self.shield
         self.shield = True
         try:
@@ -87,32 +104,58 @@ class StopFlag:
             self.shield = old
 
 
+def _swallowing(frame) -> bool:
+    """Whether ``frame`` runs inside code whose exceptions Python ignores: a garbage-collector
+    callback (JAX registers one) or a ``__del__`` method."""
+    codes = {getattr(cb, "__code__", None) for cb in gc.callbacks}
+    for _ in range(64):
+        if frame is None:
+            return False
+        if frame.f_code in codes or frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
+
+
 #: The process's flag (one per process: signal handlers are process-wide).
 FLAG = StopFlag()
 
 
-def install() -> StopFlag:
-    """Route SIGINT and SIGTERM to :data:`FLAG` (main thread only; otherwise a no-op)."""
+def install(early: list[int] | None = None, hold: bool = False) -> StopFlag:
+    """Route SIGINT and SIGTERM to :data:`FLAG` (main thread only; otherwise a no-op).
+
+    ``early``: signal numbers recorded before this module could be imported (by
+    ``gonio/__main__.py``); they count as received. ``hold``: only record signals until
+    someone clears :attr:`StopFlag.shield` (:func:`gonio.cli.main` does, inside the block that
+    turns an interrupt into one line).
+    """
+    FLAG.shield = FLAG.shield or hold
     if not FLAG.installed and threading.current_thread() is threading.main_thread():
         for sig in SIGNALS:
             signal.signal(sig, FLAG.handler)
         FLAG.installed = True
+    for signum in early or ():
+        FLAG.count += 1
+        FLAG.signum = signum
     return FLAG
 
 
 @contextmanager
-def installed():
-    """:func:`install` for the duration of the block when no one has yet (library use: the
-    previous handlers come back, and signals recorded are forgotten, at the end)."""
+def installed(hold: bool = False):
+    """:func:`install` for the duration of the block when no one has yet (library use, or
+    :func:`gonio.cli.main` called in-process: the previous handlers come back, and the signals
+    recorded are forgotten, at the end). ``hold`` as for :func:`install`."""
     if FLAG.installed or threading.current_thread() is not threading.main_thread():
+        FLAG.shield = FLAG.shield or hold
         yield FLAG
         return
     old = {sig: signal.getsignal(sig) for sig in SIGNALS}
-    install()
+    install(hold=hold)
     try:
         yield FLAG
     finally:
         for sig, h in old.items():
             signal.signal(sig, h)
         FLAG.installed = False
+        FLAG.shield = FLAG.defer = False
         FLAG.reset()

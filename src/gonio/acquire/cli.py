@@ -115,7 +115,7 @@ def register(sub) -> None:
     )
     a.add_argument("--no-progress", action="store_true", help="no progress bar")
     a.add_argument("--json", action="store_true", help="print the run summary as JSON")
-    a.set_defaults(func=_acquire)
+    a.set_defaults(func=_acquire, checks_interrupts=True)
 
 
 def _plan(args: argparse.Namespace) -> int:

@@ -264,7 +264,9 @@ def acquire(
     directory behind.
     """
     run_dir = Path(out)
-    with interrupts.installed() as flag:
+    # signals are recorded, not raised, except in the loop over configurations (see
+    # gonio.interrupts): the flag is checked wherever stopping is safe
+    with interrupts.installed() as flag, flag.shielded():
         if flag.requested:  # a signal during start-up whose exception was swallowed
             raise flag.interrupted()
         if resume:
@@ -358,16 +360,19 @@ class _Run:
                     self._loop(chain, camera, ses)
                     chain.should_abort = lambda: False
             except BaseException as exc:
-                chain.should_abort = lambda: False
-                self._stopped_by(exc, chain)
+                # from here on signals are recorded, not raised: nothing may skip the park
+                with flag.shielded():
+                    chain.should_abort = lambda: False
+                    self._stopped_by(exc, chain)
                 raise
-            reason = "interrupted" if flag.requested else "complete"
-            if flag.requested:
-                self.log("interrupted", signal=flag.signum)
-            parked, phrase = stopping.bring_to_rest(chain, flag)
-            stopping.record_stop(self.journal, self.log, reason, parked, phrase)
-            self.bus = chain.bus_stats()
-            self.stop_note = phrase
+            with flag.shielded():
+                reason = "interrupted" if flag.requested else "complete"
+                if flag.requested:
+                    self.log("interrupted", signal=flag.signum)
+                parked, phrase = stopping.bring_to_rest(chain, flag)
+                stopping.record_stop(self.journal, self.log, reason, parked, phrase)
+                self.bus = chain.bus_stats()
+                self.stop_note = phrase
             if not parked:
                 raise DeviceError(f"run ended but the rig could not be parked: {phrase}")
             self.log("parked", pose=self.rig.park_deg)
@@ -458,6 +463,9 @@ class _Run:
             self.log(
                 "end", complete=complete, **counts, measured_now=self.measured_now, bus=self.bus
             )
+        except KeyboardInterrupt as exc:  # while writing the table: the rig is at rest already
+            exc.add_note(self.stop_note)
+            raise
         finally:
             self.close()
         if flag.requested:

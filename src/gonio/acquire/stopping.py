@@ -27,15 +27,14 @@ def _short(exc: BaseException) -> str:
 def bring_to_rest(chain, flag: StopFlag) -> tuple[bool, str]:
     """Park ``chain`` (a :class:`gonio.rigs.dynamixel.ServoChain`), else switch torque off.
 
-    A further signal while parking abandons the park (torque goes off instead). Returns
-    ``(parked, phrase)``; never raises.
+    Signals are only recorded meanwhile (no exception can land half-way through a bus
+    transaction); a further signal abandons the park at the move's next poll, and torque goes
+    off instead. Returns ``(parked, phrase)``; never raises.
     """
     n0 = flag.count
     chain.should_abort = lambda: flag.count > n0
     try:
-        with flag.deferred():
-            if flag.count > n0:
-                raise flag.interrupted()
+        with flag.shielded():
             chain.park()
         return True, "rig parked"
     except BaseException as exc:
