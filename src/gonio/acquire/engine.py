@@ -504,12 +504,10 @@ def _refuse_if_any(sp: StagePlan) -> None:
 
 
 def camera_channels(rig: RigConfig) -> tuple[str, ...]:
-    from gonio.acquire.imaging import RAW_KINDS
-    from gonio.rigs.devices import open_camera
+    """Channel names of the rig's measurements (:func:`gonio.rigs.camera_factory.channels`)."""
+    from gonio.rigs.camera_factory import channels
 
-    if rig.camera.get("kind", "sim") in RAW_KINDS:
-        return ("R", "G", "B")
-    return tuple(open_camera(rig).channels)
+    return channels(rig)
 
 
 def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig):

@@ -440,7 +440,7 @@ def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
         spec = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise PlanError(f"{p}: invalid TOML: {exc}") from None
-    from gonio.rigs.config import non_finite, where
+    from gonio.rigs.toml_lines import non_finite, where
 
     for path, value in non_finite(spec):
         raise PlanError(f"{where(str(p), text, path)}: {value} is not a finite number")
