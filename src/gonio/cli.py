@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -79,9 +80,16 @@ def _run(argv: Sequence[str] | None, flag: interrupts.StopFlag) -> int:
             parser.print_help()
             return 0
         status = int(func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
         if flag.requested:
             raise flag.interrupted()
         return status
+    except BrokenPipeError:
+        # the reader went away (`gonio plan ... | head`): stop quietly, as a program killed
+        # by SIGPIPE would; stdout goes to /dev/null so the final flush cannot fail again
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 128 + 13
     except GonioError as exc:
         print(_one_line(exc), file=sys.stderr)
         return exc.exit_code
