@@ -175,3 +175,51 @@ def test_resume_with_a_different_rig_is_refused(interrupted_run):
     out = gonio("acquire", "--resume", interrupted_run, "--rig", "sim_sample", "--no-progress")
     assert out.returncode == 0, out.stderr
     assert "complete" in out.stdout
+
+
+def test_plan_total_counts_the_measured_capture_cost():
+    import json
+
+    # the virtual camera's 2.99 s per configuration (measured), not the 5 ms exposure
+    out = gonio("plan", "--rig", "sim", "--plan", "demo-quick", "--json")
+    assert out.returncode == 0, out.stderr
+    est = json.loads(out.stdout)
+    assert est["per_configuration_s"]["capture"] == 2.99 and est["capture_cost_known"]
+    assert est["predicted_total_s"] > 61 * 3.0  # a run of it took 183 s
+    assert est["predicted_total_s"] - est["predicted_motion_s"] / est["time_scale"] == (
+        pytest.approx(61 * (2.99 + 0.043 + 0.0075), abs=0.01)
+    )
+    help_text = gonio("plan", "--help").stdout
+    assert "--timing-from" in help_text and "2.99 s per configuration" in help_text
+
+
+def test_plan_of_a_never_measured_real_camera_says_so(tmp_path):
+    text = resources.files("gonio.rigs").joinpath("xm430_4axis.toml").read_text()
+    rig = tmp_path / "tethered.toml"
+    rig.write_text(
+        text.replace('kind = "sim"\nexposure_s = 0.02', 'kind = "gphoto2"\nexposure_s = 0.02')
+    )
+    out = gonio("plan", "--rig", rig, "--plan", "iso-tiny")
+    assert out.returncode == 0, out.stderr
+    assert "capture cost of camera kind 'gphoto2' unknown: measure it with --timing-from RUN" in (
+        out.stdout
+    )
+
+
+def test_plan_timing_from_a_previous_run_predicts_that_run(tmp_path):
+    import json
+
+    run = tmp_path / "run"
+    acquire(run, "sim_sample", "iso-small", progress=False, write_table=False)
+    out = gonio(
+        "plan", "--rig", "sim_sample", "--plan", "iso-small", "--timing-from", run, "--json"
+    )
+    assert out.returncode == 0, out.stderr
+    est = json.loads(out.stdout)
+    assert est["costs_source"].startswith("measured: medians of")
+    events = [json.loads(x) for x in (run / "log.jsonl").read_text().splitlines()]
+    samples = [e for e in events if e["event"] == "sample"]
+    n = len(samples)
+    assert n == est["accepted"]
+    actual = samples[-1]["t"] - samples[0]["t"]  # n - 1 configurations, first one's jit aside
+    assert actual == pytest.approx(est["predicted_total_s"] * (n - 1) / n, rel=0.35)

@@ -398,6 +398,7 @@ class _Run:
     def _loop(self, chain, camera, ses) -> None:
         rig, plan, journal, log, flag = self.rig, self.plan, self.journal, self.log, self.flag
         kin = Kinematics(rig)
+        scale = float(getattr(ses, "time_scale", 1.0))  # rig seconds per wall second
         with _Progress(self.progress) as bar:
             start_deg = dict(rig.park_deg)
             for j in rig.joints:
@@ -433,7 +434,7 @@ class _Run:
                         raise flag.interrupted()
                     if flag.requested:
                         return
-                    _measure(chain, camera, kin, journal, log, cfg)
+                    _measure(chain, camera, kin, journal, log, cfg, scale)
                     self.measured_now += 1
                     bar.advance()
                     if self.on_sample is not None:
@@ -510,7 +511,9 @@ def camera_channels(rig: RigConfig) -> tuple[str, ...]:
     return channels(rig)
 
 
-def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig):
+def _measure(
+    chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig, scale=1.0
+):
     t0 = time.monotonic()
     res = chain.move(cfg.joints_deg)
     t1 = time.monotonic()
@@ -545,6 +548,7 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
         recoveries=res.recoveries,
         polls=res.polls,
         move_wall_s=t1 - t0,
+        profile_wall_s=res.predicted_s / scale,  # what `gonio plan` predicts for this move
         **{f"t_{k}": v for k, v in timings.items()},
         **extra,
     )

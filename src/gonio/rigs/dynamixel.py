@@ -83,6 +83,8 @@ class MoveResult:
     settle_s: float
     polls: int
     recoveries: int
+    #: the profile time predicted for the move (rig time; both phases of a two-phase move)
+    predicted_s: float = 0.0
 
 
 class ServoChain:
@@ -278,13 +280,14 @@ class ServoChain:
         goals = self.check_limits(targets_deg)
         recoveries = 0
         rehome = False
+        self._predicted_s = 0.0
         while True:
             try:
                 if rehome:
                     self._move_once(self.check_limits(self.park_pose()), None, None)
                     rehome = False
                 res = self._move_once(goals, timeout_s, poll_s)
-                return MoveResult(res[0], res[1], res[2], res[3], recoveries)
+                return MoveResult(res[0], res[1], res[2], res[3], recoveries, self._predicted_s)
             except HardwareFault as fault:
                 if not recover or recoveries >= self.rig.bus.max_recoveries:
                     raise
@@ -393,8 +396,10 @@ class ServoChain:
             reached, _, settle, polls = self._move_once(goals, timeout_s, poll_s, split=False)
             t_end = time.monotonic()
             return reached, t_end - t0 - settle, settle, polls
+        predicted = self.predicted_time(start_deg, goal_deg)
+        self._predicted_s = getattr(self, "_predicted_s", 0.0) + predicted
         if timeout_s is None:
-            timeout_s = self.predicted_time(start_deg, goal_deg) + self.rig.bus.motion_timeout_s
+            timeout_s = predicted + self.rig.bus.motion_timeout_s
         if poll_s is None:
             poll_s = self.rig.bus.poll_interval_ms / 1000.0
         self.guard.check(goals, start_deg)  # the whole pose; the bus checks each goal again

@@ -26,6 +26,11 @@ class RigSession:
     chain: ServoChain
     emulator: ServoChainEmulator | None = None
 
+    @property
+    def time_scale(self) -> float:
+        """Rig seconds per wall second: the emulator's time scale, 1 for hardware."""
+        return self.emulator.time_scale if self.emulator is not None else 1.0
+
 
 def make_emulator(
     rig: RigConfig,
