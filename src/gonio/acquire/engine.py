@@ -6,12 +6,16 @@
   with no lost and no duplicated sample;
 * ``log.jsonl`` — a structured log, one JSON object per line (events, per-configuration timings,
   faults and recoveries);
-* ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received;
+* ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received
+  (and ``sim_packets.jsonl``, every instruction packet, with ``[sim] packet_log = true``);
 * ``table.brdf.h5`` — the samples as a table through :mod:`gonio.io` when the run completes.
 
-Each stage of the plan is planned once (inverse kinematics, refusals with reasons, travel-time
-ordering) and journaled atomically before any motion; later stages see earlier stages' samples.
-SIGINT/SIGTERM finish the configuration in progress, park the rig per its rig file and stop.
+The run directory appears with its complete journal (:mod:`gonio.acquire.rundir`). Each stage of
+the plan is planned once (inverse kinematics, refusals with reasons, travel-time ordering) and
+journaled atomically before any motion; later stages see earlier stages' samples. Once the servos
+are powered every way out parks the rig, or turns torque off when it cannot
+(:mod:`gonio.acquire.stopping`). SIGINT/SIGTERM (:mod:`gonio.interrupts`): the first finishes the
+configuration in progress, parks and stops; a second abandons the configuration and parks.
 """
 
 from __future__ import annotations
