@@ -81,7 +81,10 @@ def register(sub) -> None:
             "Execute a plan on a rig: move, settle, capture, record. Every configuration is"
             " journaled in RUN/journal.sqlite; after a crash or Ctrl-C, --resume RUN continues"
             " with no lost and no duplicated sample. Ctrl-C (or SIGTERM) finishes the current"
-            " configuration and parks the rig per its rig file. RUN/log.jsonl is a structured"
+            " configuration and parks the rig per its rig file; a second one abandons the"
+            " configuration and parks. Any fault once the servos are powered parks the rig, or"
+            " turns torque off when it cannot, and the one-line error says which. A start that"
+            " fails leaves no RUN behind. RUN/log.jsonl is a structured"
             " log; RUN/table.brdf.h5 is written when the run completes (needs gonio.io)."
         ),
     )
