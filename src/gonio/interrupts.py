@@ -15,7 +15,12 @@ Two modes:
 * deferred (:meth:`StopFlag.deferred`, the run engine's loop over configurations): the first
   signal only sets the flag (the engine finishes the configuration in progress and parks); a
   second one also raises, and sets :attr:`StopFlag.count` to 2, which a move polls, so the run
-  stops at once even when the exception is swallowed.
+  stops at once even when the exception is swallowed;
+* shielded (:meth:`StopFlag.shielded`): signals are only recorded.
+
+The handler does not raise where Python would ignore the exception (a gc callback, ``__del__``,
+a weakref callback): it has the signal delivered again a few milliseconds later, and
+``sys.unraisablehook`` does the same for an interrupt ignored anywhere else.
 
 :func:`install` is idempotent and imports only the standard library, so that
 ``gonio/__main__.py`` can call it before anything heavy is imported.
@@ -26,6 +31,7 @@ from __future__ import annotations
 import _thread
 import gc
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -71,13 +77,16 @@ class StopFlag:
         if self.shield or (self.defer and self.count == 1):
             return
         if _swallowing(frame):
-            # raising here would be printed as "Exception ignored" and lost: deliver the signal
-            # again shortly, from another thread (from here it would re-enter this handler
-            # before the callback has returned)
-            self._redeliver = True
-            threading.Timer(0.002, _thread.interrupt_main, (signum,)).start()
+            # raising here would be printed as "Exception ignored" and lost
+            self.redeliver()
             return
         raise self.interrupted()
+
+    def redeliver(self) -> None:
+        """Have the last signal delivered again shortly, from another thread (from a handler
+        it would re-enter the handler before the code that would swallow it has returned)."""
+        self._redeliver = True
+        threading.Timer(0.002, _thread.interrupt_main, (self.signum or signal.SIGINT,)).start()
 
     @contextmanager
     def deferred(self):
@@ -106,15 +115,30 @@ class StopFlag:
 
 def _swallowing(frame) -> bool:
     """Whether ``frame`` runs inside code whose exceptions Python ignores: a garbage-collector
-    callback (JAX registers one) or a ``__del__`` method."""
+    callback (JAX registers one), a ``__del__`` method or a weakref callback. (Any other such
+    place is caught by :func:`_unraisable`.)"""
     codes = {getattr(cb, "__code__", None) for cb in gc.callbacks}
     for _ in range(64):
         if frame is None:
             return False
-        if frame.f_code in codes or frame.f_code.co_name == "__del__":
+        code = frame.f_code
+        if code in codes or code.co_name == "__del__" or code.co_filename.endswith("weakref.py"):
             return True
         frame = frame.f_back
     return False
+
+
+_previous_unraisable = None
+
+
+def _unraisable(unraisable) -> None:
+    """``sys.unraisablehook``: an interrupt Python is about to ignore is delivered again."""
+    from gonio.errors import Interrupted
+
+    if isinstance(unraisable.exc_value, Interrupted):
+        FLAG.redeliver()
+        return
+    (_previous_unraisable or sys.__unraisablehook__)(unraisable)
 
 
 #: The process's flag (one per process: signal handlers are process-wide).
@@ -129,10 +153,14 @@ def install(early: list[int] | None = None, hold: bool = False) -> StopFlag:
     someone clears :attr:`StopFlag.shield` (:func:`gonio.cli.main` does, inside the block that
     turns an interrupt into one line).
     """
+    global _previous_unraisable
     FLAG.shield = FLAG.shield or hold
     if not FLAG.installed and threading.current_thread() is threading.main_thread():
         for sig in SIGNALS:
             signal.signal(sig, FLAG.handler)
+        if sys.unraisablehook is not _unraisable:
+            _previous_unraisable = sys.unraisablehook
+            sys.unraisablehook = _unraisable
         FLAG.installed = True
     for signum in early or ():
         FLAG.count += 1
@@ -156,6 +184,8 @@ def installed(hold: bool = False):
     finally:
         for sig, h in old.items():
             signal.signal(sig, h)
+        if sys.unraisablehook is _unraisable:
+            sys.unraisablehook = _previous_unraisable or sys.__unraisablehook__
         FLAG.installed = False
         FLAG.shield = FLAG.defer = False
         FLAG.reset()
