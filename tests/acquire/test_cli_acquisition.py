@@ -108,6 +108,8 @@ def test_rig_check_on_a_stale_port_is_one_line(tmp_path):
     def unplug_on_first_byte():
         try:
             os.read(master, 1)
+        except OSError:
+            pass
         finally:
             os.close(master)
 
@@ -120,11 +122,15 @@ def test_rig_check_on_a_stale_port_is_one_line(tmp_path):
         .read_text()
         .replace('port = "sim"', f'port = "{path}"')
     )
-    os.close(slave)
-    out = gonio("rig", "check", "--rig", rig)
-    t.join(5)
+    try:
+        # the slave stays open here until the end, so that the master reads block until the
+        # command's first packet (with no slave open they fail at once)
+        out = gonio("rig", "check", "--rig", rig)
+    finally:
+        t.join(5)
+        os.close(slave)
     assert out.returncode == 3
-    assert_one_line(out.stderr, path)
+    assert_one_line(out.stderr, f"servo bus {path} lost")
 
 
 def test_plan_into_a_closed_pipe_is_silent(tmp_path):
