@@ -4,11 +4,19 @@ Acquire reflectance with a gonioreflectometer (or its simulator), store it as ta
 fit analytic models with uncertainty, and render fitted-vs-measured comparisons.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("gonio")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0.0.0+unknown"
-
 __all__ = ["__version__"]
+
+
+def __getattr__(name: str):
+    # looked up on first use: importlib.metadata costs 30-80 ms, and `python -m gonio` installs
+    # its signal handlers only after this package is imported (see gonio/__main__.py)
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("gonio")
+        except PackageNotFoundError:  # running from a source tree that was never installed
+            v = "0.0.0+unknown"
+        globals()["__version__"] = v
+        return v
+    raise AttributeError(f"module 'gonio' has no attribute {name!r}")

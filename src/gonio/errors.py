@@ -48,3 +48,14 @@ class FitError(GonioError, RuntimeError):
     """A fit cannot be carried out on this data (too few samples, no valid cells, ...)."""
 
     exit_code = 4
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped on SIGINT or SIGTERM (``signum``); the CLI exits with 128 + signum.
+
+    A :class:`KeyboardInterrupt`, so code that stops on Ctrl-C stops on it too.
+    """
+
+    def __init__(self, message: str = "interrupted", signum: int = 2) -> None:
+        super().__init__(message)
+        self.signum = signum

@@ -19,6 +19,7 @@ from gonio.acquire.engine import acquire
 from gonio.acquire.journal import Journal
 from gonio.errors import PlanError
 from gonio.rigs.config import load_rig
+from gonio.rigs.session import open_rig
 from gonio.rigs.sim import FaultConfig
 from gonio.rigs.sim.sample import SimulatedSampleCamera
 
@@ -114,7 +115,13 @@ def test_read_back_directions_match_targets(tmp_path, plan_file):
 def test_faulty_bus_still_gives_every_sample_identically(reference, tmp_path, plan_file):
     ref, _ = reference
     faults = FaultConfig(drop=0.03, garble=0.03, crc=0.03, overload=0.01, seed=11)
-    s = acquire(tmp_path / "run", "sim_sample", plan_file, progress=False, faults=faults)
+    s = acquire(
+        tmp_path / "run",
+        "sim_sample",
+        plan_file,
+        progress=False,
+        open_devices=lambda rig, d: open_rig(rig, faults=faults, log_dir=d),
+    )
     assert s.complete and s.bus["retries"] > 0
     got, counts = samples_of(tmp_path / "run")
     assert set(got) == set(ref) and counts["done"] == len(ref)

@@ -190,3 +190,18 @@ def test_serial_led_errors():
             SerialLEDLight(emu.port, timeout_s=0.3)
     with pytest.raises(DeviceError, match="cannot open"):
         SerialLEDLight("/dev/gonio-no-such-port")
+
+
+def test_camera_factory_decides_the_kind_in_one_place():
+    from gonio.errors import RigConfigError
+    from gonio.rigs import camera_factory
+    from gonio.rigs.config import load_rig
+    from gonio.rigs.sim.sample import SimulatedSampleCamera
+
+    sim, direct = load_rig("sim"), load_rig("sim_sample")
+    assert camera_factory.is_raw(sim) and not camera_factory.is_raw(direct)
+    assert camera_factory.channels(sim) == ("R", "G", "B")
+    assert camera_factory.channels(direct) == ("R", "G", "B")  # the Phong truth is RGB
+    assert isinstance(camera_factory.open_direct_camera(direct), SimulatedSampleCamera)
+    with pytest.raises(RigConfigError, match="is a RAW camera"):
+        camera_factory.open_direct_camera(sim)

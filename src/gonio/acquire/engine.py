@@ -6,33 +6,40 @@
   with no lost and no duplicated sample;
 * ``log.jsonl`` — a structured log, one JSON object per line (events, per-configuration timings,
   faults and recoveries);
-* ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received;
+* ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received
+  (and ``sim_packets.jsonl``, every instruction packet, with ``[sim] packet_log = true``);
 * ``table.brdf.h5`` — the samples as a table through :mod:`gonio.io` when the run completes.
 
-Each stage of the plan is planned once (inverse kinematics, refusals with reasons, travel-time
-ordering) and journaled atomically before any motion; later stages see earlier stages' samples.
-SIGINT/SIGTERM finish the configuration in progress, park the rig per its rig file and stop.
+The run directory appears with its complete journal (:mod:`gonio.acquire.rundir`). Each stage of
+the plan is planned once (inverse kinematics, refusals with reasons, travel-time ordering) and
+journaled atomically before any motion; later stages see earlier stages' samples. Once the servos
+are powered every way out parks the rig, or turns torque off when it cannot
+(:mod:`gonio.acquire.stopping`). SIGINT/SIGTERM (:mod:`gonio.interrupts`): the first finishes the
+configuration in progress, parks and stops; a second abandons the configuration and parks.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
-import signal
 import sys
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from gonio import interrupts
+from gonio.acquire import rundir, stopping
 from gonio.acquire.journal import Journal, PlannedConfig
 from gonio.acquire.ordering import move_times, path_time, plan_route
-from gonio.acquire.plans import Plan, Result, load_plan, plan_from_spec
-from gonio.errors import DeviceError, FormatError, PlanError
-from gonio.rigs.config import RigConfig, load_rig, parse_rig
+from gonio.acquire.plans import Plan, Result, load_plan
+from gonio.errors import DeviceError, PlanError
+from gonio.rigs.config import RigConfig, load_rig
 from gonio.rigs.devices import Geometry
 from gonio.rigs.kinematics import Kinematics, Pose
 
@@ -217,61 +224,9 @@ class RunSummary:
     wall_s: float = 0.0
 
 
-class _StopFlag:
-    def __init__(self) -> None:
-        self.stop = False
-        self.signum = 0
-        self._old: dict = {}
-
-    def install(self) -> None:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                self._old[sig] = signal.signal(sig, self._handler)
-            except ValueError:  # not the main thread
-                pass
-
-    def restore(self) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-    def _handler(self, signum, frame) -> None:
-        if self.stop:  # second Ctrl-C: give up immediately
-            raise KeyboardInterrupt
-        self.stop = True
-        self.signum = signum
-
-
-def _start_new(run_dir: Path, rig: RigConfig, plan_spec: dict) -> Journal:
-    if run_dir.exists() and any(run_dir.iterdir()):
-        raise PlanError(f"{run_dir} exists and is not empty (use --resume to continue a run)")
-    run_dir.mkdir(parents=True, exist_ok=True)
-    j = Journal(run_dir, create=True)
-    from gonio import __version__
-
-    j.set_meta(
-        {
-            "schema_version": "1",
-            "gonio_version": __version__,
-            "rig_text": rig.text,
-            "rig_source": rig.source,
-            "plan_spec": json.dumps(plan_spec),
-            "created": str(time.time()),
-        }
-    )
-    return j
-
-
 def open_run(run_dir: Path) -> tuple[Journal, RigConfig, Plan]:
     """Open an existing run: its journal, and the rig and plan recorded in it."""
-    j = Journal(run_dir)
-    text = j.get_meta("rig_text")
-    spec = j.get_meta("plan_spec")
-    if text is None or spec is None:
-        j.close()
-        raise FormatError(f"{run_dir}: journal lacks the rig or the plan")
-    rig = parse_rig(text, j.get_meta("rig_source") or "rig")
-    plan = plan_from_spec(json.loads(spec))
-    return j, rig, plan
+    return rundir.open_run(Path(run_dir))
 
 
 def acquire(
@@ -279,154 +234,269 @@ def acquire(
     rig: str | Path | RigConfig | None = None,
     plan: str | Path | None = None,
     resume: bool = False,
-    faults=None,
     progress: bool = True,
-    time_scale: float | None = None,
     on_sample: Callable[[int, object], None] | None = None,
     write_table: bool = True,
     strict: bool = False,
     exposure_planning: bool | None = None,
+    open_devices: Callable[[RigConfig, Path], AbstractContextManager] | None = None,
 ) -> RunSummary:
     """Run (or resume) an acquisition; see the module docstring.
 
     Parameters
     ----------
     out : run directory (created; must be empty unless ``resume``).
-    rig, plan : rig name/path/config and plan name/path (ignored when resuming: the journal's
-        copies are used so a resumed run is the same run).
-    faults : :class:`gonio.rigs.sim.FaultConfig` for the simulated bus (overrides the rig file).
+    rig, plan : rig name/path/config and plan name/path. When resuming the journal's copies
+        are used so that a resumed run is the same run; a ``rig`` that differs from the
+        recorded one is refused (PlanError) rather than ignored.
     progress : show a rich progress bar with ETA.
     strict : refuse the whole plan (PlanError, nothing moved, no run directory) if any of its
         poses is refused; later stages of an adaptive plan are checked before their motion.
-    time_scale : simulated-rig speed-up (overrides ``[sim] time_scale``).
     on_sample : called as ``on_sample(n, session)`` after each sample, with the number measured
         so far in this process and the open :class:`gonio.rigs.session.RigSession` (tests use
         it to inject faults into the emulator mid-run).
     exposure_planning : RAW cameras only: plan each configuration's exposures from the previous
         frame (default: the rig file's ``camera.planning``, true) or use fixed brackets.
+    open_devices : ``open_devices(rig, run_dir)``, a context manager yielding the connected
+        :class:`gonio.rigs.session.RigSession` (default: :func:`gonio.rigs.session.open_rig`
+        with the run directory for the simulator's logs). The command line binds
+        ``--sim-faults`` and ``--time-scale`` here.
+
+    Every way out once the servos are powered parks the rig when it can and switches torque off
+    when it cannot (:mod:`gonio.acquire.stopping`); the outcome is added to the exception as a
+    note, logged, and journaled. A start that fails before the rig is ready leaves no run
+    directory behind.
     """
-    from gonio.acquire.imaging import open_run_camera
+    run_dir = Path(out)
+    # signals are recorded, not raised, except in the loop over configurations (see
+    # gonio.interrupts): the flag is checked wherever stopping is safe
+    with interrupts.installed() as flag, flag.shielded():
+        if flag.requested:  # a signal during start-up whose exception was swallowed
+            raise flag.interrupted()
+        if resume:
+            journal, rig_cfg, plan_obj = open_run(run_dir)
+            if rig is not None:
+                _same_rig_or_refuse(journal, rig_cfg, rig, run_dir)
+            created, existed = False, True
+        else:
+            if rig is None or plan is None:
+                raise PlanError("a new run needs --rig and --plan")
+            rig_cfg = rig if isinstance(rig, RigConfig) else load_rig(rig)
+            plan_obj, spec = load_plan(plan)
+            if strict:
+                # plan the first stage before creating anything or opening the bus
+                first = dry_run(rig_cfg, plan_obj)[0]
+                _refuse_if_any(first)
+            meta = {"strict": "1" if strict else "0"}
+            if exposure_planning is not None:  # a resumed run keeps the choice
+                meta["exposure_planning"] = "1" if exposure_planning else "0"
+            existed = rundir.start_new(run_dir, rig_cfg, spec, meta)
+            journal = Journal(run_dir)
+            created = True
+        if exposure_planning is None and journal.get_meta("exposure_planning") is not None:
+            exposure_planning = journal.get_meta("exposure_planning") == "1"
+        run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample)
+        try:
+            run.execute(open_devices, exposure_planning)
+        except BaseException:
+            run.close()
+            if created and not run.started:
+                rundir.discard(run_dir, existed)
+            raise
+        return run.finish(write_table)
+
+
+def _same_rig_or_refuse(journal: Journal, recorded: RigConfig, rig, run_dir: Path) -> None:
+    given = rig if isinstance(rig, RigConfig) else load_rig(rig)
+    if given.text != recorded.text:
+        journal.close()
+        raise PlanError(
+            f"{run_dir} was recorded on rig {recorded.name!r} ({recorded.source}); --resume"
+            f" continues it on that rig, not on {given.name!r} ({given.source}): drop --rig"
+        )
+
+
+def _default_devices(rig: RigConfig, run_dir: Path):
     from gonio.rigs.session import open_rig
 
-    t_start = time.monotonic()
-    run_dir = Path(out)
-    if resume:
-        journal, rig_cfg, plan_obj = open_run(run_dir)
-    else:
-        if rig is None or plan is None:
-            raise PlanError("a new run needs --rig and --plan")
-        rig_cfg = rig if isinstance(rig, RigConfig) else load_rig(rig)
-        plan_obj, spec = load_plan(plan)
-        if strict:
-            # plan the first stage before creating anything or opening the bus
-            first = dry_run(rig_cfg, plan_obj)[0]
-            _refuse_if_any(first)
-        journal = _start_new(run_dir, rig_cfg, spec)
-        journal.set_meta({"strict": "1" if strict else "0"})
-        if exposure_planning is not None:  # a resumed run keeps the choice
-            journal.set_meta({"exposure_planning": "1" if exposure_planning else "0"})
-    if resume and exposure_planning is None and journal.get_meta("exposure_planning") is not None:
-        exposure_planning = journal.get_meta("exposure_planning") == "1"
-    log = RunLog(run_dir / "log.jsonl")
-    log("resume" if resume else "start", rig=rig_cfg.name, plan=plan_obj.name, pid=os.getpid())
-    stop = _StopFlag()
-    stop.install()
-    measured_now = 0
-    kin = Kinematics(rig_cfg)
-    goal_log = run_dir / "sim_goals.jsonl" if rig_cfg.is_sim else None
-    try:
-        with open_rig(rig_cfg, faults=faults, goal_log_path=goal_log, time_scale=time_scale) as ses:
-            chain = ses.chain
-            camera = open_run_camera(rig_cfg, run_dir, exposure_planning)
-            bar = _Progress(progress)
-            with bar:
-                start_deg = dict(rig_cfg.park_deg)
-                for j in rig_cfg.joints:
-                    start_deg.setdefault(j.name, j.zero_offset_deg)
-                for stage in range(plan_obj.n_stages):
-                    if not journal.stage_planned(stage):
-                        results = [
-                            Result(tuple(s.wi), tuple(s.wo), float(np.mean(s.value)))
-                            for s in journal.samples()
-                        ]
-                        sp = plan_stage(
-                            rig_cfg, plan_obj, stage, results, start_deg, journal.next_index()
-                        )
-                        if journal.get_meta("strict") == "1":
-                            _refuse_if_any(sp)
-                        journal.plan_stage(stage, sp.configs)
-                        log(
-                            "stage_planned",
-                            stage=stage,
-                            accepted=len(sp.accepted),
-                            refused=len(sp.refused),
-                            predicted_motion_s=float(np.sum(sp.move_s)),
-                        )
-                        for c in sp.refused:
-                            log("refused", idx=c.idx, reason=c.reason)
-                    stage_cfgs = [c for c in journal.configs(stage) if c.status == "planned"]
-                    if stage_cfgs:
-                        # the next stage starts where this one ends (deterministic on resume)
-                        start_deg = dict(stage_cfgs[-1].joints_deg)
-                    counts = journal.counts()
-                    bar.set(counts["planned"], counts["done"])
-                    for cfg in journal.pending(stage):
-                        if stop.stop:
-                            break
-                        _measure(chain, camera, kin, journal, log, cfg)
-                        measured_now += 1
-                        bar.advance()
-                        if on_sample is not None:
-                            on_sample(measured_now, ses)
-                    if stop.stop:
-                        break
-            if stop.stop:
-                log("interrupted", signal=stop.signum)
-                chain.park()
-                log("parked", pose=rig_cfg.park_deg)
-            else:
-                chain.park()
-                log("parked", pose=rig_cfg.park_deg)
-            bus = dict(vars(chain.bus.stats))
+    return open_rig(rig, log_dir=run_dir)
+
+
+class _Run:
+    """One execution of :func:`acquire` (state shared by its phases)."""
+
+    def __init__(self, run_dir, journal, rig, plan, flag, resume, progress, on_sample) -> None:
+        self.run_dir = run_dir
+        self.journal = journal
+        self.rig = rig
+        self.plan = plan
+        self.flag = flag
+        self.progress = progress
+        self.on_sample = on_sample
+        self.t_start = time.monotonic()
+        self.log = RunLog(run_dir / "log.jsonl")
+        self.log("resume" if resume else "start", rig=rig.name, plan=plan.name, pid=os.getpid())
+        self.started = False  # servos powered: from here on the run persists
+        self.measured_now = 0
+        self.bus: dict = {}
+        self.stop_note = ""
+        self._closed = False
+
+    def execute(self, open_devices, exposure_planning) -> None:
+        from gonio.acquire.imaging import open_run_camera
+
+        flag = self.flag
+        with contextlib.ExitStack() as stack:
+            # the camera first: a bad camera is found before the bus is opened
+            camera = open_run_camera(self.rig, self.run_dir, exposure_planning)
             if hasattr(camera, "close"):
-                camera.close()
-    except BaseException as exc:
+                stack.callback(camera.close)
+            if flag.requested:
+                raise flag.interrupted()
+            ses = stack.enter_context((open_devices or _default_devices)(self.rig, self.run_dir))
+            chain = ses.chain
+            self.started = True
+            try:
+                with flag.deferred():
+                    chain.should_abort = lambda: flag.count >= 2
+                    if flag.requested:
+                        raise flag.interrupted()
+                    self._loop(chain, camera, ses)
+                    chain.should_abort = lambda: False
+            except BaseException as exc:
+                # from here on signals are recorded, not raised: nothing may skip the park
+                with flag.shielded():
+                    chain.should_abort = lambda: False
+                    self._stopped_by(exc, chain)
+                raise
+            with flag.shielded():
+                reason = "interrupted" if flag.requested else "complete"
+                if flag.requested:
+                    self.log("interrupted", signal=flag.signum)
+                parked, phrase = stopping.bring_to_rest(chain, flag)
+                stopping.record_stop(self.journal, self.log, reason, parked, phrase)
+                self.bus = chain.bus_stats()
+                self.stop_note = phrase
+            if not parked:
+                raise DeviceError(f"run ended but the rig could not be parked: {phrase}")
+            self.log("parked", pose=self.rig.park_deg)
+
+    def _stopped_by(self, exc: BaseException, chain) -> None:
+        """Bring the rig to rest after ``exc``; log, journal and note the outcome on ``exc``."""
         if isinstance(exc, DeviceError):
-            log("device_error", message=str(exc))
+            self.log("device_error", message=str(exc))
+        elif isinstance(exc, KeyboardInterrupt):
+            self.log("interrupted", signal=self.flag.signum, message=str(exc))
         else:
-            log("aborted", error=type(exc).__name__, message=str(exc))
-        log.close()
-        journal.close()
-        raise
-    finally:
-        stop.restore()
-    counts = journal.counts()
-    complete = (
-        not stop.stop
-        and all(journal.stage_planned(s) for s in range(plan_obj.n_stages))
-        and counts["done"] == counts["planned"]
-    )
-    table, note = None, ""
-    if complete and write_table:
-        table, note = write_run_table(journal, rig_cfg, camera_channels(rig_cfg))
-        log("table", path=table, note=note)
-    log("end", complete=complete, **counts, measured_now=measured_now, bus=bus)
-    log.close()
-    journal.close()
-    if stop.stop:
-        raise KeyboardInterrupt
-    return RunSummary(
-        str(run_dir),
-        counts["planned"],
-        counts["refused"],
-        counts["done"],
-        measured_now,
-        complete,
-        table,
-        note,
-        bus,
-        time.monotonic() - t_start,
-    )
+            self.log("aborted", error=type(exc).__name__, message=str(exc))
+        parked, phrase = stopping.bring_to_rest(chain, self.flag)
+        stopping.record_stop(self.journal, self.log, _reason(exc), parked, phrase)
+        if parked:
+            self.log("parked", pose=self.rig.park_deg)
+        try:
+            self.bus = chain.bus_stats()
+        except Exception:
+            pass
+        exc.add_note(phrase)
+
+    def _loop(self, chain, camera, ses) -> None:
+        rig, plan, journal, log, flag = self.rig, self.plan, self.journal, self.log, self.flag
+        kin = Kinematics(rig)
+        scale = float(getattr(ses, "time_scale", 1.0))  # rig seconds per wall second
+        with _Progress(self.progress) as bar:
+            start_deg = dict(rig.park_deg)
+            for j in rig.joints:
+                start_deg.setdefault(j.name, j.zero_offset_deg)
+            for stage in range(plan.n_stages):
+                if not journal.stage_planned(stage):
+                    results = [
+                        Result(tuple(s.wi), tuple(s.wo), float(np.mean(s.value)))
+                        for s in journal.samples()
+                    ]
+                    sp = plan_stage(rig, plan, stage, results, start_deg, journal.next_index())
+                    if journal.get_meta("strict") == "1":
+                        _refuse_if_any(sp)
+                    journal.plan_stage(stage, sp.configs)
+                    log(
+                        "stage_planned",
+                        stage=stage,
+                        accepted=len(sp.accepted),
+                        refused=len(sp.refused),
+                        predicted_motion_s=float(np.sum(sp.move_s)),
+                    )
+                    for c in sp.refused:
+                        log("refused", idx=c.idx, reason=c.reason)
+                stage_cfgs = [c for c in journal.configs(stage) if c.status == "planned"]
+                if stage_cfgs:
+                    # the next stage starts where this one ends (deterministic on resume)
+                    start_deg = dict(stage_cfgs[-1].joints_deg)
+                counts = journal.counts()
+                bar.set(counts["planned"], counts["done"])
+                for cfg in journal.pending(stage):
+                    # the flag, not the exception: a library callback may swallow the latter
+                    if flag.count >= 2:
+                        raise flag.interrupted()
+                    if flag.requested:
+                        return
+                    _measure(chain, camera, kin, journal, log, cfg, scale)
+                    self.measured_now += 1
+                    bar.advance()
+                    if self.on_sample is not None:
+                        self.on_sample(self.measured_now, ses)
+                if flag.requested:
+                    return
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.log.close()
+            self.journal.close()
+
+    def finish(self, write_table: bool) -> RunSummary:
+        journal, flag = self.journal, self.flag
+        counts = journal.counts()
+        complete = (
+            not flag.requested
+            and all(journal.stage_planned(s) for s in range(self.plan.n_stages))
+            and counts["done"] == counts["planned"]
+        )
+        table, note = None, ""
+        try:
+            if complete and write_table:
+                table, note = write_run_table(journal, self.rig, camera_channels(self.rig))
+                self.log("table", path=table, note=note)
+            self.log(
+                "end", complete=complete, **counts, measured_now=self.measured_now, bus=self.bus
+            )
+        except KeyboardInterrupt as exc:  # while writing the table: the rig is at rest already
+            exc.add_note(self.stop_note)
+            raise
+        finally:
+            self.close()
+        if flag.requested:
+            exc = flag.interrupted()
+            exc.add_note(self.stop_note)
+            raise exc
+        return RunSummary(
+            str(self.run_dir),
+            counts["planned"],
+            counts["refused"],
+            counts["done"],
+            self.measured_now,
+            complete,
+            table,
+            note,
+            self.bus,
+            time.monotonic() - self.t_start,
+        )
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted"
+    if isinstance(exc, DeviceError):
+        return "device error"
+    return f"error ({type(exc).__name__})"
 
 
 def _refuse_if_any(sp: StagePlan) -> None:
@@ -439,15 +509,15 @@ def _refuse_if_any(sp: StagePlan) -> None:
 
 
 def camera_channels(rig: RigConfig) -> tuple[str, ...]:
-    from gonio.acquire.imaging import RAW_KINDS
-    from gonio.rigs.devices import open_camera
+    """Channel names of the rig's measurements (:func:`gonio.rigs.camera_factory.channels`)."""
+    from gonio.rigs.camera_factory import channels
 
-    if rig.camera.get("kind", "sim") in RAW_KINDS:
-        return ("R", "G", "B")
-    return tuple(open_camera(rig).channels)
+    return channels(rig)
 
 
-def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig):
+def _measure(
+    chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig, scale=1.0
+):
     t0 = time.monotonic()
     res = chain.move(cfg.joints_deg)
     t1 = time.monotonic()
@@ -482,6 +552,7 @@ def _measure(chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg:
         recoveries=res.recoveries,
         polls=res.polls,
         move_wall_s=t1 - t0,
+        profile_wall_s=res.predicted_s / scale,  # what `gonio plan` predicts for this move
         **{f"t_{k}": v for k, v in timings.items()},
         **extra,
     )

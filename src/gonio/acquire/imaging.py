@@ -41,8 +41,6 @@ from gonio.errors import DeviceError, RigConfigError
 from gonio.io.dng import read_dng
 from gonio.rigs.devices import Capture, Geometry
 
-RAW_KINDS = ("sim", "gphoto2", "folder")
-
 
 @dataclass
 class ImagingSettings:
@@ -471,19 +469,21 @@ def settings_from_rig(rig) -> ImagingSettings:
 
 
 def open_imaging_camera(rig, run_dir: str | Path, planning: bool | None = None) -> ImagingCamera:
-    """The :class:`ImagingCamera` of a rig whose ``[camera] kind`` is a RAW backend.
+    """The :class:`ImagingCamera` of a rig whose ``[camera] kind`` is a RAW backend
+    (:func:`gonio.rigs.camera_factory.open_raw_camera` picks it).
 
     ``planning`` overrides the rig file's ``camera.planning``.
     """
-    from gonio.rigs.cameras import CommandLineCamera, FolderWatchCamera, SimulatedRawCamera
+    from gonio.rigs import camera_factory
     from gonio.rigs.lights import open_light
-    from gonio.rigs.sim.camera import HolderLayout, PinholeCamera, VirtualCamera
+    from gonio.rigs.sim.camera import HolderLayout, PinholeCamera
     from gonio.rigs.sim.sensor import SensorModel
 
+    if not camera_factory.is_raw(rig):
+        raise RigConfigError(
+            f"{rig.source}: camera.kind {camera_factory.camera_kind(rig)!r} is not a RAW camera"
+        )
     c = rig.camera
-    kind = c.get("kind", "sim")
-    if kind not in RAW_KINDS:
-        raise RigConfigError(f"{rig.source}: camera.kind {kind!r} is not a RAW camera")
     settings = settings_from_rig(rig)
     if planning is not None:
         settings.planning = planning
@@ -493,44 +493,20 @@ def open_imaging_camera(rig, run_dir: str | Path, planning: bool | None = None) 
     sensor = SensorModel(**dict(c.get("sensor", {})))
     layout = HolderLayout()
     light = open_light(rig)
-    if kind == "sim":
-        from gonio.rigs.sim.truth import load_truth
-
-        truth = load_truth(rig.sim.sample, rig.source)
-        virtual = VirtualCamera(
-            truth=truth,
-            layout=layout,
-            camera=optics,
-            sensor=sensor,
-            supersample=int(c.get("supersample", 2)),
-            seed=rig.sim.seed,
-        )
-        # the rig file gives the irradiance on a surface facing the light at the sample centre
-        d = rig.layout.light_distance_m
-        intensity = float(rig.light.get("irradiance_w_m2", 10.0)) * d * d
-        raw = SimulatedRawCamera(virtual, light, intensity)
-    elif kind == "gphoto2":
-        raw = CommandLineCamera(
-            program=str(c.get("program", "gphoto2")),
-            port=c.get("port"),
-            shutter_key=str(c.get("shutter_key", "shutterspeed")),
-            timeout_s=float(c.get("timeout_s", 30.0)),
-        )
-    else:
-        if "folder" not in c:
-            raise RigConfigError(f"{rig.source}: camera.folder is required for kind 'folder'")
-        raw = FolderWatchCamera(
-            c["folder"], str(c.get("pattern", "*.dng")), float(c.get("timeout_s", 60.0))
-        )
-    light.on()
+    try:
+        raw = camera_factory.open_raw_camera(rig, light, optics, sensor, layout)
+        light.on()
+    except BaseException:
+        light.close()
+        raise
     return ImagingCamera(raw, light, layout, optics.matrix, sensor, Path(run_dir), settings)
 
 
 def open_run_camera(rig, run_dir: str | Path, planning: bool | None = None):
-    """The run engine's camera: :class:`ImagingCamera` for RAW kinds, else the rig's own
-    (:func:`gonio.rigs.devices.open_camera`, e.g. ``"sim-sample"``)."""
-    if rig.camera.get("kind", "sim") in RAW_KINDS:
-        return open_imaging_camera(rig, run_dir, planning)
-    from gonio.rigs.devices import open_camera
+    """The run engine's camera: :class:`ImagingCamera` for RAW kinds, else the rig's direct
+    camera (:func:`gonio.rigs.camera_factory.open_direct_camera`, e.g. ``"sim-sample"``)."""
+    from gonio.rigs import camera_factory
 
-    return open_camera(rig)
+    if camera_factory.is_raw(rig):
+        return open_imaging_camera(rig, run_dir, planning)
+    return camera_factory.open_direct_camera(rig)

@@ -76,11 +76,18 @@ class SampleRow:
 
 
 class Journal:
-    """SQLite journal of one run directory."""
+    """SQLite journal of one run directory.
+
+    ``Journal(run_dir, create=True, meta={...})`` creates the tables and writes ``meta`` in one
+    transaction, so that no reader ever sees a journal without its metadata.
+    """
 
     FILENAME = "journal.sqlite"
+    SCHEMA_VERSION = SCHEMA_VERSION
 
-    def __init__(self, run_dir: str | Path, create: bool = False) -> None:
+    def __init__(
+        self, run_dir: str | Path, create: bool = False, meta: dict[str, str] | None = None
+    ) -> None:
         self.run_dir = Path(run_dir)
         self.path = self.run_dir / self.FILENAME
         if not create and not self.path.is_file():
@@ -91,7 +98,14 @@ class Journal:
             self.db.execute("PRAGMA synchronous=FULL")
             self.db.execute("PRAGMA foreign_keys=ON")
             if create:
-                self.db.executescript(_SCHEMA)
+                items = {"schema_version": str(SCHEMA_VERSION), **(meta or {})}
+                with self._tx():
+                    for stmt in filter(str.strip, _SCHEMA.split(";")):
+                        self.db.execute(stmt)
+                    self.db.executemany(
+                        "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
+                        list(items.items()),
+                    )
             else:
                 ver = self.get_meta("schema_version")
                 if ver != str(SCHEMA_VERSION):

@@ -78,26 +78,51 @@ def _dir(theta: float, phi: float) -> tuple[float, float, float]:
     return (st * math.cos(phi), st * math.sin(phi), math.cos(theta))
 
 
+#: Most values one plan axis may have (a typo such as step = 1e-9 must not exhaust memory).
+MAX_AXIS_VALUES = 10_000
+
+
+def _key_error(key: str | tuple, msg: str) -> PlanError:
+    """PlanError ``plan key KEY: msg`` that remembers the key (``load_plan`` adds the line)."""
+    path = (key,) if isinstance(key, str) else tuple(key)
+    dotted = ".".join(f"[{k}]" if isinstance(k, int) else str(k) for k in path).replace(".[", "[")
+    err = PlanError(f"plan key {dotted}: {msg}")
+    err.key_path = path
+    err.detail = msg
+    return err
+
+
 def _angles(spec, key: str) -> np.ndarray:
     """Degrees list or {start, stop, step} (inclusive) -> radians array."""
     if isinstance(spec, dict):
         try:
             start, stop, step = float(spec["start"]), float(spec["stop"]), float(spec["step"])
         except (KeyError, TypeError, ValueError):
-            raise PlanError(f"plan key {key}: a range needs numeric start, stop, step") from None
-        if step <= 0 or stop < start:
-            raise PlanError(f"plan key {key}: need step > 0 and stop >= start")
-        n = math.floor((stop - start) / step + 1e-9) + 1
+            raise _key_error(key, "a range needs numeric start, stop, step") from None
+        # written so that NaN refuses
+        if not all(math.isfinite(v) for v in (start, stop, step)):
+            raise _key_error(key, "start, stop and step must be finite")
+        if not (step > 0 and stop >= start):
+            raise _key_error(key, "need step > 0 and stop >= start")
+        count = (stop - start) / step
+        if not count < MAX_AXIS_VALUES:
+            raise _key_error(
+                key, f"the range has {count + 1:.3g} values (at most {MAX_AXIS_VALUES})"
+            )
+        n = math.floor(count + 1e-9) + 1
         vals = start + step * np.arange(n)
     elif isinstance(spec, (list, tuple)) and spec:
+        if len(spec) > MAX_AXIS_VALUES:
+            raise _key_error(key, f"{len(spec)} values (at most {MAX_AXIS_VALUES})")
         try:
             vals = np.array([float(v) for v in spec])
         except (TypeError, ValueError):
-            raise PlanError(f"plan key {key}: values must be numbers (degrees)") from None
+            raise _key_error(key, "values must be numbers (degrees)") from None
     else:
-        raise PlanError(f"plan key {key}: give a list of degrees or {{start, stop, step}}")
-    if not np.all(np.isfinite(vals)):
-        raise PlanError(f"plan key {key}: values must be finite")
+        raise _key_error(key, "give a list of degrees or {start, stop, step}")
+    bad = np.flatnonzero(~np.isfinite(vals))
+    if bad.size:
+        raise _key_error((key, int(bad[0])), f"{vals[bad[0]]} is not a finite number")
     return np.radians(vals)
 
 
@@ -203,8 +228,9 @@ class Adaptive(Plan):
         name: str = "",
     ) -> None:
         super().__init__(name)
-        if step <= 0 or window <= 0:
-            raise PlanError("refine.step_deg and refine.window_deg must be > 0")
+        for key, v in (("step_deg", step), ("window_deg", window), ("peak_ratio", peak_ratio)):
+            if not (math.isfinite(v) and v > 0):  # NaN refuses
+                raise _key_error(("refine", key), "must be a finite number > 0")
         self.coarse = coarse
         self.window = window
         self.step = step
@@ -358,14 +384,14 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
         raise PlanError("a plan must be a table")
     kind = spec.get("kind")
     if kind not in _KEYS:
-        raise PlanError(f"plan key kind: {kind!r} is not one of {sorted(_KEYS)}")
+        raise _key_error("kind", f"{kind!r} is not one of {sorted(_KEYS)}")
     allowed = {"kind", "name", *_KEYS[kind]} | ({"refine"} if kind == "adaptive" else set())
     allowed |= {"reciprocal"} if kind == "isotropic" else set()
     if not isinstance(spec.get("reciprocal", False), bool):
-        raise PlanError("plan key reciprocal: must be true or false")
+        raise _key_error("reciprocal", "must be true or false")
     extra = sorted(set(spec) - allowed)
     if extra:
-        raise PlanError(f"plan key {extra[0]}: unknown for kind {kind!r}")
+        raise _key_error(extra[0], f"unknown for kind {kind!r}")
     missing = [k for k in _KEYS[kind] if k not in spec]
     if missing:
         raise PlanError(
@@ -373,8 +399,8 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
         )
     axes = [_angles(spec[k], k) for k in _KEYS[kind]]
     for k, a in zip(_KEYS[kind], axes, strict=True):
-        if k.startswith("theta") and (np.any(a < 0) or np.any(a > math.pi / 2)):
-            raise PlanError(f"plan key {k}: polar angles must lie in [0, 90] deg")
+        if k.startswith("theta") and not np.all((a >= 0) & (a <= math.pi / 2)):
+            raise _key_error(k, "polar angles must lie in [0, 90] deg")
     name = spec.get("name", name) or kind
     if kind == "grid4d":
         return Grid4D(*axes, name=name)
@@ -393,6 +419,8 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
             peak_ratio=float(ref.get("peak_ratio", 1.5)),
             name=name,
         )
+    except PlanError:
+        raise
     except (TypeError, ValueError):
         raise PlanError("plan key refine: values must be numbers") from None
 
@@ -408,8 +436,19 @@ def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
             f"unknown plan {s!r}: not a file, and built-ins are {', '.join(builtin_plans())}"
         )
     try:
-        spec = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
+        spec = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise PlanError(f"{p}: invalid TOML: {exc}") from None
+    from gonio.rigs.toml_lines import non_finite, where
+
+    for path, value in non_finite(spec):
+        raise PlanError(f"{where(str(p), text, path)}: {value} is not a finite number")
     spec.setdefault("name", p.stem)
-    return plan_from_spec(spec, p.stem), spec
+    try:
+        return plan_from_spec(spec, p.stem), spec
+    except PlanError as exc:
+        path = getattr(exc, "key_path", None)
+        if path is None:
+            raise
+        raise PlanError(f"{where(str(p), text, path)}: {exc.detail}") from None

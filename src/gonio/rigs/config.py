@@ -23,8 +23,11 @@ from typing import Any
 
 import jsonschema
 
-from gonio.errors import RigConfigError
+from gonio.errors import PlanError, RigConfigError
 from gonio.rigs import control_table as ct
+from gonio.rigs.toml_lines import key_line, non_finite, where
+
+__all__ = ["RigConfig", "key_line", "load_rig", "non_finite", "parse_rig", "rig_schema", "where"]
 
 # --- the definition -------------------------------------------------------------------------
 # Each leaf: (json type, description, extra schema keywords). Tables are dicts; arrays of tables
@@ -95,17 +98,23 @@ SPEC: dict = {
         "retries": _int(
             "Retries of a transaction after a timeout or CRC error.", minimum=0, maximum=50
         ),
-        "backoff_ms": _num("First retry delay (ms); doubles at every retry.", minimum=0),
+        "backoff_ms": _num(
+            "First retry delay (ms); doubles at every retry.", minimum=0, maximum=10_000
+        ),
         "timeout_margin_ms": _num(
             "Added to dynamixel-sdk's reply timeout (2 x 16 ms USB latency + 2 ms + transfer),"
             " for slow links or a loaded host (ms).",
             minimum=0,
+            maximum=60_000,
         ),
         "motion_timeout_s": _num(
             "Margin (s) added to the predicted move time before a move is declared stuck.",
             exclusiveMinimum=0,
+            maximum=3600,
         ),
-        "poll_interval_ms": _num("Delay between position polls while settling (ms).", minimum=0),
+        "poll_interval_ms": _num(
+            "Delay between position polls while settling (ms).", minimum=0, maximum=10_000
+        ),
         "max_recoveries": _int(
             "Reboot-and-re-home attempts per move after a hardware error.", minimum=0, maximum=10
         ),
@@ -131,7 +140,9 @@ SPEC: dict = {
             enum=["sim", "sim-sample", "gphoto2", "folder"],
         ),
         "exposure_s": _num("Default (first probe) exposure (s).", exclusiveMinimum=0),
-        "capture_time_s": _num("Simulated capture duration (s, wall clock).", minimum=0),
+        "capture_time_s": _num(
+            "Simulated capture duration (s, wall clock).", minimum=0, maximum=3600
+        ),
         # --- imaging (RAW backends) ---
         "width": _int("Image width (pixels).", minimum=16, maximum=20000),
         "height": _int("Image height (pixels).", minimum=16, maximum=20000),
@@ -171,7 +182,9 @@ SPEC: dict = {
         "program": _str("gphoto2: the program to run (name on PATH or path)."),
         "port": _str("gphoto2: --port of the camera (e.g. usb:001,004)."),
         "shutter_key": _str("gphoto2: config key of the shutter speed."),
-        "timeout_s": _num("gphoto2/folder: longest wait for a frame (s).", exclusiveMinimum=0),
+        "timeout_s": _num(
+            "gphoto2/folder: longest wait for a frame (s).", exclusiveMinimum=0, maximum=86_400
+        ),
         "folder": _str("folder: directory the camera software writes raw files into."),
         "pattern": _str("folder: glob of the raw files (e.g. *.dng, *.CR2)."),
     },
@@ -188,7 +201,7 @@ SPEC: dict = {
         "intensity": _num("Relative output when on, 0..1.", minimum=0, maximum=1),
         "port": _str("serial: device path or pyserial URL."),
         "baudrate": _int("serial: baud rate.", minimum=300),
-        "timeout_s": _num("serial: reply timeout (s).", exclusiveMinimum=0),
+        "timeout_s": _num("serial: reply timeout (s).", exclusiveMinimum=0, maximum=3600),
     },
     "park": {
         "__doc__": "Park pose: joint name -> angle (deg). Joints not named keep their angle.",
@@ -228,14 +241,22 @@ SPEC: dict = {
     },
     "sim": {
         "__doc__": "The simulated rig (used when bus.port = 'sim').",
-        "time_scale": _num("Simulated seconds per wall-clock second.", exclusiveMinimum=0),
+        "time_scale": _num(
+            "Simulated seconds per wall-clock second.", exclusiveMinimum=0, maximum=1e6
+        ),
         "settle_ticks": _int(
             "Max settling error of a servo (encoder ticks, 0.088 deg).", minimum=0, maximum=50
         ),
-        "seed": _int("Seed of settling errors and measurement noise.", minimum=0),
+        "seed": _int(
+            "Seed of settling errors and measurement noise.", minimum=0, maximum=2**63 - 1
+        ),
         "firmware": _int("Firmware version the emulated servos report.", minimum=0, maximum=255),
         "noise_rel": _num("Relative measurement noise (1 sigma).", minimum=0),
         "noise_abs": _num("Absolute measurement noise floor (1/sr, 1 sigma).", minimum=0),
+        "packet_log": _bool(
+            "Append every instruction packet the emulator receives to RUN/sim_packets.jsonl"
+            " (tests and debugging; about 100 bytes per packet)."
+        ),
         "sample": {
             "__doc__": (
                 "Ground-truth BRDF of the simulated sample: a model (Node.to_dict() form: type,"
@@ -251,7 +272,7 @@ SPEC: dict = {
             "overload": _num(
                 "Moves ending in an overload (torque shutdown).", minimum=0, maximum=1
             ),
-            "seed": _int("Fault seed.", minimum=0),
+            "seed": _int("Fault seed.", minimum=0, maximum=2**63 - 1),
         },
     },
 }
@@ -320,9 +341,11 @@ class JointConfig:
     settle_tolerance_deg: float = 0.5
 
     def to_ticks(self, angle_deg: float) -> int:
-        """Joint angle (deg) -> Goal Position ticks."""
-        servo_deg = (angle_deg - self.zero_offset_deg) * self.gear_ratio * self.direction
-        return ct.CENTER_TICK + round(servo_deg * ct.TICKS_PER_REV / 360.0)
+        """Joint angle (deg) -> Goal Position ticks; PlanError if it has none (NaN, inf)."""
+        t = servo_ticks(self, angle_deg)
+        if not math.isfinite(t):
+            raise PlanError(f"joint {self.name}: {angle_deg} deg has no servo tick")
+        return round(t)
 
     def from_ticks(self, ticks: int) -> float:
         """Present Position ticks -> joint angle (deg)."""
@@ -331,6 +354,7 @@ class JointConfig:
 
     @property
     def tolerance_ticks(self) -> int:
+        # a validated rig has 0 < settle_tolerance_deg <= its range, so this is finite
         return max(
             1, math.floor(self.settle_tolerance_deg * self.gear_ratio * ct.TICKS_PER_REV / 360.0)
         )
@@ -379,6 +403,7 @@ class SimConfig:
     firmware: int = 52
     noise_rel: float = 0.01
     noise_abs: float = 1e-4
+    packet_log: bool = False
     sample: dict = field(default_factory=lambda: {"type": "Lambert", "params": {"albedo": [0.5]}})
     faults: dict = field(default_factory=dict)
 
@@ -414,81 +439,6 @@ class RigConfig:
 # --- loading ------------------------------------------------------------------------------
 
 
-def _key_line(text: str, path: tuple) -> int | None:
-    """Best-effort line number (1-based) of the key at ``path`` in TOML ``text``.
-
-    tomllib reports no positions, so we scan: the line of the deepest key of ``path`` that
-    appears after its enclosing table header (``[a.b]`` or the n-th ``[[a]]``).
-    """
-    lines = text.splitlines()
-    keys = [k for k in path if isinstance(k, str)]
-    if not keys:
-        return None
-    # locate the enclosing table header
-    start, end = 0, len(lines)
-    idx_in_array = None
-    table_keys: list[str] = []
-    for i, k in enumerate(path):
-        if isinstance(k, int):
-            idx_in_array = k
-            table_keys = [x for x in path[:i] if isinstance(x, str)]
-            break
-    header_re = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]\]?")
-    if idx_in_array is not None:
-        name = ".".join(table_keys)
-        count = -1
-        for n, line in enumerate(lines):
-            m = re.match(r"^\s*\[\[\s*" + re.escape(name) + r"\s*\]\]", line)
-            if m:
-                count += 1
-                if count == idx_in_array:
-                    start = n
-                    break
-        # end at the next header
-        for n in range(start + 1, len(lines)):
-            if header_re.match(lines[n]):
-                end = n
-                break
-        rest = [x for x in path[path.index(idx_in_array) + 1 :] if isinstance(x, str)]
-        target = rest[-1] if rest else None
-        if target is None:
-            return start + 1
-    else:
-        target = keys[-1]
-        parents = keys[:-1]
-        for depth in range(len(parents), 0, -1):
-            name = ".".join(parents[:depth])
-            for n, line in enumerate(lines):
-                if re.match(r"^\s*\[\s*" + re.escape(name) + r"\s*\]", line):
-                    start = n
-                    for m2 in range(n + 1, len(lines)):
-                        if header_re.match(lines[m2]):
-                            end = m2
-                            break
-                    break
-            else:
-                continue
-            break
-    pat = re.compile(r"^\s*(?:[A-Za-z0-9_.\"-]*\.)?\"?" + re.escape(str(target)) + r"\"?\s*=")
-    for n in range(start, end):
-        if pat.match(lines[n]) or re.search(
-            r"[{,]\s*" + re.escape(str(target)) + r"\s*=", lines[n]
-        ):
-            return n + 1
-    hdr = re.compile(r"^\s*\[\[?\s*" + re.escape(".".join(keys)) + r"\s*\]\]?")
-    for n, line in enumerate(lines):
-        if hdr.match(line):
-            return n + 1
-    return start + 1 if start else None
-
-
-def _where(source: str, text: str, path: tuple) -> str:
-    dotted = ".".join(f"[{k}]" if isinstance(k, int) else str(k) for k in path).replace(".[", "[")
-    line = _key_line(text, path)
-    loc = f"{source}:{line}" if line else source
-    return f"{loc}: {dotted or '(top level)'}"
-
-
 def _schema_error_message(err: jsonschema.ValidationError, source: str, text: str) -> str:
     path = tuple(err.absolute_path)
     if err.validator == "required":
@@ -498,14 +448,14 @@ def _schema_error_message(err: jsonschema.ValidationError, source: str, text: st
         dotted = ".".join(f"[{k}]" if isinstance(k, int) else str(k) for k in full).replace(
             ".[", "["
         )
-        line = _key_line(text, path) if path else None
+        line = key_line(text, path) if path else None
         loc = f"{source}:{line}" if line else source
         return f"{loc}: missing required key {dotted}"
     if err.validator == "additionalProperties":
         extra = re.findall(r"'([^']+)' was unexpected", err.message)
         key = extra[0] if extra else "?"
-        return f"{_where(source, text, (*path, key))}: unknown key"
-    return f"{_where(source, text, path)}: {err.message}"
+        return f"{where(source, text, (*path, key))}: unknown key"
+    return f"{where(source, text, path)}: {err.message}"
 
 
 def _find(name_or_path: str | Path) -> tuple[str, str]:
@@ -544,6 +494,10 @@ def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RigConfigError(f"{source}: invalid TOML: {exc}") from None
+    # jsonschema's minimum/maximum accept NaN (every comparison with it is false), and TOML
+    # spells nan and inf: refuse every non-finite number before anything else looks at it
+    for path, value in non_finite(data):
+        raise RigConfigError(f"{where(source, text, path)}: {value} is not a finite number")
     validator = jsonschema.Draft202012Validator(rig_schema())
     errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:
@@ -551,9 +505,61 @@ def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     return _build(data, text, source)
 
 
+def servo_ticks(j: JointConfig, angle_deg: float) -> float:
+    """Joint angle (deg) -> Goal Position ticks before rounding (may be inf or NaN)."""
+    servo_deg = (angle_deg - j.zero_offset_deg) * j.gear_ratio * j.direction
+    return ct.CENTER_TICK + servo_deg * ct.TICKS_PER_REV / 360.0
+
+
+def _check_joint(j: JointConfig, i: int, fail) -> None:
+    """Consistency of one joint: limits ordered, every conversion fits its register.
+
+    Comparisons are written ``not (ok)`` so that a NaN (impossible after :func:`non_finite`,
+    but cheap to be sure of) refuses.
+    """
+    if not j.min_deg < j.max_deg:
+        raise fail(("joints", i, "min_deg"), f"min_deg {j.min_deg} must be < max_deg {j.max_deg}")
+    lo, hi = ct.POSITION_RANGE[ct.OPERATING_MODES[j.operating_mode]]
+    for key in ("min_deg", "max_deg"):
+        t = servo_ticks(j, getattr(j, key))
+        if not (math.isfinite(t) and lo <= round(t) <= hi):
+            raise fail(
+                ("joints", i, key),
+                f"{getattr(j, key)} deg is servo tick {t:.6g}, outside {lo}..{hi} of"
+                f" {j.operating_mode} mode (check gear_ratio/zero_offset_deg)",
+            )
+    tol = j.settle_tolerance_deg
+    if not (0.0 < tol <= j.max_deg - j.min_deg):
+        raise fail(
+            ("joints", i, "settle_tolerance_deg"),
+            f"{tol} deg must be > 0 and within the joint's range ({j.max_deg - j.min_deg} deg)",
+        )
+    for key, unit, limit in (
+        ("profile_velocity_deg_s", 60.0 / (360.0 * ct.VELOCITY_UNIT_RPM), ct.PROFILE_RAW_MAX),
+        (
+            "profile_acceleration_deg_s2",
+            3600.0 / (360.0 * ct.ACCELERATION_UNIT_RPM2),
+            ct.PROFILE_RAW_MAX,
+        ),
+    ):
+        raw = getattr(j, key) * j.gear_ratio * unit
+        # 0 in these registers means "no limit" to the servo: a speed too small to express
+        # must not become the fastest one
+        if not (math.isfinite(raw) and 1 <= round(raw) <= limit):
+            raise fail(
+                ("joints", i, key),
+                f"{getattr(j, key)} at gear ratio {j.gear_ratio} is register value {raw:.6g},"
+                f" outside 1..{limit}",
+            )
+
+
+def _outside_keepout(angle: float, k: Keepout) -> bool:
+    return angle < k.min_deg or angle > k.max_deg
+
+
 def _build(data: dict, text: str, source: str) -> RigConfig:
     def fail(path: tuple, msg: str) -> RigConfigError:
-        return RigConfigError(f"{_where(source, text, path)}: {msg}")
+        return RigConfigError(f"{where(source, text, path)}: {msg}")
 
     joints = tuple(JointConfig(**j) for j in data["joints"])
     names: set[str] = set()
@@ -565,20 +571,7 @@ def _build(data: dict, text: str, source: str) -> RigConfig:
             raise fail(("joints", i, "id"), f"duplicate servo id {j.id}")
         names.add(j.name)
         ids.add(j.id)
-        if j.min_deg >= j.max_deg:
-            raise fail(
-                ("joints", i, "min_deg"), f"min_deg {j.min_deg} must be < max_deg {j.max_deg}"
-            )
-        mode = ct.OPERATING_MODES[j.operating_mode]
-        lo, hi = ct.POSITION_RANGE[mode]
-        for key in ("min_deg", "max_deg"):
-            t = j.to_ticks(getattr(j, key))
-            if not lo <= t <= hi:
-                raise fail(
-                    ("joints", i, key),
-                    f"{getattr(j, key)} deg is servo tick {t}, outside {lo}..{hi} of"
-                    f" {j.operating_mode} mode (check gear_ratio/zero_offset_deg)",
-                )
+        _check_joint(j, i, fail)
     layout = LayoutConfig(**data["layout"])
     for key in ("light", "camera", "tilt", "rotation"):
         if getattr(layout, key) not in names:
@@ -592,17 +585,46 @@ def _build(data: dict, text: str, source: str) -> RigConfig:
         if k not in names:
             raise fail(("park", k), "names no joint")
         j = next(x for x in joints if x.name == k)
-        if not j.min_deg <= v <= j.max_deg:
+        if not j.min_deg <= v <= j.max_deg:  # NaN refuses
             raise fail(("park", k), f"{v} deg outside the joint limits [{j.min_deg}, {j.max_deg}]")
     s = dict(data["safety"])
     keep = []
     for i, k in enumerate(s.pop("keepout", [])):
         if k["joint"] not in names:
             raise fail(("safety", "keepout", i, "joint"), f"names no joint ({k['joint']!r})")
-        if k["min_deg"] >= k["max_deg"]:
+        if not k["min_deg"] < k["max_deg"]:
             raise fail(("safety", "keepout", i, "min_deg"), "min_deg must be < max_deg")
-        keep.append(Keepout(**k))
+        ko = Keepout(**k)
+        keep.append(ko)
+        # the home angle decides which side of the sector the joint lives on (it may never
+        # cross it): the park angle, or the servo's centre when [park] does not name the joint
+        j = next(x for x in joints if x.name == ko.joint)
+        if ko.joint in park:
+            home, at = park[ko.joint], ("park", ko.joint)
+        else:
+            home, at = j.zero_offset_deg, ("safety", "keepout", i, "joint")
+            if not j.min_deg <= home <= j.max_deg:
+                raise fail(
+                    at,
+                    f"joint {ko.joint} has no park angle and its zero_offset_deg {home} is"
+                    f" outside its limits: give it one in [park]",
+                )
+        if not _outside_keepout(home, ko):
+            raise fail(
+                at,
+                f"home angle {home} deg of joint {ko.joint} is inside the keep-out sector"
+                f" [{ko.min_deg}, {ko.max_deg}] ({ko.reason})",
+            )
     safety = SafetyConfig(keepout=tuple(keep), **s)
+    lay_l, lay_c = layout.light, layout.camera
+    if lay_l in park and lay_c in park:
+        sep = abs(math.remainder(park[lay_l] - park[lay_c], 360.0))
+        if not sep >= safety.min_light_camera_deg:
+            raise fail(
+                ("park", lay_l),
+                f"park pose puts the light and camera arms {sep} deg apart"
+                f" (< safety.min_light_camera_deg {safety.min_light_camera_deg})",
+            )
     sim = SimConfig(**data.get("sim", {}))
     if "sample" in data.get("sim", {}):
         from gonio.rigs.sim.truth import truth_file

@@ -94,6 +94,8 @@ CENTER_TICK = 2048
 VELOCITY_UNIT_RPM = 0.229
 #: Profile Acceleration unit: 214.577 rev/min^2.
 ACCELERATION_UNIT_RPM2 = 214.577
+#: Largest Profile Velocity / Profile Acceleration value (e-Manual range 0..32767; 0 = no limit).
+PROFILE_RAW_MAX = 32767
 
 
 def hardware_error_text(bits: int) -> str:

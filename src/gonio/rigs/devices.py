@@ -1,8 +1,10 @@
-"""Device interfaces the run engine talks to (camera, measurement geometry).
+"""Device protocols the run engine talks to: the camera and what it is told and returns.
 
-The imaging work adds RAW-writing cameras behind the same :class:`Camera` protocol; until then
-the simulated rig's camera (:class:`gonio.rigs.sim.sample.SimulatedSampleCamera`) returns the
-reflectance of a simulated sample computed from the joint angles read back from the bus.
+Only the interfaces live here. The camera a rig file names is opened by
+:mod:`gonio.rigs.camera_factory` (RAW cameras through the imaging pipeline,
+:class:`gonio.acquire.imaging.ImagingCamera`; the direct ``sim-sample`` reading,
+:class:`gonio.rigs.sim.sample.SimulatedSampleCamera`); the servos by
+:func:`gonio.rigs.session.open_rig`.
 """
 
 from __future__ import annotations
@@ -56,26 +58,3 @@ class Camera(Protocol):
     def capture(self, geometry: Geometry, exposure_s: float | None = None) -> Capture:
         """Take one measurement at ``geometry``; ``exposure_s`` overrides the default."""
         ...
-
-
-def open_camera(rig) -> Camera:
-    """The non-imaging camera backend of the rig file's ``[camera] kind`` (``"sim-sample"``).
-
-    RAW cameras (``"sim"``, ``"gphoto2"``, ``"folder"``) are opened by
-    :func:`gonio.acquire.imaging.open_imaging_camera`.
-    """
-    from gonio.errors import RigConfigError
-
-    kind = rig.camera.get("kind", "sim")
-    if kind == "sim-sample":
-        from gonio.rigs.sim.sample import SimulatedSampleCamera
-
-        return SimulatedSampleCamera(rig)
-    if kind in ("sim", "gphoto2", "folder"):
-        # RAW cameras measure through the imaging pipeline (gonio.acquire.imaging), which needs
-        # a run directory for its files; the run engine opens them there.
-        raise RigConfigError(
-            f"{rig.source}: camera.kind {kind!r} is a RAW camera: open it with"
-            " gonio.acquire.imaging.open_imaging_camera"
-        )
-    raise RigConfigError(f"{rig.source}: camera.kind {kind!r} has no backend")

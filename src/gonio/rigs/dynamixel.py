@@ -2,13 +2,15 @@
 
 Two layers:
 
-* :class:`DynamixelBus` — transactions (ping, read, write, sync write, sync read, reboot) through
+* :class:`~gonio.rigs.dxl_bus.DynamixelBus` (in :mod:`gonio.rigs.dxl_bus`, re-exported here) —
+  transactions (ping, read, write, sync write, sync read, reboot) through
   ``dynamixel_sdk.PortHandler`` / ``PacketHandler(2.0)``, each retried with exponential backoff
   after a timeout, a corrupt reply or a CRC error reported by the servo.
 * :class:`ServoChain` — joints from a rig file: identify models, configure operating mode and
   motion profile, check software limits **before** sending anything, sync-write all goals at
   once, poll (sync read) until every joint has settled, reboot and re-home after a hardware
-  error, and return the positions actually reached as read back from the servos.
+  error, and return the positions actually reached as read back from the servos. Every goal
+  passes :class:`gonio.rigs.guard.GoalGuard` at the last moment before its packet is written.
 
 Angles at this interface are joint angles in **degrees** keyed by joint name (the rig file's
 unit); the kinematics layer converts to radians.
@@ -21,17 +23,25 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-import dynamixel_sdk as sdk
 import numpy as np
-import serial
 
-from gonio.errors import DeviceError, PlanError
+from gonio.errors import DeviceError, Interrupted, PlanError
 from gonio.rigs import control_table as ct
-from gonio.rigs.config import BusConfig, JointConfig, RigConfig
+from gonio.rigs.config import JointConfig, RigConfig
+from gonio.rigs.dxl_bus import BusLost, BusStats, DynamixelBus
+from gonio.rigs.guard import GoalGuard
+
+__all__ = [
+    "BusLost",
+    "BusStats",
+    "DynamixelBus",
+    "HardwareFault",
+    "MoveResult",
+    "ServoChain",
+    "ServoInfo",
+]
 
 log = logging.getLogger("gonio.rigs.dynamixel")
-
-_RETRY_COMM = {sdk.COMM_RX_TIMEOUT, sdk.COMM_RX_CORRUPT, sdk.COMM_RX_FAIL, sdk.COMM_TX_FAIL}
 
 
 class HardwareFault(DeviceError):
@@ -41,266 +51,6 @@ class HardwareFault(DeviceError):
         self.faults = dict(faults)
         text = "; ".join(f"{j}: {ct.hardware_error_text(b)}" for j, b in self.faults.items())
         super().__init__(f"servo hardware error ({text})")
-
-
-class _PortHandler(sdk.PortHandler):
-    """The SDK's PortHandler with an extra reply-timeout margin (``bus.timeout_margin_ms``).
-
-    The SDK waits ``2 x 16 ms + 2 ms`` (USB latency timer) plus the transfer time for a reply;
-    slow links (serial servers, a loaded host running the emulator) need more.
-    """
-
-    extra_timeout_ms: float = 0.0
-
-    def setPacketTimeout(self, packet_length):
-        super().setPacketTimeout(packet_length)
-        self.packet_timeout += self.extra_timeout_ms
-
-    def setPacketTimeoutMillis(self, msec):
-        super().setPacketTimeoutMillis(msec + self.extra_timeout_ms)
-
-
-class _URLPortHandler(_PortHandler):
-    """PortHandler that opens pyserial URLs (``socket://``, ``rfc2217://``, ``loop://``)."""
-
-    def setupPort(self, cflag_baud):
-        if self.is_open:
-            self.closePort()
-        self.ser = serial.serial_for_url(
-            self.port_name, baudrate=self.baudrate, bytesize=serial.EIGHTBITS, timeout=0
-        )
-        self.is_open = True
-        self.ser.reset_input_buffer()
-        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
-        return True
-
-
-@dataclass
-class BusStats:
-    """Counters of one bus session."""
-
-    transactions: int = 0
-    retries: int = 0
-    timeouts: int = 0
-    corrupt: int = 0
-    crc_errors: int = 0
-    resent_goals: int = 0
-    recoveries: int = 0
-
-
-class DynamixelBus:
-    """Protocol 2.0 transactions with retries.
-
-    Parameters
-    ----------
-    port : str
-        Serial device path or pyserial URL.
-    baudrate : int
-        Bits per second.
-    retries : int
-        Extra attempts after a timeout / corrupt reply / servo-reported CRC error.
-    backoff_s : float
-        Delay before the first retry; doubles each retry (capped at 0.2 s).
-    timeout_margin_s : float
-        Added to the SDK's reply timeout (about 34 ms plus transfer time).
-    """
-
-    def __init__(
-        self,
-        port: str,
-        baudrate: int = 1_000_000,
-        retries: int = 5,
-        backoff_s: float = 0.002,
-        timeout_margin_s: float = 0.0,
-    ):
-        self.port_name = port
-        self.baudrate = baudrate
-        self.retries = retries
-        self.backoff_s = backoff_s
-        self.timeout_margin_s = timeout_margin_s
-        self.stats = BusStats()
-        self._port: sdk.PortHandler | None = None
-        self._ph = sdk.PacketHandler(2.0)
-        #: ids whose last status packet carried the alert bit (hardware error pending)
-        self.alerts: set[int] = set()
-
-    @classmethod
-    def from_config(cls, cfg: BusConfig, port: str | None = None) -> DynamixelBus:
-        return cls(
-            port or cfg.port,
-            cfg.baudrate,
-            cfg.retries,
-            cfg.backoff_ms / 1000.0,
-            cfg.timeout_margin_ms / 1000.0,
-        )
-
-    # --- port ---------------------------------------------------------------------------------
-    def open(self) -> None:
-        url = "://" in self.port_name
-        port = (_URLPortHandler if url else _PortHandler)(self.port_name)
-        port.extra_timeout_ms = self.timeout_margin_s * 1000.0
-        try:
-            ok = port.openPort() and port.setBaudRate(self.baudrate)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise DeviceError(f"cannot open servo bus {self.port_name}: {exc}") from None
-        if not ok:
-            raise DeviceError(f"cannot open servo bus {self.port_name} at {self.baudrate} baud")
-        self._port = port
-
-    def close(self) -> None:
-        if self._port is not None and self._port.is_open:
-            self._port.closePort()
-        self._port = None
-
-    def __enter__(self) -> DynamixelBus:
-        self.open()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    @property
-    def port(self) -> sdk.PortHandler:
-        if self._port is None:
-            raise DeviceError("servo bus is not open")
-        return self._port
-
-    # --- retry core ---------------------------------------------------------------------------
-    def _transact(self, what: str, fn: Callable[[], tuple], who: Callable[[], str] | None = None):
-        """Run ``fn() -> (value, comm_result, error_byte)`` with retries; return value, error.
-
-        ``who()`` names the servo at fault in the final error (for multi-servo transactions).
-        """
-        delay = self.backoff_s
-        last = ""
-        for attempt in range(self.retries + 1):
-            if attempt:
-                self.stats.retries += 1
-                time.sleep(delay)
-                delay = min(delay * 2.0, 0.2)
-            self.stats.transactions += 1
-            value, comm, error = fn()
-            if comm in _RETRY_COMM:
-                if comm == sdk.COMM_RX_TIMEOUT:
-                    self.stats.timeouts += 1
-                else:
-                    self.stats.corrupt += 1
-                last = self._ph.getTxRxResult(comm)
-                continue
-            if comm != sdk.COMM_SUCCESS:
-                raise DeviceError(f"{what}: {self._ph.getTxRxResult(comm)}")
-            num = error & 0x7F
-            if num == sdk.ERRNUM_CRC:
-                self.stats.crc_errors += 1
-                last = "servo reported a CRC error"
-                continue
-            if num:
-                raise DeviceError(f"{what}: {self._ph.getRxPacketError(num)}")
-            return value, error
-        culprit = who() if who is not None else ""
-        raise DeviceError(
-            f"{what}: {culprit + ' ' if culprit else ''}no valid reply after"
-            f" {self.retries + 1} attempts ({last})"
-        )
-
-    def _note_alert(self, servo_id: int, error: int) -> None:
-        if error & sdk.ERRBIT_ALERT:
-            self.alerts.add(servo_id)
-        else:
-            self.alerts.discard(servo_id)
-
-    # --- transactions -------------------------------------------------------------------------
-    def ping(self, servo_id: int) -> int:
-        """Model Number of servo ``servo_id`` (raises DeviceError if it does not answer)."""
-        model, error = self._transact(
-            f"ping servo {servo_id}", lambda: self._ph.ping(self.port, servo_id)
-        )
-        self._note_alert(servo_id, error)
-        return int(model)
-
-    def read(self, servo_id: int, reg: tuple[int, int], signed: bool = False) -> int:
-        """Read a 1, 2 or 4-byte register."""
-        addr, n = reg
-
-        def call():
-            data, comm, err = self._ph.readTxRx(self.port, servo_id, addr, n)
-            return data, comm, err
-
-        data, error = self._transact(f"read servo {servo_id} @{addr}", call)
-        self._note_alert(servo_id, error)
-        return int.from_bytes(bytes(data[:n]), "little", signed=signed)
-
-    def write(self, servo_id: int, reg: tuple[int, int], value: int) -> None:
-        """Write a 1, 2 or 4-byte register and wait for the servo's acknowledgement."""
-        addr, n = reg
-        data = list(int(value & ((1 << (8 * n)) - 1)).to_bytes(n, "little"))
-
-        def call():
-            comm, err = self._ph.writeTxRx(self.port, servo_id, addr, n, data)
-            return None, comm, err
-
-        _, error = self._transact(f"write servo {servo_id} @{addr}={value}", call)
-        self._note_alert(servo_id, error)
-
-    def sync_write(self, reg: tuple[int, int], values: Mapping[int, int]) -> None:
-        """One Sync Write packet setting ``reg`` on every servo in ``values`` (no reply)."""
-        addr, n = reg
-        group = sdk.GroupSyncWrite(self.port, self._ph, addr, n)
-        for sid, v in values.items():
-            group.addParam(sid, list(int(v & ((1 << (8 * n)) - 1)).to_bytes(n, "little")))
-
-        def call():
-            return None, group.txPacket(), 0
-
-        self._transact("sync write", call)
-
-    def sync_read(self, addr: int, n: int, ids: list[int]) -> dict[int, bytes]:
-        """One Sync Read of ``n`` bytes at ``addr`` from every servo in ``ids``.
-
-        Uses the SDK's ``syncReadTx`` and per-servo ``readRx`` (rather than GroupSyncRead) so the
-        error byte of every status packet is seen: its alert bit flags a hardware error.
-        """
-
-        failed: list[int] = []
-
-        def call():
-            failed.clear()
-            comm = self._ph.syncReadTx(self.port, addr, n, list(ids), len(ids), False)
-            if comm != sdk.COMM_SUCCESS:
-                return None, comm, 0
-            out: dict[int, bytes] = {}
-            worst = 0
-            for sid in ids:
-                data, comm, err = self._ph.readRx(self.port, sid, n)
-                if comm != sdk.COMM_SUCCESS:
-                    self.port.is_using = False
-                    failed.append(sid)
-                    return None, comm, 0
-                if len(data) != n:
-                    failed.append(sid)
-                    return None, sdk.COMM_RX_CORRUPT, 0
-                self._note_alert(sid, err)
-                if err & 0x7F:
-                    worst = err
-                out[sid] = bytes(data)
-            return out, sdk.COMM_SUCCESS, worst
-
-        value, _ = self._transact(
-            f"sync read @{addr} from {ids}",
-            call,
-            lambda: f"servo {failed[0]} gave" if failed else "",
-        )
-        return value
-
-    def reboot(self, servo_id: int) -> None:
-        """Reboot a servo (clears a hardware error; RAM registers return to defaults)."""
-
-        def call():
-            comm, err = self._ph.reboot(self.port, servo_id)
-            return None, comm, err
-
-        self._transact(f"reboot servo {servo_id}", call)
-        self.alerts.discard(servo_id)
 
 
 @dataclass(frozen=True)
@@ -333,6 +83,8 @@ class MoveResult:
     settle_s: float
     polls: int
     recoveries: int
+    #: the profile time predicted for the move (rig time; both phases of a two-phase move)
+    predicted_s: float = 0.0
 
 
 class ServoChain:
@@ -350,7 +102,11 @@ class ServoChain:
         self.rig = rig
         self.joints: tuple[JointConfig, ...] = rig.joints
         self.bus = DynamixelBus.from_config(rig.bus, port)
+        self.guard = GoalGuard(rig)
+        self.bus.goal_guard = self.guard.check
         self.ids = [j.id for j in self.joints]
+        #: polled while a move settles; True aborts it (:class:`gonio.errors.Interrupted`)
+        self.should_abort: Callable[[], bool] = lambda: False
         self._by_id = {j.id: j for j in self.joints}
         self.last_goal_ticks: dict[int, int] = {}
         #: moves split in two because the arms would have come too close on the way
@@ -408,7 +164,12 @@ class ServoChain:
         self.bus.write(j.id, ct.TORQUE_ENABLE, 1)
 
     def initialize(self) -> None:
-        """Identify every servo, clear hardware errors (reboot), set mode/profile, torque on."""
+        """Identify every servo, clear hardware errors (reboot), set mode/profile, torque on.
+
+        Every servo is identified before any is written to: a wrong model anywhere in the
+        chain refuses the rig with no torque on. If configuring fails part-way, torque is
+        switched off again on every servo.
+        """
         for j in self.joints:
             model = self.bus.ping(j.id)
             if model != ct.MODELS[j.model]:
@@ -416,9 +177,19 @@ class ServoChain:
                 raise DeviceError(
                     f"joint {j.name}: servo {j.id} is {name}, rig file says {j.model}"
                 )
-            if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
-                self._reboot(j)
-            self._configure(j)
+        try:
+            for j in self.joints:
+                if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
+                    self._reboot(j)
+                self._configure(j)
+        except BaseException as exc:
+            try:
+                self.torque_off()
+            except Exception:
+                pass
+            else:
+                exc.add_note("torque off")
+            raise
 
     def _reboot(self, j: JointConfig) -> None:
         bits = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
@@ -459,7 +230,8 @@ class ServoChain:
                 if k.joint != j.name:
                     continue
                 park = self.rig.park_deg.get(j.name, j.zero_offset_deg)
-                if k.min_deg <= a <= k.max_deg or (a > k.max_deg) != (park > k.max_deg):
+                side = (a < k.min_deg and park < k.min_deg) or (a > k.max_deg and park > k.max_deg)
+                if not side:  # also refuses NaN
                     raise PlanError(
                         f"joint {j.name}: {a:.3f} deg in or across the keep-out sector"
                         f" [{k.min_deg}, {k.max_deg}] ({k.reason})"
@@ -508,13 +280,14 @@ class ServoChain:
         goals = self.check_limits(targets_deg)
         recoveries = 0
         rehome = False
+        self._predicted_s = 0.0
         while True:
             try:
                 if rehome:
                     self._move_once(self.check_limits(self.park_pose()), None, None)
                     rehome = False
                 res = self._move_once(goals, timeout_s, poll_s)
-                return MoveResult(res[0], res[1], res[2], res[3], recoveries)
+                return MoveResult(res[0], res[1], res[2], res[3], recoveries, self._predicted_s)
             except HardwareFault as fault:
                 if not recover or recoveries >= self.rig.bus.max_recoveries:
                     raise
@@ -540,8 +313,26 @@ class ServoChain:
         """Move to the park pose."""
         return self.move(self.park_pose())
 
-    def torque_off(self) -> None:
+    def torque_off(self) -> list[int]:
+        """Torque off on every servo: one Sync Write, then a write each servo acknowledges.
+
+        Returns the ids of servos that did not acknowledge; raises DeviceError only when the
+        bus itself is gone.
+        """
         self.bus.sync_write(ct.TORQUE_ENABLE, dict.fromkeys(self.ids, 0))
+        silent = []
+        for sid in self.ids:
+            try:
+                self.bus.write(sid, ct.TORQUE_ENABLE, 0)
+            except BusLost:
+                raise
+            except DeviceError:
+                silent.append(sid)
+        return silent
+
+    def bus_stats(self) -> dict[str, int]:
+        """Counters of this bus session (transactions, retries, timeouts, recoveries, ...)."""
+        return dict(vars(self.bus.stats))
 
     def arm_transit_hold(
         self, start_deg: Mapping[str, float], goal_deg: Mapping[str, float]
@@ -597,17 +388,21 @@ class ServoChain:
         if hold is not None:
             j = self.rig.joint(hold)
             first = dict(goals)
-            first[j.id] = _field(start[j.id], ct.PRESENT_POSITION)
+            # the held arm keeps its last (checked) goal; it rests within tolerance of it
+            first[j.id] = self.last_goal_ticks.get(j.id, _field(start[j.id], ct.PRESENT_POSITION))
             log.info("two-phase move: %s waits for the other arm", hold)
             self.two_phase_moves += 1
             self._move_once(first, None, poll_s, split=False)
             reached, _, settle, polls = self._move_once(goals, timeout_s, poll_s, split=False)
             t_end = time.monotonic()
             return reached, t_end - t0 - settle, settle, polls
+        predicted = self.predicted_time(start_deg, goal_deg)
+        self._predicted_s = getattr(self, "_predicted_s", 0.0) + predicted
         if timeout_s is None:
-            timeout_s = self.predicted_time(start_deg, goal_deg) + self.rig.bus.motion_timeout_s
+            timeout_s = predicted + self.rig.bus.motion_timeout_s
         if poll_s is None:
             poll_s = self.rig.bus.poll_interval_ms / 1000.0
+        self.guard.check(goals, start_deg)  # the whole pose; the bus checks each goal again
         self.bus.sync_write(ct.GOAL_POSITION, goals)
         self.last_goal_ticks = dict(goals)
         t_sent = time.monotonic()
@@ -615,6 +410,8 @@ class ServoChain:
         polls = 0
         deadline = t_sent + timeout_s
         while True:
+            if self.should_abort():
+                raise Interrupted("move abandoned on a second interrupt")
             data = self.bus.sync_read(a, n, self.ids)
             polls += 1
             if self.bus.alerts & set(self.ids):

@@ -161,35 +161,37 @@ class Kinematics:
                     f"joint {self.joint_names[role]} at {math.degrees(v):.2f} deg is outside"
                     f" its limits [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}]"
                 )
+        # every comparison below is written so that NaN refuses (a NaN compares false)
         for role, lo, hi, reason, name, park in self._keepout:
             v = getattr(pose, role)
-            if lo <= v <= hi:
+            if not (v < lo or v > hi):
                 return (
                     f"joint {name} at {math.degrees(v):.2f} deg is in a keep-out sector ({reason})"
                 )
             # every move is monotone in each joint, so a sector may never be crossed either:
             # the joint stays on the park pose's side of it
-            if (v > hi) != (park > hi):
+            if not ((v > hi and park > hi) or (v < lo and park < lo)):
                 return (
                     f"joint {name} at {math.degrees(v):.2f} deg is across the keep-out sector"
                     f" [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] from its park angle"
                     f" ({reason})"
                 )
-        if not self.arms_can_pass and (pose.light - pose.camera) * self._arm_order < 0:
+        if not self.arms_can_pass and not (pose.light - pose.camera) * self._arm_order >= 0:
             return (
                 "light and camera arms would have to pass each other (they keep their park"
                 " order; safety.arms_can_pass = false)"
             )
         sep = abs(math.remainder(pose.light - pose.camera, 2 * math.pi))
-        if sep < self.min_sep - 1e-12:
+        if not sep >= self.min_sep - 1e-12:
             return (
                 f"light and camera arms {math.degrees(sep):.2f} deg apart"
                 f" (< min_light_camera_deg {math.degrees(self.min_sep):.1f}: occlusion/collision)"
             )
         wi, wo = self.forward(pose)
         for name, w in (("light", wi), ("camera", wo)):
-            th = math.acos(max(-1.0, min(1.0, float(w[2]))))
-            if th > self.max_theta + 1e-9:
+            z = float(w[2])
+            th = math.acos(max(-1.0, min(1.0, z))) if z == z else math.nan
+            if not th <= self.max_theta + 1e-9:
                 where = "below the sample horizon" if th > math.pi / 2 else "too grazing"
                 return (
                     f"{name} at theta {math.degrees(th):.2f} deg is {where}"

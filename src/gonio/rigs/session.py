@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 from gonio.rigs.config import RigConfig
 from gonio.rigs.dynamixel import ServoChain
@@ -25,12 +26,18 @@ class RigSession:
     chain: ServoChain
     emulator: ServoChainEmulator | None = None
 
+    @property
+    def time_scale(self) -> float:
+        """Rig seconds per wall second: the emulator's time scale, 1 for hardware."""
+        return self.emulator.time_scale if self.emulator is not None else 1.0
+
 
 def make_emulator(
     rig: RigConfig,
     faults: FaultConfig | None = None,
     goal_log_path: str | os.PathLike | None = None,
     time_scale: float | None = None,
+    packet_log_path: str | os.PathLike | None = None,
 ) -> ServoChainEmulator:
     """An emulator with the rig's servos, each starting at its park angle."""
     specs = []
@@ -46,6 +53,7 @@ def make_emulator(
         settle_ticks=rig.sim.settle_ticks,
         seed=rig.sim.seed,
         goal_log_path=goal_log_path,
+        packet_log_path=packet_log_path,
     )
 
 
@@ -56,15 +64,24 @@ def open_rig(
     goal_log_path: str | os.PathLike | None = None,
     initialize: bool = True,
     time_scale: float | None = None,
+    log_dir: str | os.PathLike | None = None,
 ):
     """Context manager yielding a connected :class:`RigSession`.
 
-    ``faults``, ``goal_log_path`` and ``time_scale`` apply to the simulated rig only.
+    ``faults``, ``goal_log_path``, ``time_scale`` and ``log_dir`` apply to the simulated rig
+    only: with ``log_dir`` (a run directory) the emulator appends every Goal Position it
+    receives to ``log_dir/sim_goals.jsonl`` and, when the rig file sets ``[sim]
+    packet_log = true``, every instruction packet to ``log_dir/sim_packets.jsonl``.
     """
     emu = None
     port = None
     if rig.is_sim:
-        emu = make_emulator(rig, faults, goal_log_path, time_scale)
+        packets = None
+        if log_dir is not None:
+            goal_log_path = goal_log_path or Path(log_dir) / "sim_goals.jsonl"
+            if rig.sim.packet_log:
+                packets = Path(log_dir) / "sim_packets.jsonl"
+        emu = make_emulator(rig, faults, goal_log_path, time_scale, packets)
         port = emu.start()
     try:
         chain = ServoChain(rig, port=port)

@@ -95,6 +95,42 @@ class GoalRecord:
     accepted: bool
 
 
+@dataclass(frozen=True)
+class PacketRecord:
+    """An instruction packet as the bus carried it (wall time, id, instruction, parameters).
+
+    Recorded before any fault is injected, so the log is what the driver *sent*.
+    """
+
+    time: float
+    id: int
+    instruction: int
+    params: bytes
+
+    def writes(self, reg: tuple[int, int]) -> list[tuple[int, int]]:
+        """``(servo id, value)`` of every write of register ``reg`` this packet carries
+        (Write and Sync Write instructions whose data covers the register)."""
+        a, n = reg
+        prm = self.params
+        if self.instruction == p.WRITE and len(prm) >= 2:
+            addr = p.from_le(prm[0:2])
+            data = prm[2:]
+            if addr <= a and a + n <= addr + len(data):
+                return [(self.id, p.from_le(data[a - addr : a - addr + n], signed=n == 4))]
+            return []
+        if self.instruction == p.SYNC_WRITE and len(prm) >= 4:
+            addr, size = p.from_le(prm[0:2]), p.from_le(prm[2:4])
+            if not (addr <= a and a + n <= addr + size):
+                return []
+            out, i = [], 4
+            while i + 1 + size <= len(prm):
+                d = prm[i + 1 + a - addr : i + 1 + a - addr + n]
+                out.append((prm[i], p.from_le(d, signed=n == 4)))
+                i += 1 + size
+            return out
+        return []
+
+
 @dataclass
 class _Servo:
     spec: ServoSpec
@@ -241,6 +277,9 @@ class ServoChainEmulator(PtyDevice):
         Seed of the settling errors.
     goal_log_path : path, optional
         JSON-lines file to which every received Goal Position write is appended (flushed).
+    packet_log_path : path, optional
+        JSON-lines file to which every decoded instruction packet is appended (flushed):
+        ``{"t", "id", "inst", "params" (hex)}``; :func:`read_packet_log` reads it back.
 
     Use as a context manager, or call :meth:`start` / :meth:`stop`. :attr:`port` is the path the
     driver opens.
@@ -256,6 +295,7 @@ class ServoChainEmulator(PtyDevice):
         settle_ticks: int = 2,
         seed: int = 0,
         goal_log_path: str | os.PathLike | None = None,
+        packet_log_path: str | os.PathLike | None = None,
     ) -> None:
         if time_scale <= 0:
             raise ValueError("time_scale must be > 0")
@@ -280,6 +320,9 @@ class ServoChainEmulator(PtyDevice):
         self._rng = random.Random(self.faults.seed)
         self._lock = threading.Lock()
         self.goal_log: list[GoalRecord] = []
+        #: every decoded instruction packet, in order (see :class:`PacketRecord`)
+        self.packet_log: list[PacketRecord] = []
+        self._packet_log_path = Path(packet_log_path) if packet_log_path else None
         self.packets_in = 0
         self.crc_errors_seen = 0
         self._goal_log_path = Path(goal_log_path) if goal_log_path else None
@@ -373,6 +416,7 @@ class ServoChainEmulator(PtyDevice):
                 if s is None or not self._alive(s):
                     return []
                 return [self._reply(s, p.ERR_CRC)]
+            self._log_packet(pkt)
             if self._chance(self.faults.drop):
                 return []
             if self._chance(self.faults.crc):
@@ -516,6 +560,28 @@ class ServoChainEmulator(PtyDevice):
         s.set(ct.GOAL_POSITION, pos)
         s.refresh(now)
 
+    def _log_packet(self, pkt) -> None:
+        rec = PacketRecord(time.time(), pkt.id, pkt.instruction, bytes(pkt.params))
+        self.packet_log.append(rec)
+        if self._packet_log_path is not None:
+            with open(self._packet_log_path, "a", encoding="utf-8") as fh:
+                fh.write(
+                    json.dumps(
+                        {
+                            "t": rec.time,
+                            "id": rec.id,
+                            "inst": rec.instruction,
+                            "params": rec.params.hex(),
+                        }
+                    )
+                    + "\n"
+                )
+
+    def writes(self, reg: tuple[int, int]) -> list[tuple[int, int]]:
+        """``(servo id, value)`` of every write of ``reg`` sent on the bus so far, in order."""
+        with self._lock:
+            return [w for rec in self.packet_log for w in rec.writes(reg)]
+
     def _log_goal(self, servo_id: int, ticks: int, accepted: bool) -> None:
         rec = GoalRecord(time.time(), servo_id, ticks, accepted)
         self.goal_log.append(rec)
@@ -525,3 +591,13 @@ class ServoChainEmulator(PtyDevice):
                     json.dumps({"t": rec.time, "id": servo_id, "ticks": ticks, "ok": accepted})
                     + "\n"
                 )
+
+
+def read_packet_log(path: str | os.PathLike) -> list[PacketRecord]:
+    """The :class:`PacketRecord` list of a JSON-lines packet log (``packet_log_path``)."""
+    out = []
+    for line in Path(path).read_text(encoding="utf-8").splitlines():
+        if line.strip():
+            d = json.loads(line)
+            out.append(PacketRecord(d["t"], d["id"], d["inst"], bytes.fromhex(d["params"])))
+    return out
