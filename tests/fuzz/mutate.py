@@ -39,6 +39,12 @@ from tests.fuzz.corpus import Seed
 
 Rng = np.random.Generator
 
+
+def _pick(rng: Rng, seq: Any) -> Any:
+    """One element of ``seq`` (by index: ``rng.choice`` would turn big ints into floats)."""
+    seq = list(seq)
+    return seq[int(rng.integers(0, len(seq)))]
+
 #: Numbers that readers must refuse or handle: non-finite, absurd, negative, integer limits.
 BAD_FLOATS = (math.nan, math.inf, -math.inf, 1e308, -1e308, 1e38, -1.0, -1e-3, 0.0, 1e-320)
 BAD_INTS = (0, -1, -(2**31), 2**31 - 1, 2**32 - 1, 2**62, 2**63 - 1, 2**64 - 1, 10**30)
@@ -95,28 +101,28 @@ def m_flip(d: bytes, rng: Rng) -> tuple[bytes, str]:
 
 def m_zero(d: bytes, rng: Rng) -> tuple[bytes, str]:
     at = _pos(rng, len(d))
-    n = int(rng.choice([1, 4, 8, 64, 512, 4096]))
+    n = int(_pick(rng, [1, 4, 8, 64, 512, 4096]))
     b = bytearray(d)
     b[at : at + n] = bytes(len(b[at : at + n]))
     return bytes(b), f"zeroed {n} bytes at {at}"
 
 
 def m_duplicate(d: bytes, rng: Rng) -> tuple[bytes, str]:
-    n = int(rng.choice([16, 256, 1024, 4096]))
+    n = int(_pick(rng, [16, 256, 1024, 4096]))
     at = 1103 if rng.random() < 0.15 else _pos(rng, len(d))
     return d[: at + n] + d[at : at + n] + d[at + n :], f"duplicated {n} bytes at {at}"
 
 
 def m_insert(d: bytes, rng: Rng) -> tuple[bytes, str]:
     at = _pos(rng, len(d))
-    n = int(rng.choice([1, 7, 64, 1000]))
+    n = int(_pick(rng, [1, 7, 64, 1000]))
     junk = rng.integers(0, 256, n, dtype=np.uint8).tobytes()
     return d[:at] + junk + d[at:], f"inserted {n} random bytes at {at}"
 
 
 def m_delete(d: bytes, rng: Rng) -> tuple[bytes, str]:
     at = _pos(rng, len(d))
-    n = int(rng.choice([1, 8, 100, 1000]))
+    n = int(_pick(rng, [1, 8, 100, 1000]))
     return d[:at] + d[at + n :], f"deleted {n} bytes at {at}"
 
 
@@ -124,8 +130,8 @@ def m_word(d: bytes, rng: Rng) -> tuple[bytes, str]:
     if len(d) < 8:
         return m_truncate(d, rng)
     at = _pos(rng, len(d) - 8, 0.8)
-    v = int(rng.choice(BAD_INTS))
-    fmt = str(rng.choice(["<I", "<i", "<Q", "<q"]))
+    v = int(_pick(rng, BAD_INTS))
+    fmt = str(_pick(rng, ["<I", "<i", "<Q", "<q"]))
     lim = {"<I": (0, 2**32 - 1), "<i": (-(2**31), 2**31 - 1)}.get(fmt, (-(2**63), 2**64 - 1))
     if fmt == "<q":
         lim = (-(2**63), 2**63 - 1)
@@ -143,7 +149,7 @@ BYTE_MUTATIONS: list[Callable[[bytes, Rng], tuple[bytes, str]]] = [
 
 
 def _bad_float(rng: Rng) -> float:
-    return float(rng.choice(BAD_FLOATS))
+    return float(_pick(rng, BAD_FLOATS))
 
 
 def _float_payload(d: bytes, rng: Rng, start: int, end: int, dtype: str) -> tuple[bytes, str]:
@@ -155,7 +161,7 @@ def _float_payload(d: bytes, rng: Rng, start: int, end: int, dtype: str) -> tupl
         return m_flip(d, rng)
     view = arr[start : start + n * size].view(dtype)
     v = _bad_float(rng)
-    how = str(rng.choice(["one", "some", "all", "negate"]))
+    how = str(_pick(rng, ["one", "some", "all", "negate"]))
     if how == "one":
         view[int(rng.integers(0, n))] = v
     elif how == "some":
@@ -172,7 +178,7 @@ def m_merl(d: bytes, rng: Rng) -> tuple[bytes, str]:
     if rng.random() < 0.5:
         b = bytearray(d)
         i = int(rng.integers(0, 3))
-        v = int(rng.choice([0, -1, -90, 1, 2**31 - 1, 1 << 16, 1 << 17, 90, 180, 6]))
+        v = int(_pick(rng, [0, -1, -90, 1, 2**31 - 1, 1 << 16, 1 << 17, 90, 180, 6]))
         struct.pack_into("<i", b, 4 * i, v)
         return bytes(b), f"MERL dimension {i} set to {v}"
     return _float_payload(d, rng, 12, len(d), "<f8")
@@ -206,26 +212,26 @@ def m_rgl(d: bytes, rng: Rng) -> tuple[bytes, str]:
     f = fields[int(rng.integers(0, len(fields)))]
     name = d[f["name_at"] : f["name_at"] + f["name_len"]].decode("ascii", "replace")
     b = bytearray(d)
-    what = str(rng.choice(["shape", "shape", "offset", "ndim", "code", "payload", "count"]))
+    what = str(_pick(rng, ["shape", "shape", "offset", "ndim", "code", "payload", "count"]))
     if what == "shape" and f["ndim"]:
         k = int(rng.integers(0, f["ndim"]))
-        v = int(rng.choice([0, 1, 2**63, 2**32, 2**64 - 1, 1 << 20, 3]))
+        v = int(_pick(rng, [0, 1, 2**63, 2**32, 2**64 - 1, 1 << 20, 3]))
         struct.pack_into("<Q", b, f["shape_at"] + 8 * k, v)
         return bytes(b), f"RGL field {name!r} shape[{k}] set to {v}"
     if what == "offset":
-        v = int(rng.choice([0, len(d), len(d) - 4, 2**63, 2**64 - 1, f["offset"] + 1]))
+        v = int(_pick(rng, [0, len(d), len(d) - 4, 2**63, 2**64 - 1, f["offset"] + 1]))
         struct.pack_into("<Q", b, f["offset_at"], v)
         return bytes(b), f"RGL field {name!r} offset set to {v}"
     if what == "ndim":
-        v = int(rng.choice([0, 1, 2, 5, 16, 17, 65535]))
+        v = int(_pick(rng, [0, 1, 2, 5, 16, 17, 65535]))
         struct.pack_into("<H", b, f["ndim_at"], v)
         return bytes(b), f"RGL field {name!r} ndim set to {v}"
     if what == "code":
-        v = int(rng.choice([0, 1, 6, 8, 9, 11, 12, 255]))
+        v = int(_pick(rng, [0, 1, 6, 8, 9, 11, 12, 255]))
         b[f["code_at"]] = v
         return bytes(b), f"RGL field {name!r} dtype code set to {v}"
     if what == "count":
-        v = int(rng.choice([0, 1, 100, 4097, 2**32 - 1]))
+        v = int(_pick(rng, [0, 1, 100, 4097, 2**32 - 1]))
         struct.pack_into("<I", b, 14, v)
         return bytes(b), f"RGL field count set to {v}"
     # payload of a float field
@@ -252,11 +258,11 @@ def m_exr(d: bytes, rng: Rng) -> tuple[bytes, str]:
     size_at = tname_end + 1
     b = bytearray(d)
     if rng.random() < 0.3:
-        v = int(rng.choice([0, -1, 2**31 - 1, 1 << 20]))
+        v = int(_pick(rng, [0, -1, 2**31 - 1, 1 << 20]))
         struct.pack_into("<i", b, size_at, v)
         return bytes(b), f"EXR attribute {name.decode()} size field set to {v}"
     k = int(rng.integers(0, 4))
-    v = int(rng.choice([-1, 0, 2**31 - 1, -(2**31), 1 << 16, 1 << 24]))
+    v = int(_pick(rng, [-1, 0, 2**31 - 1, -(2**31), 1 << 16, 1 << 24]))
     struct.pack_into("<i", b, size_at + 4 + 4 * k, v)
     return bytes(b), f"EXR attribute {name.decode()} int {k} set to {v}"
 
@@ -273,7 +279,7 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
         h5.visititems(lambda n, o: datasets.append(o) if isinstance(o, h5py.Dataset) else None)
         objs = [o for o in groups + datasets if len(o.attrs)]
         op = str(
-            rng.choice(
+            _pick(rng, 
                 ["attr", "attr", "attr", "data", "data", "data", "shape", "dtype", "delete",
                  "external", "virtual", "unallocated", "bomb", "metadata", "mask0", "horizon"]
             )
@@ -282,18 +288,18 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
             o = objs[int(rng.integers(0, len(objs)))]
             keys = list(o.attrs)
             k = keys[int(rng.integers(0, len(keys)))]
-            how = str(rng.choice(["delete", "float", "int", "str", "array", "bytes"]))
+            how = str(_pick(rng, ["delete", "float", "int", "str", "array", "bytes"]))
             if how == "delete":
                 del o.attrs[k]
                 return f"HDF5 attribute {o.name}@{k} deleted"
             if how == "float":
                 v: Any = _bad_float(rng)
             elif how == "int":
-                v = np.int64(min(int(rng.choice(BAD_INTS)), 2**63 - 1))
+                v = np.int64(min(int(_pick(rng, BAD_INTS)), 2**63 - 1))
             elif how == "str":
-                v = str(rng.choice(["", "x", "nan", "gridded", "scattered", "{", "1e308"]))
+                v = str(_pick(rng, ["", "x", "nan", "gridded", "scattered", "{", "1e308"]))
             elif how == "array":
-                v = np.full(int(rng.choice([0, 2, 1000])), 1.0)
+                v = np.full(int(_pick(rng, [0, 2, 1000])), 1.0)
             else:
                 v = np.void(b"\xff\xfe\x00")
             o.attrs[k] = v
@@ -317,7 +323,7 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
             v = _bad_float(rng)
             flat = arr.reshape(-1).copy() if arr.size else arr.reshape(-1)
             if flat.size and flat.dtype.kind == "f":
-                sel = rng.integers(0, flat.size, size=max(1, flat.size // int(rng.choice([1, 50]))))
+                sel = rng.integers(0, flat.size, size=max(1, flat.size // int(_pick(rng, [1, 50]))))
                 flat[sel] = v
             replace(flat.reshape(arr.shape).astype(ds.dtype, copy=False) if ds.dtype.kind == "f"
                     else flat.reshape(arr.shape))  # fmt: skip
@@ -326,11 +332,11 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
             shape = tuple(int(s) for s in ds.shape)
             new = list(shape) or [1]
             k = int(rng.integers(0, len(new)))
-            new[k] = int(rng.choice([0, 1, new[k] + 1, new[k] * 2]))
+            new[k] = int(_pick(rng, [0, 1, new[k] + 1, new[k] * 2]))
             replace(np.zeros(new, dtype=ds.dtype))
             return f"HDF5 dataset {name} reshaped {shape} -> {tuple(new)}"
         if op == "dtype":
-            dt = str(rng.choice(["i1", "u8", "f2", "f8", "S4", "c16", "bool"]))
+            dt = str(_pick(rng, ["i1", "u8", "f2", "f8", "S4", "c16", "bool"]))
             replace(np.zeros(ds.shape, dtype=dt))
             return f"HDF5 dataset {name} retyped to {dt}"
         if op == "delete":
@@ -362,7 +368,7 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
             # (fill value) or one highly compressible chunk
             if "axes" not in h5 or "values" not in h5:
                 return _h5_scattered_huge(h5, rng)
-            n = int(rng.choice([64, 256, 512]))
+            n = int(_pick(rng, [64, 256, 512]))
             order = [x.decode() if isinstance(x, bytes) else str(x)
                      for x in np.atleast_1d(h5["axes"].attrs["order"])]  # fmt: skip
             for ax in order:
@@ -391,8 +397,8 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
                 v.attrs[k] = val
             return f"HDF5 gridded axes set to {n}^{len(order)} with {op} /values"
         if op == "metadata":
-            depth = int(rng.choice([50, 600, 5000]))
-            how = str(rng.choice(["deep", "huge", "notjson"]))
+            depth = int(_pick(rng, [50, 600, 5000]))
+            how = str(_pick(rng, ["deep", "huge", "notjson"]))
             if how == "deep":
                 h5.attrs["metadata"] = "[" * depth + "]" * depth
                 return f"HDF5 metadata attribute nested {depth} deep"
@@ -413,15 +419,15 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
         if "axes" in h5:
             order = list(h5["axes"])
             ax = order[int(rng.integers(0, len(order)))]
-            k = str(rng.choice(["lo", "hi"]))
-            v = float(rng.choice([100.0, -100.0, 7.0, -0.5, 1e308]))
+            k = str(_pick(rng, ["lo", "hi"]))
+            v = float(_pick(rng, [100.0, -100.0, 7.0, -0.5, 1e308]))
             h5["axes"][ax].attrs[k] = v
             return f"HDF5 axis {ax}@{k} set to {v}"
         return "HDF5 unchanged (no applicable mutation)"
 
 
 def _h5_scattered_huge(h5: Any, rng: Rng) -> str:
-    n = int(rng.choice([10**6, 10**8]))
+    n = int(_pick(rng, [10**6, 10**8]))
     for key in ("wi", "wo", "values", "sigma", "weights"):
         if key not in h5:
             continue
@@ -451,7 +457,7 @@ def m_hdf5(d: bytes, rng: Rng) -> tuple[bytes, str]:
 def m_text(d: bytes, rng: Rng) -> tuple[bytes, str]:
     text = d.decode("utf-8", "replace")
     lines = text.split("\n")
-    op = str(rng.choice(["number", "number", "number", "drop", "dup", "swap", "utf8", "header"]))
+    op = str(_pick(rng, ["number", "number", "number", "drop", "dup", "swap", "utf8", "header"]))
     if op in ("number", "header"):
         header = op == "header"
         cand = [
@@ -466,7 +472,7 @@ def m_text(d: bytes, rng: Rng) -> tuple[bytes, str]:
         top = min(len(cand), 64) if rng.random() < 0.5 else len(cand)
         i, j = cand[int(rng.integers(0, top))]
         toks = lines[i].split()
-        new = str(rng.choice(BAD_TEXT_NUMBERS))
+        new = str(_pick(rng, BAD_TEXT_NUMBERS))
         old = toks[j]
         toks[j] = new
         lines[i] = " ".join(toks)
@@ -521,7 +527,7 @@ def _tree_mutation(tree: Any, rng: Rng, for_toml: bool) -> str:
     path = paths[int(rng.integers(0, len(paths)))]
     parent, key = _get(tree, path[:-1]), path[-1]
     where = "/".join(map(str, path))
-    op = str(rng.choice(["value", "value", "value", "type", "delete", "null", "unknown", "deep"]))
+    op = str(_pick(rng, ["value", "value", "value", "type", "delete", "null", "unknown", "deep"]))
     if op == "delete" or (op == "null" and for_toml):
         if isinstance(parent, list):
             parent.pop(key)
@@ -536,20 +542,20 @@ def _tree_mutation(tree: Any, rng: Rng, for_toml: bool) -> str:
         target["fuzz_unknown_key"] = 1
         return f"unknown key added next to {where}"
     if op == "deep":
-        depth = int(rng.choice([20, 120, 600, 3000]))
-        parent[key] = _deep(depth, str(rng.choice(["list", "dict"])))
+        depth = int(_pick(rng, [20, 120, 600, 3000]))
+        parent[key] = _deep(depth, str(_pick(rng, ["list", "dict"])))
         return f"{where} replaced by a structure nested {depth} deep"
     if op == "type":
-        v = rng.choice(["str", "list", "table", "bool", "bigint"])
+        v = _pick(rng, ["str", "list", "table", "bool", "bigint"])
         new: Any = {"str": "fuzz", "list": [1, "a"], "table": {"x": 1}, "bool": True,
                     "bigint": 10**30}[str(v)]  # fmt: skip
         parent[key] = new
         return f"{where} replaced by {v} {new!r}"
     old = parent[key]
     if isinstance(old, bool) or not isinstance(old, int | float):
-        new = _bad_float(rng) if rng.random() < 0.7 else int(rng.choice(BAD_INTS))
+        new = _bad_float(rng) if rng.random() < 0.7 else int(_pick(rng, BAD_INTS))
     elif isinstance(old, int):
-        new = int(rng.choice(BAD_INTS)) if rng.random() < 0.6 else _bad_float(rng)
+        new = int(_pick(rng, BAD_INTS)) if rng.random() < 0.6 else _bad_float(rng)
     else:
         new = _bad_float(rng) if rng.random() < 0.8 else -abs(old) - 1.0
     if for_toml and isinstance(new, int) and not (-(2**63) <= new < 2**63):

@@ -225,6 +225,8 @@ def _spec_params(spec: Any) -> set[str]:
     for k, v in (spec.get("params") or {}).items():
         if v is not None:
             out.add(k)
+    for i, lobe in enumerate(spec.get("lobes") or []):
+        out |= {f"lobes[{i}].{p}" for p in _spec_params(lobe)}
     for name, child in (spec.get("children") or {}).items():
         kids = child if isinstance(child, list) else [child]
         for i, c in enumerate(kids):

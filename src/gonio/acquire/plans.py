@@ -44,14 +44,18 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gonio._bounded import loads_toml
 from gonio.errors import PlanError
+
+#: Most values one plan axis may have, and most configurations one plan may ask for.
+MAX_AXIS_VALUES = 3600
+MAX_TARGETS = 200_000
 
 
 @dataclass(frozen=True)
@@ -85,11 +89,17 @@ def _angles(spec, key: str) -> np.ndarray:
             start, stop, step = float(spec["start"]), float(spec["stop"]), float(spec["step"])
         except (KeyError, TypeError, ValueError):
             raise PlanError(f"plan key {key}: a range needs numeric start, stop, step") from None
+        if not all(map(math.isfinite, (start, stop, step))):
+            raise PlanError(f"plan key {key}: start, stop and step must be finite")
         if step <= 0 or stop < start:
             raise PlanError(f"plan key {key}: need step > 0 and stop >= start")
         n = math.floor((stop - start) / step + 1e-9) + 1
+        if n > MAX_AXIS_VALUES:
+            raise PlanError(f"plan key {key}: {n} values, more than {MAX_AXIS_VALUES}")
         vals = start + step * np.arange(n)
     elif isinstance(spec, (list, tuple)) and spec:
+        if len(spec) > MAX_AXIS_VALUES:
+            raise PlanError(f"plan key {key}: {len(spec)} values, more than {MAX_AXIS_VALUES}")
         try:
             vals = np.array([float(v) for v in spec])
         except (TypeError, ValueError):
@@ -357,7 +367,7 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if not isinstance(spec, dict):
         raise PlanError("a plan must be a table")
     kind = spec.get("kind")
-    if kind not in _KEYS:
+    if not isinstance(kind, str) or kind not in _KEYS:
         raise PlanError(f"plan key kind: {kind!r} is not one of {sorted(_KEYS)}")
     allowed = {"kind", "name", *_KEYS[kind]} | ({"refine"} if kind == "adaptive" else set())
     allowed |= {"reciprocal"} if kind == "isotropic" else set()
@@ -372,6 +382,9 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
             f"plan key {missing[0]}: missing (kind {kind!r} needs {', '.join(_KEYS[kind])})"
         )
     axes = [_angles(spec[k], k) for k in _KEYS[kind]]
+    n_targets = math.prod(len(a) for a in axes)
+    if n_targets > MAX_TARGETS:
+        raise PlanError(f"plan asks for {n_targets} configurations, more than {MAX_TARGETS}")
     for k, a in zip(_KEYS[kind], axes, strict=True):
         if k.startswith("theta") and (np.any(a < 0) or np.any(a > math.pi / 2)):
             raise PlanError(f"plan key {k}: polar angles must lie in [0, 90] deg")
@@ -386,15 +399,22 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if not isinstance(ref, dict) or set(ref) - {"window_deg", "step_deg", "peak_ratio"}:
         raise PlanError("plan key refine: allowed keys are window_deg, step_deg, peak_ratio")
     try:
-        return Adaptive(
-            Isotropic3D(*axes),
-            window=math.radians(float(ref.get("window_deg", 10.0))),
-            step=math.radians(float(ref.get("step_deg", 2.5))),
-            peak_ratio=float(ref.get("peak_ratio", 1.5)),
-            name=name,
-        )
+        window = float(ref.get("window_deg", 10.0))
+        step = float(ref.get("step_deg", 2.5))
+        peak_ratio = float(ref.get("peak_ratio", 1.5))
     except (TypeError, ValueError):
         raise PlanError("plan key refine: values must be numbers") from None
+    if not all(map(math.isfinite, (window, step, peak_ratio))):
+        raise PlanError("plan key refine: values must be finite")
+    if step > 0 and window / step > MAX_AXIS_VALUES:
+        raise PlanError(f"plan key refine: window_deg / step_deg above {MAX_AXIS_VALUES}")
+    return Adaptive(
+        Isotropic3D(*axes),
+        window=math.radians(window),
+        step=math.radians(step),
+        peak_ratio=peak_ratio,
+        name=name,
+    )
 
 
 def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
@@ -408,8 +428,12 @@ def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
             f"unknown plan {s!r}: not a file, and built-ins are {', '.join(builtin_plans())}"
         )
     try:
-        spec = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise PlanError(f"{p}: invalid TOML: {exc}") from None
+        data = p.read_bytes()
+    except OSError as exc:
+        raise PlanError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    spec = loads_toml(data, str(p), PlanError)  # size, UTF-8 and depth bounds
     spec.setdefault("name", p.stem)
-    return plan_from_spec(spec, p.stem), spec
+    try:
+        return plan_from_spec(spec, p.stem), spec
+    except PlanError as exc:
+        raise PlanError(f"{p}: {exc}") from None

@@ -29,6 +29,13 @@ import numpy as np
 
 from gonio import __version__
 from gonio.io._common import PathLike, atomic_output, check_input_file, fail
+from gonio.io._hdf5_guard import (
+    ReadBudgetExceeded,
+    check_attribute,
+    check_group_datasets,
+    open_bounded,
+)
+from gonio.io._sanity import check_axis_range, check_brdf_values, check_directions
 from gonio.io.schemas import register_schema
 
 FORMAT_NAME = "gonio-brdf"
@@ -375,6 +382,7 @@ def is_native(data_head: bytes) -> bool:
 def _attr_str(obj: Any, name: str, path: PathLike) -> str:
     if name not in obj.attrs:
         raise fail(path, f"missing attribute {name!r} on {obj.name}")
+    check_attribute(obj, name, path)
     v = obj.attrs[name]
     if isinstance(v, bytes):
         v = v.decode("utf-8")
@@ -388,6 +396,7 @@ def _attr_str(obj: Any, name: str, path: PathLike) -> str:
 def _attr_num(obj: Any, name: str, path: PathLike, kind: type = float) -> Any:
     if name not in obj.attrs:
         raise fail(path, f"missing attribute {name!r} on {obj.name}")
+    check_attribute(obj, name, path)
     v = np.asarray(obj.attrs[name])
     if v.shape != () or v.dtype.kind not in "iuf":
         raise fail(path, f"attribute {name!r} on {obj.name} is not a number")
@@ -415,6 +424,8 @@ class _Guard:
 
         if exc is None or isinstance(exc, GonioError) or not isinstance(exc, Exception):
             return False
+        if isinstance(exc, ReadBudgetExceeded):
+            raise fail(self.path, f"corrupt {FORMAT_NAME} file: HDF5 structures loop ({exc})")
         raise fail(self.path, f"corrupt {FORMAT_NAME} file ({etype.__name__}: {exc})") from None
 
 
@@ -424,7 +435,6 @@ def _open(path: PathLike) -> Any:
 
 
 def _open_unguarded(path: PathLike) -> Any:
-    import h5py
 
     p = check_input_file(path)
     with open(p, "rb") as fh:
@@ -432,7 +442,9 @@ def _open_unguarded(path: PathLike) -> Any:
     if not is_native(head):
         raise fail(p, "not an HDF5 file (wrong magic)")
     try:
-        h5 = h5py.File(p, "r")
+        h5 = open_bounded(p)
+    except ReadBudgetExceeded:
+        raise
     except OSError as exc:
         raise fail(p, f"corrupt or truncated HDF5 file ({exc})") from None
     try:
@@ -444,6 +456,7 @@ def _open_unguarded(path: PathLike) -> Any:
             raise fail(
                 p, f"unsupported format_version {version} (this gonio reads {FORMAT_VERSION})"
             )
+        check_group_datasets(h5, p, p.stat().st_size)
     except BaseException:
         h5.close()
         raise
@@ -501,6 +514,9 @@ def _read_axes(h5: Any, path: PathLike) -> list[dict]:
             raise fail(path, f"axis {name!r}: unknown warp {ax['warp']!r}")
         if not ax["hi"] > ax["lo"]:
             raise fail(path, f"axis {name!r}: empty range [{ax['lo']}, {ax['hi']}]")
+        check_axis_range(path, name, ax["lo"], ax["hi"])
+        if not 0.0 <= ax["node_offset"] < 1.0:
+            raise fail(path, f"axis {name!r}: node_offset {ax['node_offset']} outside [0, 1)")
         axes.append(ax)
     return axes
 
@@ -680,14 +696,17 @@ def _read_arrays(h5: Any, header: dict, path: PathLike) -> dict:
         valid = np.broadcast_to(out["mask"][..., None], out["values"].shape)
     else:
         valid = np.ones(out["values"].shape, dtype=bool)
+    # a BRDF in 1/sr (and its standard deviation) is finite, >= 0 and below MAX_BRDF
     for name in ("values", "sigma"):
         if name in out:
-            bad = ~np.isfinite(out[name]) & valid
-            if np.any(bad):
-                raise fail(path, f"{int(bad.sum())} NaN/Inf {name} at valid cells")
-    for name in ("wi", "wo", "weights"):
-        if name in out and not np.all(np.isfinite(out[name])):
-            raise fail(path, f"NaN/Inf in /{name}")
+            check_brdf_values(path, f"/{name}", out[name], valid[..., 0])
+    for name in ("wi", "wo"):
+        if name in out:
+            check_directions(path, f"/{name}", out[name])
+    if "weights" in out:
+        w = out["weights"]
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise fail(path, "/weights: NaN/Inf or negative weights")
     return out
 
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -23,6 +22,7 @@ from typing import Any
 
 import jsonschema
 
+from gonio._bounded import loads_toml, non_finite_path
 from gonio.errors import RigConfigError
 from gonio.rigs import control_table as ct
 
@@ -540,10 +540,10 @@ def load_rig(name_or_path: str | Path) -> RigConfig:
 
 def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     """Parse and validate rig-file ``text``; ``source`` names it in error messages."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RigConfigError(f"{source}: invalid TOML: {exc}") from None
+    data = loads_toml(text, source, RigConfigError)  # size and nesting bounds
+    bad = non_finite_path(data)
+    if bad is not None:
+        raise RigConfigError(f"{source}: {bad}: must be a finite number, not nan or inf")
     validator = jsonschema.Draft202012Validator(rig_schema())
     errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:

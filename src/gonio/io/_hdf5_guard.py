@@ -1,0 +1,207 @@
+"""Reading untrusted HDF5 (native ``*.brdf.h5``) through a bounded path.
+
+libhdf5 trusts the structures it reads: a corrupt B-tree or heap can make it re-read the same
+blocks for minutes without returning to Python (so Ctrl-C is not seen), a dataset can declare
+gigabytes that are never stored (unallocated chunks read as the fill value), point at external
+files such as ``/dev/zero``, or be a virtual dataset assembled from other files. Three defences:
+
+* :class:`BoundedReader`: the file is opened through h5py's file-object driver on a reader that
+  counts every read. More than :data:`READ_FACTOR` times the file size (plus
+  :data:`READ_SLACK_BYTES`), or more than :data:`MAX_READ_CALLS` reads, raise inside libhdf5,
+  which unwinds with an error; the Python callback also lets a pending Ctrl-C through.
+* :func:`check_dataset`: before any data is read, a dataset must have the documented layout
+  (contiguous, compact or chunked; no external storage; not virtual), only the documented
+  filters (shuffle, deflate, fletcher32), a declared size within the memory budget
+  :data:`gonio._bounded.MAX_DECODED_BYTES`, its storage fully allocated inside the file, and no
+  chunk may expand by more than :data:`gonio._bounded.MAX_COMPRESSION_RATIO`.
+* :func:`check_attribute`: an attribute's declared size is bounded before it is read.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+from typing import Any
+
+from gonio._bounded import MAX_COMPRESSION_RATIO, MAX_DECODED_BYTES
+from gonio.io._common import PathLike, fail
+
+#: A reader may read at most this many times the file's size in total (plus the slack).
+READ_FACTOR = 16
+READ_SLACK_BYTES = 64 << 20
+#: Most read calls one open file may make (a legitimate table file needs a few hundred).
+MAX_READ_CALLS = 200_000
+#: HDF5 filter ids a native file may use: deflate (1), shuffle (2), fletcher32 (3).
+ALLOWED_FILTERS = {1: "deflate", 2: "shuffle", 3: "fletcher32"}
+#: Largest attribute (declared elements x element size) read from a file.
+MAX_ATTRIBUTE_BYTES = 16 << 20
+#: Most chunks one dataset may have (the writer's chunks are about 256 KiB each).
+MAX_CHUNKS = 1 << 16
+
+
+class ReadBudgetExceeded(OSError):
+    """Raised from inside libhdf5's reads when a file is being read far more than its size."""
+
+
+class BoundedReader(io.RawIOBase):
+    """A read-only raw file that refuses to read more than its budget (see module docstring)."""
+
+    def __init__(self, path: PathLike) -> None:
+        super().__init__()
+        self._fh = open(path, "rb")
+        self.size = os.fstat(self._fh.fileno()).st_size
+        self.budget = READ_FACTOR * self.size + READ_SLACK_BYTES
+        self.bytes_read = 0
+        self.calls = 0
+        self.exceeded: str | None = None
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._fh.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+    def readinto(self, buf: Any) -> int:
+        self.calls += 1
+        if self.calls > MAX_READ_CALLS:
+            self.exceeded = f"more than {MAX_READ_CALLS} reads"
+        elif self.bytes_read + len(buf) > self.budget:
+            self.exceeded = f"more than {self.budget} bytes read from a {self.size}-byte file"
+        if self.exceeded:
+            raise ReadBudgetExceeded(self.exceeded)
+        n = self._fh.readinto(buf)
+        self.bytes_read += n
+        return n
+
+    def close(self) -> None:
+        self._fh.close()
+        super().close()
+
+
+def open_bounded(path: PathLike) -> Any:
+    """``h5py.File`` opened read-only on a :class:`BoundedReader` (its ``reader`` attribute)."""
+    import h5py
+
+    reader = BoundedReader(path)
+    try:
+        h5 = h5py.File(reader, "r")
+    except BaseException:
+        reader.close()
+        raise
+    h5._gonio_reader = reader  # kept alive with the file; closed by close_bounded
+    return h5
+
+
+def close_bounded(h5: Any) -> None:
+    """Close a file from :func:`open_bounded` and its reader."""
+    reader = getattr(h5, "_gonio_reader", None)
+    try:
+        h5.close()
+    finally:
+        if reader is not None:
+            reader.close()
+
+
+def budget_problem(h5: Any) -> str | None:
+    """Why the reader of ``h5`` stopped reading, or None."""
+    reader = getattr(h5, "_gonio_reader", None)
+    return None if reader is None else reader.exceeded
+
+
+def check_attribute(obj: Any, name: str, path: PathLike) -> None:
+    """Refuse an attribute whose declared size exceeds :data:`MAX_ATTRIBUTE_BYTES`."""
+    import h5py
+
+    aid = h5py.h5a.open(obj.id, name.encode("utf-8"))
+    n = math.prod(aid.shape or ())
+    if n * max(1, aid.dtype.itemsize) > MAX_ATTRIBUTE_BYTES:
+        raise fail(path, f"attribute {name!r} on {obj.name} declares {n} elements")
+
+
+def check_dataset(ds: Any, path: PathLike, file_size: int) -> None:
+    """Refuse a dataset that is not stored the documented way (see the module docstring).
+
+    Called before any of the dataset's data is read; it looks at metadata only.
+    """
+    import h5py
+
+    name = ds.name
+    dcpl = ds.id.get_create_plist()
+    layout = dcpl.get_layout()
+    if layout == h5py.h5d.VIRTUAL:
+        raise fail(path, f"{name} is a virtual dataset (not allowed in a native file)")
+    if layout not in (h5py.h5d.CONTIGUOUS, h5py.h5d.CHUNKED, h5py.h5d.COMPACT):
+        raise fail(path, f"{name} has an unknown storage layout {layout}")
+    if dcpl.get_external_count():
+        raise fail(path, f"{name} uses external storage (not allowed in a native file)")
+    filters = [dcpl.get_filter(i)[0] for i in range(dcpl.get_nfilters())]
+    bad = [f for f in filters if f not in ALLOWED_FILTERS]
+    if bad:
+        allowed = ", ".join(ALLOWED_FILTERS.values())
+        raise fail(path, f"{name} uses HDF5 filter {bad[0]} (allowed: {allowed})")
+    if ds.dtype.kind not in "fiub" or ds.dtype.itemsize > 8:
+        raise fail(path, f"{name} has dtype {ds.dtype}, not a plain number type")
+    shape = tuple(int(s) for s in ds.shape)
+    nbytes = math.prod(shape) * ds.dtype.itemsize
+    if nbytes > MAX_DECODED_BYTES:
+        raise fail(
+            path,
+            f"{name} declares {shape} ({nbytes / 2**20:.0f} MiB), over the "
+            f"{MAX_DECODED_BYTES >> 20} MiB a table may take",
+        )
+    if nbytes == 0:
+        return
+    if layout == h5py.h5d.CONTIGUOUS:
+        offset = ds.id.get_offset()
+        stored = ds.id.get_storage_size()
+        if offset is None or stored < nbytes or offset + nbytes > file_size:
+            raise fail(path, f"{name}: data not stored in the file ({stored} of {nbytes} bytes)")
+        return
+    if layout == h5py.h5d.COMPACT:
+        return  # stored inside the object header, which is inside the file
+    chunk = tuple(int(c) for c in dcpl.get_chunk())
+    if len(chunk) != len(shape) or min(chunk) < 1:
+        raise fail(path, f"{name}: bad chunk shape {chunk}")
+    expected = math.prod(-(-s // c) for s, c in zip(shape, chunk, strict=True))
+    if expected > MAX_CHUNKS:
+        raise fail(path, f"{name}: {expected} chunks (chunks of {chunk} are too small)")
+    n_chunks = ds.id.get_num_chunks()
+    if n_chunks != expected:
+        raise fail(path, f"{name}: {n_chunks} of {expected} chunks stored (missing data)")
+    chunk_bytes = math.prod(chunk) * ds.dtype.itemsize
+    min_stored = chunk_bytes / MAX_COMPRESSION_RATIO
+    for i in range(n_chunks):
+        info = ds.id.get_chunk_info(i)
+        if info.byte_offset is None or info.byte_offset + info.size > file_size:
+            raise fail(path, f"{name}: chunk {i} lies outside the file")
+        if info.size < min_stored:
+            raise fail(
+                path,
+                f"{name}: chunk {i} expands {info.size} bytes to {chunk_bytes} "
+                f"(more than {MAX_COMPRESSION_RATIO}:1)",
+            )
+
+
+def check_group_datasets(group: Any, path: PathLike, file_size: int) -> None:
+    """:func:`check_dataset` on every dataset directly in ``group`` and in its sub-groups."""
+    import h5py
+
+    stack = [group]
+    while stack:
+        g = stack.pop()
+        for key in g:
+            link = g.get(key, getlink=True)
+            if not isinstance(link, h5py.HardLink):
+                raise fail(path, f"{g.name}/{key} is a {type(link).__name__} (not allowed)")
+            obj = g[key]
+            if isinstance(obj, h5py.Dataset):
+                check_dataset(obj, path, file_size)
+            elif isinstance(obj, h5py.Group) and obj.name.count("/") < 8:
+                stack.append(obj)
