@@ -45,6 +45,7 @@ def _pick(rng: Rng, seq: Any) -> Any:
     seq = list(seq)
     return seq[int(rng.integers(0, len(seq)))]
 
+
 #: Numbers that readers must refuse or handle: non-finite, absurd, negative, integer limits.
 BAD_FLOATS = (math.nan, math.inf, -math.inf, 1e308, -1e308, 1e38, -1.0, -1e-3, 0.0, 1e-320)
 BAD_INTS = (0, -1, -(2**31), 2**31 - 1, 2**32 - 1, 2**62, 2**63 - 1, 2**64 - 1, 10**30)
@@ -279,7 +280,7 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
         h5.visititems(lambda n, o: datasets.append(o) if isinstance(o, h5py.Dataset) else None)
         objs = [o for o in groups + datasets if len(o.attrs)]
         op = str(
-            _pick(rng, 
+            _pick(rng,
                 ["attr", "attr", "attr", "data", "data", "data", "shape", "dtype", "delete",
                  "external", "virtual", "unallocated", "bomb", "metadata", "mask0", "horizon"]
             )
@@ -442,6 +443,11 @@ def _h5_scattered_huge(h5: Any, rng: Rng) -> str:
 
 
 def m_hdf5(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    if rng.random() < 0.15:
+        # a range of the metadata region (object headers, global heaps) duplicated in place
+        n = int(_pick(rng, [256, 1024]))
+        at = int(rng.integers(512, min(len(d), 4096)))
+        return d[: at + n] + d[at : at + n] + d[at + n :], f"duplicated {n} bytes at {at}"
     with tempfile.TemporaryDirectory() as tmp:
         p = Path(tmp) / "x.h5"
         p.write_bytes(d)

@@ -53,8 +53,15 @@ class Verdict:
 class Worker:
     """One worker process; :meth:`run` judges a case or kills and restarts the worker."""
 
-    def __init__(self, warm: list[tuple[str, str]]) -> None:
+    def __init__(
+        self,
+        warm: list[tuple[str, str]],
+        timeout_s: float = CASE_TIMEOUT_S,
+        rss_budget: int = RSS_BUDGET_BYTES,
+    ) -> None:
         self.warm = warm
+        self.timeout_s = timeout_s
+        self.rss_budget = rss_budget
         self.proc: subprocess.Popen | None = None
         self.restarts = 0
         self._start()
@@ -105,12 +112,12 @@ class Worker:
                 peak = max(peak, rss_bytes(self.proc.pid))
                 return Verdict(v["outcome"], v["detail"], time.monotonic() - t0, peak)
             peak = max(peak, rss_bytes(self.proc.pid))
-            if peak > RSS_BUDGET_BYTES:
+            if peak > self.rss_budget:
                 return self._restart(
                     "memory", f"worker RSS {peak / 2**30:.2f} GiB over the budget", t0, peak
                 )
-            if time.monotonic() - t0 > CASE_TIMEOUT_S:
-                return self._restart("hang", f"no answer in {CASE_TIMEOUT_S:.0f} s", t0, peak)
+            if time.monotonic() - t0 > self.timeout_s:
+                return self._restart("hang", f"no answer in {self.timeout_s:.0f} s", t0, peak)
 
     def _restart(self, outcome: str, detail: str, t0: float, peak: int) -> Verdict:
         self.close()

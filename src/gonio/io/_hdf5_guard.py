@@ -3,8 +3,14 @@
 libhdf5 trusts the structures it reads: a corrupt B-tree or heap can make it re-read the same
 blocks for minutes without returning to Python (so Ctrl-C is not seen), a dataset can declare
 gigabytes that are never stored (unallocated chunks read as the fill value), point at external
-files such as ``/dev/zero``, or be a virtual dataset assembled from other files. Three defences:
+files such as ``/dev/zero``, or be a virtual dataset assembled from other files. Four defences:
 
+* :func:`check_global_heaps`: libhdf5 decodes a global heap collection (where variable-length
+  strings such as gonio's attributes live) by stepping from object to object; an object with
+  index 0 and size 0 makes that step zero and the library loops forever in C, without reading
+  and without seeing Ctrl-C (a 1 KB duplicated range in a scattered file does exactly this).
+  Every collection in the file is walked the same way first, and a step that does not advance
+  or leaves the collection is an error;
 * :class:`BoundedReader`: the file is opened through h5py's file-object driver on a reader that
   counts every read. More than :data:`READ_FACTOR` times the file size (plus
   :data:`READ_SLACK_BYTES`), or more than :data:`MAX_READ_CALLS` reads, raise inside libhdf5,
@@ -38,6 +44,60 @@ ALLOWED_FILTERS = {1: "deflate", 2: "shuffle", 3: "fletcher32"}
 MAX_ATTRIBUTE_BYTES = 16 << 20
 #: Most chunks one dataset may have (the writer's chunks are about 256 KiB each).
 MAX_CHUNKS = 1 << 16
+
+
+_GCOL = b"GCOL\x01"  # global heap collection signature and version
+
+
+def _size_of_lengths(head: bytes) -> int:
+    """The "size of lengths" field of the HDF5 superblock at offset 0 (versions 0-3)."""
+    version = head[8] if len(head) > 8 else -1
+    pos = {0: 14, 1: 14, 2: 10, 3: 10}.get(version)
+    if pos is None or len(head) <= pos or head[pos] not in (2, 4, 8):
+        raise ValueError(f"unknown HDF5 superblock (version {version})")
+    return head[pos]
+
+
+def check_global_heaps(path: PathLike) -> None:
+    """Walk every global heap collection as libhdf5's decoder does; refuse one it would loop on.
+
+    The walk (HDF5 file format spec, "Global Heap"): after the 16-byte header, each object has
+    a header of index (2 bytes), reference count (2), reserved (4) and size (``L`` bytes, the
+    superblock's size of lengths), then its data padded to 8 bytes; index 0 is the free space,
+    whose size is the rest of the collection; a tail too short for an object header is free.
+    """
+    import mmap
+
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        try:
+            n_len = _size_of_lengths(data[:16])
+        except ValueError as exc:
+            raise fail(path, str(exc)) from None
+        hdr = 8 + n_len
+        obj_hdr = 8 + n_len
+        size = len(data)
+        at = data.find(_GCOL)
+        while at >= 0:
+            if at + hdr > size:
+                raise fail(path, f"global heap collection at byte {at} is truncated")
+            end = at + int.from_bytes(data[at + 8 : at + 8 + n_len], "little")
+            if not at + hdr <= end <= size:
+                raise fail(path, f"global heap collection at byte {at} has an impossible size")
+            p = at + hdr
+            while p < end:
+                if p + obj_hdr > end:
+                    break  # free space too small for an object header
+                idx = int.from_bytes(data[p : p + 2], "little")
+                obj = int.from_bytes(data[p + 8 : p + 8 + n_len], "little")
+                need = obj_hdr + -(-obj // 8) * 8 if idx > 0 else obj
+                if need <= 0 or p + need > end:
+                    raise fail(
+                        path,
+                        f"corrupt global heap collection at byte {at}: object {idx} at byte "
+                        f"{p} has size {obj} (the HDF5 library would loop or overrun on it)",
+                    )
+                p += need
+            at = data.find(_GCOL, at + 1)
 
 
 class ReadBudgetExceeded(OSError):

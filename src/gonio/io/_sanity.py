@@ -1,7 +1,11 @@
 """Checks every reader applies to the numbers it loads: values that cannot be right are errors.
 
 A loaded table must not lie: a BRDF is finite, non-negative (where the format stores f_r or
-f_r cos, as every format gonio reads except RGL does) and below :data:`gonio._bounded.MAX_BRDF`;
+f_r cos, as every format gonio reads except RGL does) and below :data:`gonio._bounded.MAX_BRDF`.
+"Non-negative" allows what measurement and colour conversion produce: values down to
+:data:`NEGATIVE_TOLERANCE` times the table's largest magnitude (dark-frame noise; a spectrum
+converted to sRGB outside the gamut has slightly negative components); anything lower cannot be
+noise and is refused;
 a table has at least one valid cell; directions are unit vectors in the upper hemisphere; a grid
 axis stays inside the domain of its angle. Each failure is a one-line :class:`FormatError`
 naming the file and the field.
@@ -25,6 +29,8 @@ AXIS_DOMAIN = {
     "phi_d": 2 * math.pi,
 }
 _ANGLE_TOL = 1e-6
+#: Lowest value accepted as "non-negative", as a fraction of the largest |value| (see above).
+NEGATIVE_TOLERANCE = 0.01
 #: Largest deviation of a direction's norm from 1, and lowest z of an upper-hemisphere direction.
 UNIT_TOL = 1e-3
 HORIZON_TOL = 1e-6
@@ -34,6 +40,8 @@ def check_brdf_values(
     path: PathLike, what: str, values: Any, valid: Any = None, non_negative: bool = True
 ) -> None:
     """Refuse NaN/Inf, |v| > MAX_BRDF and (optionally) negative values at valid entries.
+
+    With ``non_negative``, a value below ``-NEGATIVE_TOLERANCE * max|v|`` is an error.
 
     ``valid`` is a boolean mask over the leading axes of ``values`` (None: all valid); a mask
     with no True entry is itself an error (a table with no valid cell).
@@ -55,8 +63,8 @@ def check_brdf_values(
         raise fail(path, f"{what}: value {top:.3g} is beyond any reflectance ({MAX_BRDF:g} 1/sr)")
     if non_negative:
         low = float(np.min(v))
-        if low < 0:
-            n = int(np.count_nonzero(v < 0))
+        if low < -NEGATIVE_TOLERANCE * top:
+            n = int(np.count_nonzero(v < -NEGATIVE_TOLERANCE * top))
             raise fail(path, f"{what}: {n} negative value(s) (lowest {low:.3g}) at valid cells")
 
 

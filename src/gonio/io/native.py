@@ -14,6 +14,8 @@ Scattered files: ``/wi`` and ``/wo`` (N, 3) float64, ``/values`` (N, C), optiona
 ``/weights``. Values are float32 compressed losslessly (shuffle + deflate), chunked with one
 channel per chunk and a few rows of the first axis per chunk; or, opt-in, log-quantized with a
 guaranteed relative error bound (encoding "log-quantized-delta", see :func:`encode_lossy`).
+Every array dataset carries a fletcher32 checksum per chunk (files written before it load too).
+Reading is bounded (:mod:`gonio.io._hdf5_guard`): only this layout is accepted.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from gonio.io._common import PathLike, atomic_output, check_input_file, fail
 from gonio.io._hdf5_guard import (
     ReadBudgetExceeded,
     check_attribute,
+    check_global_heaps,
     check_group_datasets,
     open_bounded,
 )
@@ -62,7 +65,7 @@ PROVENANCE_FIELDS: dict[str, tuple[list[str], str]] = {
 #: Target uncompressed bytes per chunk (a few rows of the first axis, one channel).
 CHUNK_BYTES = 1 << 18
 DEFAULT_GZIP_LEVEL = 4
-#: Datasets up to this size are stored contiguous and uncompressed.
+#: Datasets up to this size are stored as one uncompressed chunk (with a fletcher32 checksum).
 SMALL_BYTES = 1 << 14
 #: In lossy mode, values below ``LOSSY_FLOOR_RATIO * max`` are stored as 0.
 LOSSY_FLOOR_RATIO = 1e-7
@@ -186,9 +189,12 @@ def _chunks(shape: tuple[int, ...], itemsize: int, channel_last: bool) -> tuple[
 
 def _dataset(h5: Any, name: str, data: np.ndarray, channel_last: bool, level: int) -> Any:
     data = np.ascontiguousarray(data)
+    if data.ndim == 0 or data.size == 0:
+        return h5.create_dataset(name, data=data)  # HDF5 cannot chunk these
     if data.nbytes <= SMALL_BYTES:
-        # chunk indexing and filters cost more than they save on small arrays
-        return h5.create_dataset(name, data=data)
+        # one uncompressed chunk: compression costs more than it saves on small arrays, but the
+        # fletcher32 checksum still catches a flipped bit
+        return h5.create_dataset(name, data=data, chunks=data.shape, fletcher32=True)
     return h5.create_dataset(
         name,
         data=data,
@@ -196,6 +202,7 @@ def _dataset(h5: Any, name: str, data: np.ndarray, channel_last: bool, level: in
         shuffle=True,
         compression="gzip",
         compression_opts=level,
+        fletcher32=True,  # a checksum per chunk: payload corruption is an error, not data
     )
 
 
@@ -441,6 +448,7 @@ def _open_unguarded(path: PathLike) -> Any:
         head = fh.read(8)
     if not is_native(head):
         raise fail(p, "not an HDF5 file (wrong magic)")
+    check_global_heaps(p)  # before libhdf5 decodes one (a corrupt one makes it loop forever)
     try:
         h5 = open_bounded(p)
     except ReadBudgetExceeded:
