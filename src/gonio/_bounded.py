@@ -6,7 +6,7 @@ real measurement needs and far below what would exhaust a workstation:
 
 * :data:`MAX_BRDF` — no measured reflectance reaches 1e10 1/sr (a mirror tabulated on a
   0.01-degree cell peaks near 3e7 1/sr); larger values are corruption, not data.
-* :data:`MAX_DECODED_BYTES` — the memory one file's decoded arrays may take (1 GiB: a
+* :data:`MAX_DECODED_BYTES` — the memory one file's decoded arrays may take together (1 GiB: a
   MERL-resolution table is 17 MB); a reader refuses a file whose declared shapes exceed it.
 * :data:`MAX_COMPRESSION_RATIO` — each compressed chunk must store at least 1/1100 of its
   decoded size (deflate cannot exceed about 1032:1, so only a crafted filter pipeline can).

@@ -185,10 +185,11 @@ def check_attribute(obj: Any, name: str, path: PathLike) -> None:
         raise fail(path, f"attribute {name!r} on {obj.name} declares {n} elements")
 
 
-def check_dataset(ds: Any, path: PathLike, file_size: int) -> None:
+def check_dataset(ds: Any, path: PathLike, file_size: int) -> int:
     """Refuse a dataset that is not stored the documented way (see the module docstring).
 
-    Called before any of the dataset's data is read; it looks at metadata only.
+    Called before any of the dataset's data is read; it looks at metadata only. Returns the
+    dataset's declared size in bytes.
     """
     import h5py
 
@@ -217,15 +218,15 @@ def check_dataset(ds: Any, path: PathLike, file_size: int) -> None:
             f"{MAX_DECODED_BYTES >> 20} MiB a table may take",
         )
     if nbytes == 0:
-        return
+        return 0
     if layout == h5py.h5d.CONTIGUOUS:
         offset = ds.id.get_offset()
         stored = ds.id.get_storage_size()
         if offset is None or stored < nbytes or offset + nbytes > file_size:
             raise fail(path, f"{name}: data not stored in the file ({stored} of {nbytes} bytes)")
-        return
+        return nbytes
     if layout == h5py.h5d.COMPACT:
-        return  # stored inside the object header, which is inside the file
+        return nbytes  # stored inside the object header, which is inside the file
     chunk = tuple(int(c) for c in dcpl.get_chunk())
     if len(chunk) != len(shape) or min(chunk) < 1:
         raise fail(path, f"{name}: bad chunk shape {chunk}")
@@ -247,12 +248,15 @@ def check_dataset(ds: Any, path: PathLike, file_size: int) -> None:
                 f"{name}: chunk {i} expands {info.size} bytes to {chunk_bytes} "
                 f"(more than {MAX_COMPRESSION_RATIO}:1)",
             )
+    return nbytes
 
 
 def check_group_datasets(group: Any, path: PathLike, file_size: int) -> None:
-    """:func:`check_dataset` on every dataset directly in ``group`` and in its sub-groups."""
+    """:func:`check_dataset` on every dataset in ``group`` and its sub-groups; all of them
+    together may declare at most :data:`gonio._bounded.MAX_DECODED_BYTES`."""
     import h5py
 
+    datasets = []
     stack = [group]
     while stack:
         g = stack.pop()
@@ -262,6 +266,15 @@ def check_group_datasets(group: Any, path: PathLike, file_size: int) -> None:
                 raise fail(path, f"{g.name}/{key} is a {type(link).__name__} (not allowed)")
             obj = g[key]
             if isinstance(obj, h5py.Dataset):
-                check_dataset(obj, path, file_size)
+                datasets.append(obj)
             elif isinstance(obj, h5py.Group) and obj.name.count("/") < 8:
                 stack.append(obj)
+    total = sum(math.prod(ds.shape or ()) * ds.dtype.itemsize for ds in datasets)
+    if total > MAX_DECODED_BYTES:
+        raise fail(
+            path,
+            f"datasets declare {total / 2**20:.0f} MiB in total, over the "
+            f"{MAX_DECODED_BYTES >> 20} MiB a file may take",
+        )
+    for ds in datasets:
+        check_dataset(ds, path, file_size)
