@@ -3,7 +3,8 @@ non-zero exit, never a traceback, and no output file (not even a partial or temp
 
 Each case is a fresh ``python -m gonio`` process (seconds each), so the default run takes
 :data:`DEFAULT_CLI_CASES` cases and ``-m slow`` :data:`SLOW_CLI_CASES`. The command depends on
-the kind: ``info`` or ``convert FILE out.brdf.h5`` for tables, ``info`` for EXR, ``plan --rig``
+the kind: ``info``, ``convert FILE out.brdf.h5`` or ``fit`` (one Lambert start) for tables,
+``info`` for RGL and EXR files, ``plan --rig``
 for rig files, ``plan --plan`` for plan files, ``render --fitted`` (tiny) for fit results.
 """
 
@@ -33,8 +34,11 @@ def corpus(tmp_path_factory):
 
 def command(kind: str, path: Path, out: Path, index: int) -> tuple[list[str], Path | None]:
     """The gonio arguments for a case, and the output path it would write (or None)."""
-    if kind in TABLE_KINDS and index % 2:
+    if kind in TABLE_KINDS and index % 3 == 1:
         return ["convert", str(path), str(out / "out.brdf.h5")], out / "out.brdf.h5"
+    if kind in TABLE_KINDS and index % 3 == 2:
+        args = ["fit", str(path), "--model", "lambert", "--starts", "1", "--no-plots"]
+        return [*args, "--out", str(out / "fit")], out / "fit"
     if kind == "rig":
         return ["plan", "--rig", str(path), "--plan", "iso-tiny"], None
     if kind == "plan":

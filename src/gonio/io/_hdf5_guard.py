@@ -5,7 +5,8 @@ blocks for minutes without returning to Python (so Ctrl-C is not seen), a datase
 gigabytes that are never stored (unallocated chunks read as the fill value), point at external
 files such as ``/dev/zero``, or be a virtual dataset assembled from other files. Four defences:
 
-* :func:`check_global_heaps`: libhdf5 decodes a global heap collection (where variable-length
+* :func:`check_global_heaps` (after the dataset checks, before any attribute is read):
+  libhdf5 decodes a global heap collection (where variable-length
   strings such as gonio's attributes live) by stepping from object to object; an object with
   index 0 and size 0 makes that step zero and the library loops forever in C, without reading
   and without seeing Ctrl-C (a 1 KB duplicated range in a scattered file does exactly this).
@@ -25,6 +26,7 @@ files such as ``/dev/zero``, or be a virtual dataset assembled from other files.
 
 from __future__ import annotations
 
+import bisect
 import io
 import math
 import os
@@ -58,8 +60,12 @@ def _size_of_lengths(head: bytes) -> int:
     return head[pos]
 
 
-def check_global_heaps(path: PathLike) -> None:
+def check_global_heaps(path: PathLike, raw_data: list[tuple[int, int]] = ()) -> None:
     """Walk every global heap collection as libhdf5's decoder does; refuse one it would loop on.
+
+    Collections are found by their signature; one that starts inside a dataset's raw data
+    (``raw_data``: byte ranges ``[start, end)``, from :func:`check_group_datasets`) or inside a
+    collection already walked is payload that happens to spell it, and is skipped.
 
     The walk (HDF5 file format spec, "Global Heap"): after the 16-byte header, each object has
     a header of index (2 bytes), reference count (2), reserved (4) and size (``L`` bytes, the
@@ -76,8 +82,13 @@ def check_global_heaps(path: PathLike) -> None:
         hdr = 8 + n_len
         obj_hdr = 8 + n_len
         size = len(data)
+        starts = sorted(raw_data)
         at = data.find(_GCOL)
         while at >= 0:
+            k = bisect.bisect_right(starts, (at, math.inf)) - 1
+            if k >= 0 and starts[k][0] <= at < starts[k][1]:
+                at = data.find(_GCOL, at + 1)
+                continue
             if at + hdr > size:
                 raise fail(path, f"global heap collection at byte {at} is truncated")
             end = at + int.from_bytes(data[at + 8 : at + 8 + n_len], "little")
@@ -97,7 +108,7 @@ def check_global_heaps(path: PathLike) -> None:
                         f"{p} has size {obj} (the HDF5 library would loop or overrun on it)",
                     )
                 p += need
-            at = data.find(_GCOL, at + 1)
+            at = data.find(_GCOL, end)
 
 
 class ReadBudgetExceeded(OSError):
@@ -185,11 +196,11 @@ def check_attribute(obj: Any, name: str, path: PathLike) -> None:
         raise fail(path, f"attribute {name!r} on {obj.name} declares {n} elements")
 
 
-def check_dataset(ds: Any, path: PathLike, file_size: int) -> int:
+def check_dataset(ds: Any, path: PathLike, file_size: int) -> list[tuple[int, int]]:
     """Refuse a dataset that is not stored the documented way (see the module docstring).
 
     Called before any of the dataset's data is read; it looks at metadata only. Returns the
-    dataset's declared size in bytes.
+    byte ranges ``[start, end)`` of the file that hold the dataset's raw data.
     """
     import h5py
 
@@ -218,15 +229,15 @@ def check_dataset(ds: Any, path: PathLike, file_size: int) -> int:
             f"{MAX_DECODED_BYTES >> 20} MiB a table may take",
         )
     if nbytes == 0:
-        return 0
+        return []
     if layout == h5py.h5d.CONTIGUOUS:
         offset = ds.id.get_offset()
         stored = ds.id.get_storage_size()
         if offset is None or stored < nbytes or offset + nbytes > file_size:
             raise fail(path, f"{name}: data not stored in the file ({stored} of {nbytes} bytes)")
-        return nbytes
+        return [(offset, offset + stored)]
     if layout == h5py.h5d.COMPACT:
-        return nbytes  # stored inside the object header, which is inside the file
+        return []  # stored inside the object header, which is inside the file
     chunk = tuple(int(c) for c in dcpl.get_chunk())
     if len(chunk) != len(shape) or min(chunk) < 1:
         raise fail(path, f"{name}: bad chunk shape {chunk}")
@@ -238,6 +249,7 @@ def check_dataset(ds: Any, path: PathLike, file_size: int) -> int:
         raise fail(path, f"{name}: {n_chunks} of {expected} chunks stored (missing data)")
     chunk_bytes = math.prod(chunk) * ds.dtype.itemsize
     min_stored = chunk_bytes / MAX_COMPRESSION_RATIO
+    extents = []
     for i in range(n_chunks):
         info = ds.id.get_chunk_info(i)
         if info.byte_offset is None or info.byte_offset + info.size > file_size:
@@ -248,12 +260,14 @@ def check_dataset(ds: Any, path: PathLike, file_size: int) -> int:
                 f"{name}: chunk {i} expands {info.size} bytes to {chunk_bytes} "
                 f"(more than {MAX_COMPRESSION_RATIO}:1)",
             )
-    return nbytes
+        extents.append((info.byte_offset, info.byte_offset + info.size))
+    return extents
 
 
-def check_group_datasets(group: Any, path: PathLike, file_size: int) -> None:
+def check_group_datasets(group: Any, path: PathLike, file_size: int) -> list[tuple[int, int]]:
     """:func:`check_dataset` on every dataset in ``group`` and its sub-groups; all of them
-    together may declare at most :data:`gonio._bounded.MAX_DECODED_BYTES`."""
+    together may declare at most :data:`gonio._bounded.MAX_DECODED_BYTES`. Returns the byte
+    ranges of their raw data (for :func:`check_global_heaps`)."""
     import h5py
 
     datasets = []
@@ -276,5 +290,4 @@ def check_group_datasets(group: Any, path: PathLike, file_size: int) -> None:
             f"datasets declare {total / 2**20:.0f} MiB in total, over the "
             f"{MAX_DECODED_BYTES >> 20} MiB a file may take",
         )
-    for ds in datasets:
-        check_dataset(ds, path, file_size)
+    return [e for ds in datasets for e in check_dataset(ds, path, file_size)]

@@ -442,13 +442,11 @@ def _open(path: PathLike) -> Any:
 
 
 def _open_unguarded(path: PathLike) -> Any:
-
     p = check_input_file(path)
     with open(p, "rb") as fh:
         head = fh.read(8)
     if not is_native(head):
         raise fail(p, "not an HDF5 file (wrong magic)")
-    check_global_heaps(p)  # before libhdf5 decodes one (a corrupt one makes it loop forever)
     try:
         h5 = open_bounded(p)
     except ReadBudgetExceeded:
@@ -456,6 +454,10 @@ def _open_unguarded(path: PathLike) -> Any:
     except OSError as exc:
         raise fail(p, f"corrupt or truncated HDF5 file ({exc})") from None
     try:
+        # the layout first: attributes live in global heaps, which must be checked before
+        # libhdf5 decodes one (a corrupt one makes it loop forever), skipping raw data
+        raw = check_group_datasets(h5, p, p.stat().st_size)
+        check_global_heaps(p, raw)
         fmt = _attr_str(h5, "format", p) if "format" in h5.attrs else None
         if fmt != FORMAT_NAME:
             raise fail(p, f"HDF5 file is not a {FORMAT_NAME} table (format attribute {fmt!r})")
@@ -464,7 +466,6 @@ def _open_unguarded(path: PathLike) -> Any:
             raise fail(
                 p, f"unsupported format_version {version} (this gonio reads {FORMAT_VERSION})"
             )
-        check_group_datasets(h5, p, p.stat().st_size)
     except BaseException:
         h5.close()
         raise
