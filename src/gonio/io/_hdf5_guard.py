@@ -26,7 +26,6 @@ files such as ``/dev/zero``, or be a virtual dataset assembled from other files.
 
 from __future__ import annotations
 
-import bisect
 import io
 import math
 import os
@@ -60,12 +59,25 @@ def _size_of_lengths(head: bytes) -> int:
     return head[pos]
 
 
+def _gaps(raw_data: list[tuple[int, int]], size: int) -> list[tuple[int, int]]:
+    """The byte ranges of ``[0, size)`` not covered by ``raw_data``."""
+    gaps, pos = [], 0
+    for start, end in sorted(raw_data):
+        if start > pos:
+            gaps.append((pos, start))
+        pos = max(pos, end)
+    if pos < size:
+        gaps.append((pos, size))
+    return gaps
+
+
 def check_global_heaps(path: PathLike, raw_data: list[tuple[int, int]] = ()) -> None:
     """Walk every global heap collection as libhdf5's decoder does; refuse one it would loop on.
 
-    Collections are found by their signature; one that starts inside a dataset's raw data
-    (``raw_data``: byte ranges ``[start, end)``, from :func:`check_group_datasets`) or inside a
-    collection already walked is payload that happens to spell it, and is skipped.
+    Collections are found by their signature outside the datasets' raw data (``raw_data``: byte
+    ranges ``[start, end)`` from :func:`check_group_datasets`; a payload that happens to spell
+    the signature is not a heap, and skipping the payload keeps the scan to the metadata) and
+    outside collections already walked.
 
     The walk (HDF5 file format spec, "Global Heap"): after the 16-byte header, each object has
     a header of index (2 bytes), reference count (2), reserved (4) and size (``L`` bytes, the
@@ -79,36 +91,39 @@ def check_global_heaps(path: PathLike, raw_data: list[tuple[int, int]] = ()) -> 
             n_len = _size_of_lengths(data[:16])
         except ValueError as exc:
             raise fail(path, str(exc)) from None
-        hdr = 8 + n_len
-        obj_hdr = 8 + n_len
         size = len(data)
-        starts = sorted(raw_data)
-        at = data.find(_GCOL)
-        while at >= 0:
-            k = bisect.bisect_right(starts, (at, math.inf)) - 1
-            if k >= 0 and starts[k][0] <= at < starts[k][1]:
-                at = data.find(_GCOL, at + 1)
-                continue
-            if at + hdr > size:
-                raise fail(path, f"global heap collection at byte {at} is truncated")
-            end = at + int.from_bytes(data[at + 8 : at + 8 + n_len], "little")
-            if not at + hdr <= end <= size:
-                raise fail(path, f"global heap collection at byte {at} has an impossible size")
-            p = at + hdr
-            while p < end:
-                if p + obj_hdr > end:
-                    break  # free space too small for an object header
-                idx = int.from_bytes(data[p : p + 2], "little")
-                obj = int.from_bytes(data[p + 8 : p + 8 + n_len], "little")
-                need = obj_hdr + -(-obj // 8) * 8 if idx > 0 else obj
-                if need <= 0 or p + need > end:
-                    raise fail(
-                        path,
-                        f"corrupt global heap collection at byte {at}: object {idx} at byte "
-                        f"{p} has size {obj} (the HDF5 library would loop or overrun on it)",
-                    )
-                p += need
-            at = data.find(_GCOL, end)
+        done = 0  # end of the last collection walked
+        for lo, hi in _gaps(list(raw_data), size):
+            at = data.find(_GCOL, max(lo, done), hi)
+            while at >= 0:
+                done = _walk_collection(data, at, n_len, path)
+                at = data.find(_GCOL, done, hi) if done < hi else -1
+
+
+def _walk_collection(data: Any, at: int, n_len: int, path: PathLike) -> int:
+    """Walk the collection at byte ``at`` (see :func:`check_global_heaps`); returns its end."""
+    hdr = obj_hdr = 8 + n_len
+    size = len(data)
+    if at + hdr > size:
+        raise fail(path, f"global heap collection at byte {at} is truncated")
+    end = at + int.from_bytes(data[at + 8 : at + 8 + n_len], "little")
+    if not at + hdr <= end <= size:
+        raise fail(path, f"global heap collection at byte {at} has an impossible size")
+    p = at + hdr
+    while p < end:
+        if p + obj_hdr > end:
+            break  # free space too small for an object header
+        idx = int.from_bytes(data[p : p + 2], "little")
+        obj = int.from_bytes(data[p + 8 : p + 8 + n_len], "little")
+        need = obj_hdr + -(-obj // 8) * 8 if idx > 0 else obj
+        if need <= 0 or p + need > end:
+            raise fail(
+                path,
+                f"corrupt global heap collection at byte {at}: object {idx} at byte {p} has "
+                f"size {obj} (the HDF5 library would loop or overrun on it)",
+            )
+        p += need
+    return end
 
 
 class ReadBudgetExceeded(OSError):
