@@ -18,7 +18,7 @@ from unittest import mock
 
 import numpy as np
 
-from tests.conftest import SHARED_DATA
+from tests.conftest import ROOT, SHARED_DATA
 
 #: Kinds of check, one per reader family (the worker's ``CHECKS``).
 KINDS = ("native", "merl", "rgl", "cornell", "alta", "exr", "exr_slices", "rig", "plan", "fit")
@@ -31,6 +31,8 @@ REAL_FILES = {
     "alta": ["alta/pink-felt-1d.alta"],
 }
 SHIPPED_RIGS = ("sim.toml", "sim_sample.toml", "xm430_4axis.toml")
+#: The format's example files (written before the checksums: contiguous, unfiltered datasets).
+EXAMPLES = ROOT / "data-schema" / "examples"
 
 
 @dataclass(frozen=True)
@@ -187,6 +189,8 @@ def build_corpus(out: Path, real: bool = True) -> list[Seed]:
         p = out / "run_table.brdf.h5"  # a run's layout: samples at the root, a gridded group
         write_native(_samples(100, 6), p, groups={"gridded": small})
         seeds.append(Seed("native:run-groups", "native", p))
+    for name in ("tiny-gridded.brdf.h5", "tiny-scattered.brdf.h5"):
+        seeds.append(Seed(f"native:example-{name}", "native", EXAMPLES / name))
     p = out / "small.binary"  # MERL at a reduced resolution (the reader takes any dimensions)
     io.save(_half_diff_table((5, 5, 10), 8), p)
     seeds.append(Seed("merl:5x5x10", "merl", p))

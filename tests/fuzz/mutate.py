@@ -618,12 +618,15 @@ STRUCTURED: dict[str, Callable[[bytes, Rng], tuple[bytes, str]]] = {
     "fit": m_json,
 }
 TEXT_KINDS = ("cornell", "alta", "rig", "plan", "fit")
+#: Native files get three shares of the cases: HDF5 has by far the most structure to corrupt.
+KIND_WEIGHTS = {"native": 3}
 
 
 def make_case(master: int, index: int, seeds: list[Seed]) -> Case:
-    """The case ``index`` of the run seeded ``master`` over the corpus ``seeds``."""
+    """The case ``index`` of the run seeded ``master`` over the corpus ``seeds``: a kind drawn
+    with :data:`KIND_WEIGHTS`, a file of that kind, a mutation (sometimes two)."""
     rng = np.random.default_rng([master, index])
-    kinds = sorted({s.kind for s in seeds})
+    kinds = [k for k in sorted({s.kind for s in seeds}) for _ in range(KIND_WEIGHTS.get(k, 1))]
     kind = kinds[int(rng.integers(0, len(kinds)))]
     pool = [s for s in seeds if s.kind == kind]
     seed = pool[int(rng.integers(0, len(pool)))]
