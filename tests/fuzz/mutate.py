@@ -318,16 +318,14 @@ def _h5_mutation(path: Path, rng: Rng) -> str:
                 new.attrs[k] = v
 
         if op == "data":
+            # integer datasets (mask, counts) become float64 ones: a wrong dtype as well
             arr = np.asarray(ds[()])
-            if arr.dtype.kind != "f":
-                arr = arr.astype(np.float64) if arr.dtype.kind in "iub" else arr
+            arr = arr.astype(ds.dtype if ds.dtype.kind == "f" else np.float64).reshape(-1)
             v = _bad_float(rng)
-            flat = arr.reshape(-1).copy() if arr.size else arr.reshape(-1)
-            if flat.size and flat.dtype.kind == "f":
-                sel = rng.integers(0, flat.size, size=max(1, flat.size // int(_pick(rng, [1, 50]))))
-                flat[sel] = v
-            replace(flat.reshape(arr.shape).astype(ds.dtype, copy=False) if ds.dtype.kind == "f"
-                    else flat.reshape(arr.shape))  # fmt: skip
+            if arr.size:
+                share = int(_pick(rng, [1, 50]))  # every cell, or one in 50
+                arr[rng.integers(0, arr.size, size=max(1, arr.size // share))] = v
+            replace(arr.reshape(ds.shape))
             return f"HDF5 dataset {name} values set to {v} at some cells"
         if op == "shape":
             shape = tuple(int(s) for s in ds.shape)
