@@ -152,10 +152,13 @@ def loads_toml(
         raise error(f"{source}: TOML nested too deeply") from None
 
 
-def non_finite_path(tree: Any, prefix: str = "", limit: float = math.inf) -> str | None:
+def non_finite_path(
+    tree: Any, prefix: str = "", limit: float = math.inf, tiny: float = 0.0
+) -> str | None:
     """Dotted path of the first NaN or infinite float in a parsed JSON/TOML tree, else None.
 
-    With ``limit``, a number (float or integer) whose magnitude exceeds it counts as well.
+    With ``limit``, a number (float or integer) whose magnitude exceeds it counts as well; with
+    ``tiny``, a non-zero float whose magnitude is below it.
     """
     stack: list[tuple[str, Any]] = [(prefix, tree)]
     while stack:
@@ -163,6 +166,8 @@ def non_finite_path(tree: Any, prefix: str = "", limit: float = math.inf) -> str
         if isinstance(node, float) and not math.isfinite(node):
             return where or "<root>"
         if isinstance(node, int | float) and not isinstance(node, bool) and abs(node) > limit:
+            return where or "<root>"
+        if isinstance(node, float) and 0.0 < abs(node) < tiny:
             return where or "<root>"
         if isinstance(node, dict):
             stack += [(f"{where}.{k}" if where else str(k), v) for k, v in node.items()]

@@ -315,9 +315,19 @@ def _spec(obj: dict, **change) -> bytes:
             "kind = 'grid4d'\ntheta_i_deg = { start = 0, stop = 90, step = 0.1 }\n"
             "phi_i_deg = { start = 0, stop = 359, step = 0.5 }\ntheta_o_deg = [10]\n"
             "phi_o_deg = [0]",
-            "more than 200000",
+            "more than 10000",
         ),
         ("kind = 'isotropic'\ntheta_i_deg = [10]\ntheta_o_deg = [10]\ndphi_deg = [nan]", "finite"),
+        (
+            "kind = 'halfdiff'\ntheta_h_deg = [1]\ntheta_d_deg = { start = 0, stop = 60, "
+            "step = 1e-320 }\nphi_d_deg = [90]",
+            "more than 3600",
+        ),
+        (
+            "kind = 'isotropic'\ntheta_i_deg = [10]\ntheta_o_deg = [10]\n"
+            "dphi_deg = { start = 0, stop = 180, step = true }",
+            "numeric",
+        ),
     ],
 )
 def test_plan_files_are_bounded_and_errors_name_the_file(tmp_path, text, match):
@@ -335,7 +345,12 @@ def test_plan_files_are_bounded_and_errors_name_the_file(tmp_path, text, match):
     [
         ("settle_tolerance_deg = 0.3", "settle_tolerance_deg = nan", "settle_tolerance_deg"),
         ("min_deg = -170.0", "min_deg = -inf", r"joints\[0\].min_deg"),
-        ("max_deg = 170.0", "max_deg = 1e308", r"joints\[0\].max_deg.*<= 1e12"),
+        ("max_deg = 170.0", "max_deg = 1e308", r"joints\[0\].max_deg.*1e12"),
+        (
+            "profile_acceleration_deg_s2 = 180.0",
+            "profile_acceleration_deg_s2 = 1e-320",
+            r"joints\[0\].profile_acceleration_deg_s2.*1e-9",
+        ),
         ('name = "sim"', "name = " + "[" * 600 + "]" * 600, "nested deeper"),
     ],
 )

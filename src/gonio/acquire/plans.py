@@ -53,9 +53,10 @@ import numpy as np
 from gonio._bounded import loads_toml
 from gonio.errors import PlanError
 
-#: Most values one plan axis may have, and most configurations one plan may ask for.
+#: Most values one plan axis may have, and most configurations one plan may ask for (10,000
+#: configurations are days of acquisition; the dry run orders them with an n x n cost matrix).
 MAX_AXIS_VALUES = 3600
-MAX_TARGETS = 200_000
+MAX_TARGETS = 10_000
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,8 @@ def _angles(spec, key: str) -> np.ndarray:
     """Degrees list or {start, stop, step} (inclusive) -> radians array."""
     if isinstance(spec, dict):
         try:
+            if any(isinstance(spec[k], bool) for k in ("start", "stop", "step")):
+                raise TypeError("a boolean is not a number of degrees")
             start, stop, step = float(spec["start"]), float(spec["stop"]), float(spec["step"])
         except (KeyError, TypeError, ValueError):
             raise PlanError(f"plan key {key}: a range needs numeric start, stop, step") from None
@@ -93,14 +96,17 @@ def _angles(spec, key: str) -> np.ndarray:
             raise PlanError(f"plan key {key}: start, stop and step must be finite")
         if step <= 0 or stop < start:
             raise PlanError(f"plan key {key}: need step > 0 and stop >= start")
-        n = math.floor((stop - start) / step + 1e-9) + 1
-        if n > MAX_AXIS_VALUES:
-            raise PlanError(f"plan key {key}: {n} values, more than {MAX_AXIS_VALUES}")
+        span = (stop - start) / step  # inf when step is denormal
+        if not span < MAX_AXIS_VALUES:
+            raise PlanError(f"plan key {key}: more than {MAX_AXIS_VALUES} values")
+        n = math.floor(span + 1e-9) + 1
         vals = start + step * np.arange(n)
     elif isinstance(spec, (list, tuple)) and spec:
         if len(spec) > MAX_AXIS_VALUES:
             raise PlanError(f"plan key {key}: {len(spec)} values, more than {MAX_AXIS_VALUES}")
         try:
+            if any(isinstance(v, bool) for v in spec):
+                raise TypeError("a boolean is not a number of degrees")
             vals = np.array([float(v) for v in spec])
         except (TypeError, ValueError):
             raise PlanError(f"plan key {key}: values must be numbers (degrees)") from None
@@ -406,8 +412,11 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
         raise PlanError("plan key refine: values must be numbers") from None
     if not all(map(math.isfinite, (window, step, peak_ratio))):
         raise PlanError("plan key refine: values must be finite")
-    if step > 0 and window / step > MAX_AXIS_VALUES:
-        raise PlanError(f"plan key refine: window_deg / step_deg above {MAX_AXIS_VALUES}")
+    # the refinement patch has about (2 window / step + 1)^2 targets per incident angle
+    if step > 0 and not (2 * window / step + 1) ** 2 * len(axes[0]) <= MAX_TARGETS:
+        raise PlanError(
+            f"plan key refine: window_deg / step_deg asks for more than {MAX_TARGETS} targets"
+        )
     return Adaptive(
         Isotropic3D(*axes),
         window=math.radians(window),

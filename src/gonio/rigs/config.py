@@ -541,9 +541,13 @@ def load_rig(name_or_path: str | Path) -> RigConfig:
 def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     """Parse and validate rig-file ``text``; ``source`` names it in error messages."""
     data = loads_toml(text, source, RigConfigError)  # size and nesting bounds
-    bad = non_finite_path(data, limit=1e12)  # no rig quantity comes near 1e12 in its unit
+    # no rig quantity comes near 1e12 in its unit, nor below 1e-9 unless it is 0 (a denormal
+    # acceleration made every move take forever)
+    bad = non_finite_path(data, limit=1e12, tiny=1e-9)
     if bad is not None:
-        raise RigConfigError(f"{source}: {bad}: must be a finite number of magnitude <= 1e12")
+        raise RigConfigError(
+            f"{source}: {bad}: must be a finite number, 0 or of magnitude in [1e-9, 1e12]"
+        )
     validator = jsonschema.Draft202012Validator(rig_schema())
     errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:
