@@ -152,10 +152,12 @@ def loads_toml(
         raise error(f"{source}: TOML nested too deeply") from None
 
 
-def non_finite_path(
+def bad_number_path(
     tree: Any, prefix: str = "", limit: float = math.inf, tiny: float = 0.0
 ) -> str | None:
-    """Dotted path of the first NaN or infinite float in a parsed JSON/TOML tree, else None.
+    """Dotted path of the first bad number in a parsed JSON/TOML tree, else None.
+
+    Bad: a NaN or infinite float.
 
     With ``limit``, a number (float or integer) whose magnitude exceeds it counts as well; with
     ``tiny``, a non-zero float whose magnitude is below it.

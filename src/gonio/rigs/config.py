@@ -22,7 +22,7 @@ from typing import Any
 
 import jsonschema
 
-from gonio._bounded import loads_toml, non_finite_path
+from gonio._bounded import bad_number_path, loads_toml
 from gonio.errors import RigConfigError
 from gonio.rigs import control_table as ct
 
@@ -543,7 +543,7 @@ def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     data = loads_toml(text, source, RigConfigError)  # size and nesting bounds
     # no rig quantity comes near 1e12 in its unit, nor below 1e-9 unless it is 0 (a denormal
     # acceleration made every move take forever)
-    bad = non_finite_path(data, limit=1e12, tiny=1e-9)
+    bad = bad_number_path(data, limit=1e12, tiny=1e-9)
     if bad is not None:
         raise RigConfigError(
             f"{source}: {bad}: must be a finite number, 0 or of magnitude in [1e-9, 1e12]"
