@@ -32,7 +32,10 @@ def _small_table(values_sign: float = 1.0) -> TabulatedBRDF:
     )
     t = TabulatedBRDF.from_model(models.Lambert(albedo=[0.6, 0.3, 0.1]), axes)
     values = np.asarray(t.values).copy()
-    values[..., 2] *= values_sign  # a negative channel, as in spectral->RGB conversions
+    if values_sign < 0:
+        # a slightly negative channel, as in spectral->RGB conversions (the native reader
+        # refuses values below -1 % of the peak: those cannot be noise)
+        values[..., 2] *= -0.05
     return TabulatedBRDF(values=values, axes=axes, parameterization="half_diff_iso", mask=t.mask)
 
 

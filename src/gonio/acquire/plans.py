@@ -44,14 +44,19 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gonio._bounded import loads_toml
 from gonio.errors import PlanError
+
+#: Most values one plan axis may have, and most configurations one plan may ask for (10,000
+#: configurations are days of acquisition; the dry run orders them with an n x n cost matrix).
+MAX_AXIS_VALUES = 3600
+MAX_TARGETS = 10_000
 
 
 @dataclass(frozen=True)
@@ -78,10 +83,6 @@ def _dir(theta: float, phi: float) -> tuple[float, float, float]:
     return (st * math.cos(phi), st * math.sin(phi), math.cos(theta))
 
 
-#: Most values one plan axis may have (a typo such as step = 1e-9 must not exhaust memory).
-MAX_AXIS_VALUES = 10_000
-
-
 def _key_error(key: str | tuple, msg: str) -> PlanError:
     """PlanError ``plan key KEY: msg`` that remembers the key (``load_plan`` adds the line)."""
     path = (key,) if isinstance(key, str) else tuple(key)
@@ -96,6 +97,8 @@ def _angles(spec, key: str) -> np.ndarray:
     """Degrees list or {start, stop, step} (inclusive) -> radians array."""
     if isinstance(spec, dict):
         try:
+            if any(isinstance(spec[k], bool) for k in ("start", "stop", "step")):
+                raise TypeError("a boolean is not a number of degrees")
             start, stop, step = float(spec["start"]), float(spec["stop"]), float(spec["step"])
         except (KeyError, TypeError, ValueError):
             raise _key_error(key, "a range needs numeric start, stop, step") from None
@@ -107,14 +110,16 @@ def _angles(spec, key: str) -> np.ndarray:
         count = (stop - start) / step
         if not count < MAX_AXIS_VALUES:
             raise _key_error(
-                key, f"the range has {count + 1:.3g} values (at most {MAX_AXIS_VALUES})"
+                key, f"the range has {count + 1:.3g} values, more than {MAX_AXIS_VALUES}"
             )
         n = math.floor(count + 1e-9) + 1
         vals = start + step * np.arange(n)
     elif isinstance(spec, (list, tuple)) and spec:
         if len(spec) > MAX_AXIS_VALUES:
-            raise _key_error(key, f"{len(spec)} values (at most {MAX_AXIS_VALUES})")
+            raise _key_error(key, f"{len(spec)} values, more than {MAX_AXIS_VALUES}")
         try:
+            if any(isinstance(v, bool) for v in spec):
+                raise TypeError("a boolean is not a number of degrees")
             vals = np.array([float(v) for v in spec])
         except (TypeError, ValueError):
             raise _key_error(key, "values must be numbers (degrees)") from None
@@ -383,7 +388,7 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if not isinstance(spec, dict):
         raise PlanError("a plan must be a table")
     kind = spec.get("kind")
-    if kind not in _KEYS:
+    if not isinstance(kind, str) or kind not in _KEYS:
         raise _key_error("kind", f"{kind!r} is not one of {sorted(_KEYS)}")
     allowed = {"kind", "name", *_KEYS[kind]} | ({"refine"} if kind == "adaptive" else set())
     allowed |= {"reciprocal"} if kind == "isotropic" else set()
@@ -398,6 +403,9 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
             f"plan key {missing[0]}: missing (kind {kind!r} needs {', '.join(_KEYS[kind])})"
         )
     axes = [_angles(spec[k], k) for k in _KEYS[kind]]
+    n_targets = math.prod(len(a) for a in axes)
+    if n_targets > MAX_TARGETS:
+        raise PlanError(f"plan asks for {n_targets} configurations, more than {MAX_TARGETS}")
     for k, a in zip(_KEYS[kind], axes, strict=True):
         if k.startswith("theta") and not np.all((a >= 0) & (a <= math.pi / 2)):
             raise _key_error(k, "polar angles must lie in [0, 90] deg")
@@ -412,17 +420,25 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if not isinstance(ref, dict) or set(ref) - {"window_deg", "step_deg", "peak_ratio"}:
         raise PlanError("plan key refine: allowed keys are window_deg, step_deg, peak_ratio")
     try:
-        return Adaptive(
-            Isotropic3D(*axes),
-            window=math.radians(float(ref.get("window_deg", 10.0))),
-            step=math.radians(float(ref.get("step_deg", 2.5))),
-            peak_ratio=float(ref.get("peak_ratio", 1.5)),
-            name=name,
-        )
-    except PlanError:
-        raise
+        window = float(ref.get("window_deg", 10.0))
+        step = float(ref.get("step_deg", 2.5))
+        peak_ratio = float(ref.get("peak_ratio", 1.5))
     except (TypeError, ValueError):
         raise PlanError("plan key refine: values must be numbers") from None
+    if not all(map(math.isfinite, (window, step, peak_ratio))):
+        raise PlanError("plan key refine: values must be finite")
+    # the refinement patch has about (2 window / step + 1)^2 targets per incident angle
+    if step > 0 and not (2 * window / step + 1) ** 2 * len(axes[0]) <= MAX_TARGETS:
+        raise PlanError(
+            f"plan key refine: window_deg / step_deg asks for more than {MAX_TARGETS} targets"
+        )
+    return Adaptive(
+        Isotropic3D(*axes),
+        window=math.radians(window),
+        step=math.radians(step),
+        peak_ratio=peak_ratio,
+        name=name,
+    )
 
 
 def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
@@ -436,10 +452,11 @@ def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
             f"unknown plan {s!r}: not a file, and built-ins are {', '.join(builtin_plans())}"
         )
     try:
-        text = p.read_text(encoding="utf-8")
-        spec = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise PlanError(f"{p}: invalid TOML: {exc}") from None
+        data = p.read_bytes()
+    except OSError as exc:
+        raise PlanError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    spec = loads_toml(data, str(p), PlanError)  # size, UTF-8 and depth bounds
+    text = data.decode("utf-8")  # loads_toml has checked that it decodes
     from gonio.rigs.toml_lines import non_finite, where
 
     for path, value in non_finite(spec):
@@ -450,5 +467,5 @@ def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
     except PlanError as exc:
         path = getattr(exc, "key_path", None)
         if path is None:
-            raise
+            raise PlanError(f"{p}: {exc}") from None
         raise PlanError(f"{where(str(p), text, path)}: {exc.detail}") from None

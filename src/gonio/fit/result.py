@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from gonio._bounded import read_json
 from gonio.brdf.models import BRDFModel, Node
 from gonio.errors import FormatError
+from gonio.fit._spec_check import check_model_spec
 from gonio.fit.uncertainty import Uncertainty
 
 SCHEMA_ID = "gonio/fit-result"
@@ -284,14 +286,7 @@ def read_result(path: str | Path) -> dict[str, Any]:
     import jsonschema
 
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise FormatError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FormatError(f"{path}: not JSON ({exc.msg} at line {exc.lineno})") from None
+    obj = read_json(path)  # size, UTF-8, nesting depth and finite numbers, see gonio._bounded
     try:
         jsonschema.validate(obj, SCHEMA)
     except jsonschema.ValidationError as exc:
@@ -305,9 +300,10 @@ def load_model(path: str | Path) -> BRDFModel:
     from gonio.errors import ParameterError
 
     obj = read_result(path)
+    check_model_spec(obj["model_spec"], str(path))  # no missing, null or mistyped parameter
     try:
         model = Node.from_dict(obj["model_spec"])
-    except (ParameterError, TypeError, KeyError) as exc:
+    except (ParameterError, TypeError, KeyError, ValueError) as exc:
         raise FormatError(f"{path}: model_spec cannot be rebuilt ({exc})") from None
     if not isinstance(model, BRDFModel):
         raise FormatError(f"{path}: model_spec describes a {type(model).__name__}, not a BRDF")

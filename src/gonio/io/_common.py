@@ -8,6 +8,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from gonio._bounded import MAX_DECODED_BYTES, MAX_TEXT_BYTES
 from gonio.errors import FormatError
 
 PathLike = str | os.PathLike[str]
@@ -39,10 +40,17 @@ def check_input_file(path: PathLike) -> Path:
     return p
 
 
-def read_bytes(path: PathLike) -> bytes:
-    """Read a whole input file, turning OS errors into :class:`FormatError`."""
+def read_bytes(path: PathLike, max_bytes: int = MAX_DECODED_BYTES + (1 << 20)) -> bytes:
+    """Read a whole input file, turning OS errors into :class:`FormatError`.
+
+    A file larger than ``max_bytes`` (default: the memory budget of one table plus 1 MiB for
+    headers, see :mod:`gonio._bounded`) is refused before anything is read.
+    """
     p = check_input_file(path)
     try:
+        size = p.stat().st_size
+        if size > max_bytes:
+            raise fail(p, f"{size} bytes, more than the {max_bytes} a file of this kind may have")
         return p.read_bytes()
     except OSError as exc:
         raise fail(p, f"cannot read: {exc.strerror or exc}") from None
@@ -50,7 +58,7 @@ def read_bytes(path: PathLike) -> bytes:
 
 def read_text(path: PathLike) -> str:
     """Read a text file as UTF-8 (undecodable bytes are an error, not silently replaced)."""
-    data = read_bytes(path)
+    data = read_bytes(path, MAX_TEXT_BYTES)
     if b"\x00" in data:
         raise fail(path, "binary content in a text file (NUL byte)")
     try:

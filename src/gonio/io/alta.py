@@ -28,6 +28,7 @@ import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
 from gonio.io._geometry import half_diff_to_directions, spherical
+from gonio.io._sanity import check_brdf_values
 from gonio.io._text import parse_row, rows_to_array
 
 PARAM_IN_DIMS = {
@@ -186,6 +187,10 @@ def read_alta(
         sigma = None  # per-channel intervals do not map through the colour matrix
     if not np.any(keep):
         raise fail(path, "no sample lies above the horizon")
+    # every output parametrization is f_r (times a cosine): finite, >= 0, not absurd
+    check_brdf_values(path, "sample values", values[keep])
+    if sigma is not None:
+        check_brdf_values(path, "#VS uncertainties", sigma[keep])
     source: dict[str, Any] = {
         "format": "alta",
         "file": str(path),

@@ -14,6 +14,7 @@ import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
 from gonio.io._geometry import spherical
+from gonio.io._sanity import check_brdf_values
 
 _MAX_WAVELENGTHS = 100_000
 
@@ -68,6 +69,7 @@ def parse_cornell_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
         raise fail(path, "polar angles outside [0, pi/2] (records must be in radians)")
     if np.any(np.abs(ang[:, [1, 3]]) > 4 * np.pi):
         raise fail(path, "azimuths outside [-4 pi, 4 pi] (records must be in radians)")
+    check_brdf_values(path, "sample values", rec[:, 4:])  # f_r: finite, >= 0, not absurd
     return {
         "wavelengths_nm": wl,
         "theta_i": ang[:, 0],

@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from gonio.errors import ParameterError
+from gonio._bounded import MAX_COMPRESSION_RATIO, MAX_DECODED_BYTES, loads_json
+from gonio.errors import GonioError, ParameterError
 from gonio.io._common import PathLike, atomic_output, check_input_file, fail
+from gonio.io._sanity import check_brdf_values
 
 
 def _openexr() -> Any:
@@ -74,10 +76,34 @@ def write_exr(
             f.write(str(tmp))
 
 
+def _check_budget(ox: Any, p: Any) -> None:
+    """Refuse, from the headers alone, a file whose pixels would exceed the memory budget.
+
+    Every part's data window must be non-empty, and all parts together may decode to at most
+    :data:`gonio._bounded.MAX_DECODED_BYTES` (counting 4 bytes per channel sample) and to at
+    most :data:`gonio._bounded.MAX_COMPRESSION_RATIO` times the file's size.
+    """
+    try:
+        with ox.File(str(p), header_only=True) as f:
+            total = 0
+            for part in f.parts:
+                lo, hi = (np.asarray(c, dtype=np.int64) for c in part.header["dataWindow"])
+                w, h = (hi - lo + 1).tolist()
+                if w < 1 or h < 1:
+                    raise fail(p, f"EXR part {part.name()!r}: empty data window {w}x{h}")
+                total += w * h * max(1, len(part.header.get("channels", ()) or ())) * 4
+    except (RuntimeError, OSError, ValueError, KeyError, TypeError) as exc:
+        raise fail(p, f"cannot read EXR header ({exc})") from None
+    size = p.stat().st_size
+    if total > MAX_DECODED_BYTES or total > MAX_COMPRESSION_RATIO * size + (1 << 20):
+        raise fail(p, f"EXR header declares {total} bytes of pixels in a {size}-byte file")
+
+
 def read_exr(path: PathLike, part: int = 0) -> tuple[np.ndarray, list[str]]:
     """Read one part of an EXR file: float32 ``(H, W, C)`` and the channel names (sorted)."""
     ox = _openexr()
     p = check_input_file(path)
+    _check_budget(ox, p)
     try:
         with ox.File(str(p), separate_channels=True) as f:
             parts = f.parts
@@ -171,6 +197,7 @@ def read_table_slices(path: PathLike) -> dict[str, Any]:
     """
     ox = _openexr()
     p = check_input_file(path)
+    _check_budget(ox, p)
     try:
         with ox.File(str(p), separate_channels=True) as f:
             vals, masks, phis = [], [], []
@@ -181,17 +208,22 @@ def read_table_slices(path: PathLike) -> dict[str, Any]:
                 if "gonio_phi_d_rad" not in hdr:
                     raise fail(p, "EXR part without gonio_phi_d_rad: not a gonio table slice")
                 phis.append(float(hdr["gonio_phi_d_rad"]))
-                axes = json.loads(hdr["gonio_axes"])
+                axes = loads_json(str(hdr["gonio_axes"]).encode(), f"{p} gonio_axes")
                 chans = part.channels
-                names = json.loads(hdr["gonio_channels"])
+                names = loads_json(str(hdr["gonio_channels"]).encode(), f"{p} gonio_channels")
+                if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                    raise fail(p, "gonio_channels is not a list of channel names")
                 vals.append(np.stack([np.asarray(chans[n].pixels, np.float32) for n in names], -1))
                 masks.append(np.asarray(chans["A"].pixels) > 0.5)
-    except (RuntimeError, OSError, ValueError, KeyError) as exc:
+        if not vals:
+            raise fail(p, "EXR file has no table slice")
+        values, mask = np.stack(vals, axis=2), np.stack(masks, axis=2)
+    except GonioError:
+        raise
+    except (RuntimeError, OSError, ValueError, KeyError, TypeError) as exc:
         raise fail(p, f"cannot read EXR table slices ({exc})") from None
-    return {
-        "values": np.stack(vals, axis=2),
-        "mask": np.stack(masks, axis=2),
-        "phi_d": np.asarray(phis),
-        "channels": names,
-        "axes": axes,
-    }
+    phi = np.asarray(phis)
+    if not np.all(np.isfinite(phi)) or np.any(phi < 0) or np.any(phi > 2 * math.pi + 1e-6):
+        raise fail(p, "gonio_phi_d_rad outside [0, 2 pi]")
+    check_brdf_values(p, "slice values", values, mask)
+    return {"values": values, "mask": mask, "phi_d": phi, "channels": names, "axes": axes}

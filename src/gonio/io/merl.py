@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gonio.io._common import PathLike, atomic_output, fail, read_bytes
+from gonio.io._sanity import check_brdf_values
 
 if TYPE_CHECKING:
     from gonio.brdf.tabulated import TabulatedBRDF
@@ -94,6 +95,8 @@ def parse_merl_bytes(data: bytes, path: PathLike = "<bytes>") -> MerlArrays:
     values = np.moveaxis(raw, 0, -1) * MERL_SCALES
     mask = np.all(raw >= 0.0, axis=0)
     values = np.where(mask[..., None], values, 0.0)
+    # no valid cell, or values no reflectance reaches (they would also overflow float32)
+    check_brdf_values(path, "MERL values", values, mask)
     return MerlArrays(values=values, mask=mask)
 
 

@@ -14,6 +14,8 @@ Scattered files: ``/wi`` and ``/wo`` (N, 3) float64, ``/values`` (N, C), optiona
 ``/weights``. Values are float32 compressed losslessly (shuffle + deflate), chunked with one
 channel per chunk and a few rows of the first axis per chunk; or, opt-in, log-quantized with a
 guaranteed relative error bound (encoding "log-quantized-delta", see :func:`encode_lossy`).
+Every array dataset carries a fletcher32 checksum per chunk (files written before it load too).
+Reading is bounded (:mod:`gonio.io._hdf5_guard`): only this layout is accepted.
 """
 
 from __future__ import annotations
@@ -29,6 +31,14 @@ import numpy as np
 
 from gonio import __version__
 from gonio.io._common import PathLike, atomic_output, check_input_file, fail
+from gonio.io._hdf5_guard import (
+    ReadBudgetExceeded,
+    check_attribute,
+    check_global_heaps,
+    check_group_datasets,
+    open_bounded,
+)
+from gonio.io._sanity import check_axis_range, check_brdf_values, check_directions
 from gonio.io.schemas import register_schema
 
 FORMAT_NAME = "gonio-brdf"
@@ -55,7 +65,7 @@ PROVENANCE_FIELDS: dict[str, tuple[list[str], str]] = {
 #: Target uncompressed bytes per chunk (a few rows of the first axis, one channel).
 CHUNK_BYTES = 1 << 18
 DEFAULT_GZIP_LEVEL = 4
-#: Datasets up to this size are stored contiguous and uncompressed.
+#: Datasets up to this size are stored as one uncompressed chunk (with a fletcher32 checksum).
 SMALL_BYTES = 1 << 14
 #: In lossy mode, values below ``LOSSY_FLOOR_RATIO * max`` are stored as 0.
 LOSSY_FLOOR_RATIO = 1e-7
@@ -179,9 +189,12 @@ def _chunks(shape: tuple[int, ...], itemsize: int, channel_last: bool) -> tuple[
 
 def _dataset(h5: Any, name: str, data: np.ndarray, channel_last: bool, level: int) -> Any:
     data = np.ascontiguousarray(data)
+    if data.ndim == 0 or data.size == 0:
+        return h5.create_dataset(name, data=data)  # HDF5 cannot chunk these
     if data.nbytes <= SMALL_BYTES:
-        # chunk indexing and filters cost more than they save on small arrays
-        return h5.create_dataset(name, data=data)
+        # one uncompressed chunk: compression costs more than it saves on small arrays, but the
+        # fletcher32 checksum still catches a flipped bit
+        return h5.create_dataset(name, data=data, chunks=data.shape, fletcher32=True)
     return h5.create_dataset(
         name,
         data=data,
@@ -189,6 +202,7 @@ def _dataset(h5: Any, name: str, data: np.ndarray, channel_last: bool, level: in
         shuffle=True,
         compression="gzip",
         compression_opts=level,
+        fletcher32=True,  # a checksum per chunk: payload corruption is an error, not data
     )
 
 
@@ -375,6 +389,7 @@ def is_native(data_head: bytes) -> bool:
 def _attr_str(obj: Any, name: str, path: PathLike) -> str:
     if name not in obj.attrs:
         raise fail(path, f"missing attribute {name!r} on {obj.name}")
+    check_attribute(obj, name, path)
     v = obj.attrs[name]
     if isinstance(v, bytes):
         v = v.decode("utf-8")
@@ -388,6 +403,7 @@ def _attr_str(obj: Any, name: str, path: PathLike) -> str:
 def _attr_num(obj: Any, name: str, path: PathLike, kind: type = float) -> Any:
     if name not in obj.attrs:
         raise fail(path, f"missing attribute {name!r} on {obj.name}")
+    check_attribute(obj, name, path)
     v = np.asarray(obj.attrs[name])
     if v.shape != () or v.dtype.kind not in "iuf":
         raise fail(path, f"attribute {name!r} on {obj.name} is not a number")
@@ -415,6 +431,8 @@ class _Guard:
 
         if exc is None or isinstance(exc, GonioError) or not isinstance(exc, Exception):
             return False
+        if isinstance(exc, ReadBudgetExceeded):
+            raise fail(self.path, f"corrupt {FORMAT_NAME} file: HDF5 structures loop ({exc})")
         raise fail(self.path, f"corrupt {FORMAT_NAME} file ({etype.__name__}: {exc})") from None
 
 
@@ -424,18 +442,22 @@ def _open(path: PathLike) -> Any:
 
 
 def _open_unguarded(path: PathLike) -> Any:
-    import h5py
-
     p = check_input_file(path)
     with open(p, "rb") as fh:
         head = fh.read(8)
     if not is_native(head):
         raise fail(p, "not an HDF5 file (wrong magic)")
     try:
-        h5 = h5py.File(p, "r")
+        h5 = open_bounded(p)
+    except ReadBudgetExceeded:
+        raise
     except OSError as exc:
         raise fail(p, f"corrupt or truncated HDF5 file ({exc})") from None
     try:
+        # the layout first: attributes live in global heaps, which must be checked before
+        # libhdf5 decodes one (a corrupt one makes it loop forever), skipping raw data
+        raw = check_group_datasets(h5, p, p.stat().st_size)
+        check_global_heaps(p, raw)
         fmt = _attr_str(h5, "format", p) if "format" in h5.attrs else None
         if fmt != FORMAT_NAME:
             raise fail(p, f"HDF5 file is not a {FORMAT_NAME} table (format attribute {fmt!r})")
@@ -501,6 +523,9 @@ def _read_axes(h5: Any, path: PathLike) -> list[dict]:
             raise fail(path, f"axis {name!r}: unknown warp {ax['warp']!r}")
         if not ax["hi"] > ax["lo"]:
             raise fail(path, f"axis {name!r}: empty range [{ax['lo']}, {ax['hi']}]")
+        check_axis_range(path, name, ax["lo"], ax["hi"])
+        if not 0.0 <= ax["node_offset"] < 1.0:
+            raise fail(path, f"axis {name!r}: node_offset {ax['node_offset']} outside [0, 1)")
         axes.append(ax)
     return axes
 
@@ -680,14 +705,17 @@ def _read_arrays(h5: Any, header: dict, path: PathLike) -> dict:
         valid = np.broadcast_to(out["mask"][..., None], out["values"].shape)
     else:
         valid = np.ones(out["values"].shape, dtype=bool)
+    # a BRDF in 1/sr (and its standard deviation) is finite, >= 0 and below MAX_BRDF
     for name in ("values", "sigma"):
         if name in out:
-            bad = ~np.isfinite(out[name]) & valid
-            if np.any(bad):
-                raise fail(path, f"{int(bad.sum())} NaN/Inf {name} at valid cells")
-    for name in ("wi", "wo", "weights"):
-        if name in out and not np.all(np.isfinite(out[name])):
-            raise fail(path, f"NaN/Inf in /{name}")
+            check_brdf_values(path, f"/{name}", out[name], valid[..., 0])
+    for name in ("wi", "wo"):
+        if name in out:
+            check_directions(path, f"/{name}", out[name])
+    if "weights" in out:
+        w = out["weights"]
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise fail(path, "/weights: NaN/Inf or negative weights")
     return out
 
 

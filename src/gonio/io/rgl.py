@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gonio._bounded import MAX_BRDF
 from gonio.io._common import PathLike, fail, read_bytes
 
 if TYPE_CHECKING:
@@ -102,6 +103,8 @@ def parse_tensor_file(data: bytes, path: PathLike = "<bytes>") -> dict[str, np.n
                 raise fail(path, f"field {name!r}: unknown dtype code {code}")
             shape = struct.unpack_from(f"<{ndim}Q", data, pos)
             pos += 8 * ndim
+            if any(n >= 1 << 40 for n in shape):  # even beside a 0, NumPy cannot shape these
+                raise fail(path, f"field {name!r}: impossible shape {'x'.join(map(str, shape))}")
             dtype = np.dtype(_DTYPES[code])
             count = 1
             for s in shape:
@@ -315,8 +318,8 @@ class RGLBSDF:
                     path,
                     f"field {name!r} has shape {arr.shape} {arr.dtype}, expected {ndim}-D {kind}",
                 )
-            if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-                raise fail(path, f"field {name!r} contains NaN or Inf")
+            if arr.dtype.kind == "f" and not np.all(np.abs(arr) <= MAX_BRDF):  # False for NaN
+                raise fail(path, f"field {name!r} contains NaN, Inf or values beyond {MAX_BRDF:g}")
             if arr.size == 0:
                 raise fail(path, f"field {name!r} is empty")
             return arr

@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -23,6 +22,7 @@ from typing import Any
 
 import jsonschema
 
+from gonio._bounded import bad_number_path, loads_toml
 from gonio.errors import PlanError, RigConfigError
 from gonio.rigs import control_table as ct
 from gonio.rigs.toml_lines import key_line, non_finite, where
@@ -490,14 +490,18 @@ def load_rig(name_or_path: str | Path) -> RigConfig:
 
 def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     """Parse and validate rig-file ``text``; ``source`` names it in error messages."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RigConfigError(f"{source}: invalid TOML: {exc}") from None
+    data = loads_toml(text, source, RigConfigError)  # size and nesting bounds
     # jsonschema's minimum/maximum accept NaN (every comparison with it is false), and TOML
     # spells nan and inf: refuse every non-finite number before anything else looks at it
     for path, value in non_finite(data):
         raise RigConfigError(f"{where(source, text, path)}: {value} is not a finite number")
+    # no rig quantity comes near 1e12 in its unit, nor below 1e-9 unless it is 0 (a denormal
+    # acceleration made every move take forever)
+    bad = bad_number_path(data, limit=1e12, tiny=1e-9)
+    if bad is not None:
+        raise RigConfigError(
+            f"{source}: {bad}: must be a finite number, 0 or of magnitude in [1e-9, 1e12]"
+        )
     validator = jsonschema.Draft202012Validator(rig_schema())
     errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:

@@ -1,0 +1,336 @@
+"""The fuzz worker: a long-lived process that loads one mutated file per request and judges it.
+
+Protocol (one JSON object per line): the parent writes ``{"kind": ..., "path": ...}`` on the
+worker's stdin and reads ``{"outcome": "error" | "load" | "fail", "detail": ...}`` from its
+stdout. Library output that would go to stdout is sent to stderr so that it cannot break the
+protocol. The worker imports JAX and gonio once and runs every check on a clean corpus file at
+start, so that compilation and import time are not charged to the first case.
+
+A case passes when it gives
+
+* ``error``: a :class:`gonio.errors.GonioError` whose message is one line and names the file; or
+* ``load``: an object that passes its kind's check below (finite values, non-negative where the
+  format promises it, directions in the upper hemisphere, a sane shape), after evaluating it
+  where the format is an evaluator (RGL: a few directions; fit results: the model's ``f``; rig
+  files: a dry-run plan; plan files: a dry run on the simulated rig).
+
+Anything else (another exception type, a multi-line or anonymous message, a silent load of data
+that cannot be right) is a ``fail`` whose detail names the problem and the innermost frames.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import sys
+import traceback
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Largest |BRDF| a check accepts, 1/sr (the readers' documented bound, gonio._bounded).
+MAX_BRDF = 1e10
+NEGATIVE_TOLERANCE = 0.01
+#: Plans with more first-stage targets are loaded and checked but not dry-run.
+DRY_RUN_TARGETS = 1000
+#: Largest table a check accepts (cells x channels), far above any real measurement.
+MAX_VALUES = 1 << 27
+
+
+class Lie(Exception):
+    """A load that returned data which cannot be right."""
+
+
+def _dirs(n: int = 24, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+
+    def one() -> np.ndarray:
+        th = np.arccos(np.sqrt(rng.random(n))) * 0.98
+        ph = 2 * math.pi * rng.random(n)
+        return np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
+
+    return one(), one()
+
+
+def _check_values(what: str, v: Any, valid: Any = None, nonneg: bool = True) -> None:
+    v = np.asarray(v)
+    if v.dtype.kind not in "fiu":
+        raise Lie(f"{what} has dtype {v.dtype}")
+    if v.size > MAX_VALUES:
+        raise Lie(f"{what} has {v.size} values")
+    if valid is not None:
+        valid = np.asarray(valid, bool)
+        valid = valid.reshape(valid.shape + (1,) * (v.ndim - valid.ndim))
+        v = v[np.broadcast_to(valid, v.shape)]
+    if not np.all(np.isfinite(v)):
+        raise Lie(f"{what}: {int(np.count_nonzero(~np.isfinite(v)))} non-finite values")
+    if v.size and np.max(np.abs(v)) > MAX_BRDF:
+        raise Lie(f"{what}: absurd value {float(np.max(np.abs(v))):.3g}")
+    # "non-negative" as gonio.io._sanity documents it: noise and out-of-gamut colour
+    # conversion dip below zero by at most NEGATIVE_TOLERANCE of the peak
+    if nonneg and v.size and np.min(v) < -NEGATIVE_TOLERANCE * np.max(np.abs(v)):
+        raise Lie(f"{what}: negative value {float(np.min(v)):.3g}")
+
+
+def _check_dirs(what: str, d: Any) -> None:
+    d = np.asarray(d, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3 or len(d) == 0:
+        raise Lie(f"{what} has shape {d.shape}")
+    if not np.all(np.isfinite(d)):
+        raise Lie(f"{what}: non-finite directions")
+    if np.max(np.abs(np.linalg.norm(d, axis=1) - 1)) > 1e-3:
+        raise Lie(f"{what}: not unit vectors")
+    if np.min(d[:, 2]) < -1e-6:
+        raise Lie(f"{what}: a direction below the horizon (z = {float(np.min(d[:, 2])):.3g})")
+
+
+_DOMAIN = {"theta_h": math.pi / 2, "theta_d": math.pi / 2, "phi_d": 2 * math.pi,
+           "phi_h": 2 * math.pi}  # fmt: skip
+
+
+def check_table(obj: Any, nonneg: bool = True) -> str:
+    """A TabulatedBRDF or MeasuredSamples: finite, in range, sane shape; evaluate a table."""
+    if hasattr(obj, "axes"):
+        for a in obj.axes:
+            top = _DOMAIN.get(a.name)
+            if top is None:
+                raise Lie(f"unknown axis {a.name!r}")
+            if a.lo < -1e-6 or a.hi > top + 1e-6:
+                raise Lie(f"axis {a.name} range [{a.lo}, {a.hi}] outside [0, {top:.4g}]")
+        mask = np.ones(np.shape(obj.values)[:-1], bool) if obj.mask is None else obj.mask
+        if not np.any(mask):
+            raise Lie("table has no valid cell")
+        _check_values("values", obj.values, mask, nonneg)
+        if obj.sigma is not None:
+            _check_values("sigma", obj.sigma, mask, True)
+        wi, wo = _dirs()
+        _check_values("f(wi, wo)", np.asarray(obj.f(wi, wo)), None, nonneg)
+        return f"table {np.shape(obj.values)}"
+    if hasattr(obj, "wi"):
+        _check_dirs("wi", obj.wi)
+        _check_dirs("wo", obj.wo)
+        _check_values("values", obj.values, None, nonneg)
+        if getattr(obj, "sigma", None) is not None:
+            _check_values("sigma", obj.sigma, None, True)
+        return f"samples {np.shape(obj.values)}"
+    raise Lie(f"load returned a {type(obj).__name__}")
+
+
+def _load(path: str) -> Any:
+    from gonio import io
+
+    return io.load(path)
+
+
+def c_native(path: str) -> str:
+    out = check_table(_load(path))
+    from gonio.io.native import read_native
+
+    try:  # a run file keeps its gridded table in a group
+        out += "; group " + check_table(read_native(path, group="gridded"))
+    except Exception as exc:
+        from gonio.errors import GonioError
+
+        if not isinstance(exc, GonioError):
+            raise
+    return out
+
+
+def c_merl(path: str) -> str:
+    return check_table(_load(path))
+
+
+def c_cornell(path: str) -> str:
+    return check_table(_load(path))
+
+
+def c_alta(path: str) -> str:
+    return check_table(_load(path))
+
+
+def c_rgl(path: str) -> str:
+    from gonio.io.rgl import read_rgl
+
+    b = read_rgl(path)
+    wi, wo = _dirs(16, 1)
+    _check_values("RGL f", b.f(wi, wo), None, nonneg=False)  # real RGL data dip below 0
+    return f"RGL BSDF, {b.n_channels} channels"
+
+
+def c_exr(path: str) -> str:
+    from gonio.io.exr import read_exr
+
+    img, names = read_exr(path)
+    if img.ndim != 3 or img.shape[2] != len(names) or img.size > MAX_VALUES:
+        raise Lie(f"image of shape {img.shape} with channels {names}")
+    return f"image {img.shape}"
+
+
+def c_exr_slices(path: str) -> str:
+    from gonio.io.exr import read_table_slices
+
+    d = read_table_slices(path)
+    v, m = d["values"], d["mask"]
+    if v.ndim != 4 or m.shape != v.shape[:3] or len(d["phi_d"]) != v.shape[2]:
+        raise Lie(f"slices of shape {v.shape}, mask {m.shape}")
+    _check_values("slice values", v, m, True)
+    if not np.all(np.isfinite(d["phi_d"])):
+        raise Lie("non-finite phi_d")
+    return f"slices {v.shape}"
+
+
+def _walk_numbers(obj: Any, where: str = "") -> None:
+    if dataclasses.is_dataclass(obj):
+        for f in dataclasses.fields(obj):
+            _walk_numbers(getattr(obj, f.name), f"{where}.{f.name}")
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            _walk_numbers(v, f"{where}.{k}")
+    elif isinstance(obj, list | tuple):
+        for i, v in enumerate(obj):
+            _walk_numbers(v, f"{where}[{i}]")
+    elif isinstance(obj, float) and not math.isfinite(obj):
+        raise Lie(f"rig field {where} = {obj}")
+
+
+def c_rig(path: str) -> str:
+    from gonio.acquire.engine import dry_run
+    from gonio.acquire.plans import load_plan
+    from gonio.rigs.config import load_rig
+
+    rig = load_rig(path)
+    _walk_numbers(rig)
+    plan, _ = load_plan("iso-tiny")
+    stages = dry_run(rig, plan, time_budget_s=2.0)
+    return f"rig {rig.name}: {sum(len(s.accepted) for s in stages)} accepted"
+
+
+def c_plan(path: str) -> str:
+    from gonio.acquire.engine import dry_run
+    from gonio.acquire.plans import load_plan
+    from gonio.rigs.config import load_rig
+
+    plan, _ = load_plan(path)
+    targets = list(plan.stage(0))
+    _check_dirs("plan wi", [t.wi for t in targets])
+    _check_dirs("plan wo", [t.wo for t in targets])
+    if len(targets) > DRY_RUN_TARGETS:
+        # a valid big plan: its dry run is legitimate work (seconds per thousand targets)
+        return f"plan {plan.name}: {len(targets)} targets (no dry run)"
+    stages = dry_run(load_rig("sim"), plan, time_budget_s=2.0)
+    return f"plan {plan.name}: {sum(len(s.configs) for s in stages)} configurations"
+
+
+def _spec_params(spec: Any) -> set[str]:
+    """Parameter names a model_spec states, with their nesting (``child.param``)."""
+    out: set[str] = set()
+    if not isinstance(spec, dict):
+        return out
+    for k, v in (spec.get("params") or {}).items():
+        if v is not None:
+            out.add(k)
+    for i, lobe in enumerate(spec.get("lobes") or []):
+        out |= {f"lobes[{i}].{p}" for p in _spec_params(lobe)}
+    for name, child in (spec.get("children") or {}).items():
+        kids = child if isinstance(child, list) else [child]
+        for i, c in enumerate(kids):
+            out |= {f"{name}[{i}].{p}" for p in _spec_params(c)}
+    return out
+
+
+def c_fit(path: str) -> str:
+    from gonio.fit.result import load_model, read_result
+
+    obj = read_result(path)
+    model = load_model(path)
+    stated = _spec_params(obj["model_spec"])
+    built = _spec_params(model.to_dict())
+    missing = sorted(built - stated)
+    if missing:
+        raise Lie(f"parameters {missing} missing or null in the file, loaded with defaults")
+    wi, wo = _dirs(16, 2)
+    _check_values("model f", np.asarray(model.f(wi, wo)), None, nonneg=True)
+    return f"model {type(model).__name__}"
+
+
+def c_selftest_hang(path: str) -> str:
+    """Harness self-test: a case that never answers (and ignores SIGINT, as libhdf5 does)."""
+    import signal
+    import time
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        time.sleep(1)
+
+
+def c_selftest_memory(path: str) -> str:
+    """Harness self-test: a case that keeps allocating (touching every page) until killed."""
+    import time
+
+    blocks = []
+    while True:
+        blocks.append(np.ones(1 << 24))  # 128 MiB, resident
+        time.sleep(0.05)
+
+
+CHECKS = {
+    "native": c_native,
+    "merl": c_merl,
+    "rgl": c_rgl,
+    "cornell": c_cornell,
+    "alta": c_alta,
+    "exr": c_exr,
+    "exr_slices": c_exr_slices,
+    "rig": c_rig,
+    "plan": c_plan,
+    "fit": c_fit,
+    "selftest-hang": c_selftest_hang,
+    "selftest-memory": c_selftest_memory,
+}
+
+
+def judge(kind: str, path: str) -> dict[str, str]:
+    """Run the check of ``kind`` on ``path``; the verdict as a JSON-ready dict."""
+    from gonio.errors import GonioError
+
+    try:
+        detail = CHECKS[kind](path)
+    except GonioError as exc:
+        msg = str(exc)
+        if "\n" in msg:
+            return {"outcome": "fail", "detail": f"multi-line {type(exc).__name__}: {msg[:300]!r}"}
+        if Path(path).name not in msg:
+            return {"outcome": "fail", "detail": f"error does not name the file: {msg[:300]!r}"}
+        return {"outcome": "error", "detail": f"{type(exc).__name__}: {msg[:300]}"}
+    except Lie as exc:
+        return {"outcome": "fail", "detail": f"silent load of bad data: {exc}"}
+    except BaseException as exc:
+        if isinstance(exc, KeyboardInterrupt | SystemExit):
+            raise
+        frames = traceback.extract_tb(exc.__traceback__)
+        where = " <- ".join(f"{Path(f.filename).name}:{f.lineno}" for f in reversed(frames[-4:]))
+        return {
+            "outcome": "fail",
+            "detail": f"uncaught {type(exc).__name__}: {str(exc)[:200]} at {where}",
+        }
+    return {"outcome": "load", "detail": detail}
+
+
+def main() -> None:
+    proto = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)  # anything printed by libraries goes to stderr
+    sys.stdout = sys.stderr
+    warm = json.loads(sys.argv[1]) if len(sys.argv) > 1 else []
+    for kind, path in warm:
+        judge(kind, path)
+    proto.write(json.dumps({"ready": os.getpid()}) + "\n")
+    for line in sys.stdin:
+        req = json.loads(line)
+        proto.write(json.dumps(judge(req["kind"], req["path"])) + "\n")
+
+
+if __name__ == "__main__":
+    main()
