@@ -345,11 +345,11 @@ def test_plan_files_are_bounded_and_errors_name_the_file(tmp_path, text, match):
     [
         ("settle_tolerance_deg = 0.3", "settle_tolerance_deg = nan", "settle_tolerance_deg"),
         ("min_deg = -170.0", "min_deg = -inf", r"joints\[0\].min_deg"),
-        ("max_deg = 170.0", "max_deg = 1e308", r"joints\[0\].max_deg.*1e12"),
+        ("max_deg = 170.0", "max_deg = 1e308", r"rig.toml:\d+: joints\[0\].max_deg.*servo tick"),
         (
             "profile_acceleration_deg_s2 = 180.0",
             "profile_acceleration_deg_s2 = 1e-320",
-            r"joints\[0\].profile_acceleration_deg_s2.*1e-9",
+            r"rig.toml:\d+: joints\[0\].profile_acceleration_deg_s2.*outside 1\.\.32767",
         ),
         ('name = "sim"', "name = " + "[" * 600 + "]" * 600, "nested deeper"),
     ],

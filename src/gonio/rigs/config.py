@@ -495,18 +495,19 @@ def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     # spells nan and inf: refuse every non-finite number before anything else looks at it
     for path, value in non_finite(data):
         raise RigConfigError(f"{where(source, text, path)}: {value} is not a finite number")
+    validator = jsonschema.Draft202012Validator(rig_schema())
+    errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
+    if errors:
+        raise RigConfigError(_schema_error_message(errors[0], source, text))
+    rig = _build(data, text, source)  # its consistency checks name the file line and quantity
     # no rig quantity comes near 1e12 in its unit, nor below 1e-9 unless it is 0 (a denormal
-    # acceleration made every move take forever)
+    # acceleration made every move take forever): a last bound on what the checks above let by
     bad = bad_number_path(data, limit=1e12, tiny=1e-9)
     if bad is not None:
         raise RigConfigError(
             f"{source}: {bad}: must be a finite number, 0 or of magnitude in [1e-9, 1e12]"
         )
-    validator = jsonschema.Draft202012Validator(rig_schema())
-    errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
-    if errors:
-        raise RigConfigError(_schema_error_message(errors[0], source, text))
-    return _build(data, text, source)
+    return rig
 
 
 def servo_ticks(j: JointConfig, angle_deg: float) -> float:
