@@ -19,6 +19,7 @@ from gonio.errors import GonioError
 #: Modules that contribute subcommands, in the order they appear in ``--help``.
 COMMAND_MODULES: tuple[str, ...] = (
     "gonio.io.cli",
+    "gonio.io.grid_cli",
     "gonio.rigs.cli",
     "gonio.acquire.cli",
     "gonio.fit.cli",

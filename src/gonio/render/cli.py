@@ -49,20 +49,75 @@ def load_fit_model(path: str | Path) -> Any:
     return model
 
 
-def load_table(path: str | Path) -> Any:
-    """A tabulated BRDF through :func:`gonio.io.load`."""
+def load_fitted(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[str]]:
+    """``(model, notes)`` of a fit file, a spectral model projected to linear sRGB
+    (:mod:`gonio.render.spectral`) using the wavelengths named in the fit's ``data.channels``."""
+    from gonio.render.spectral import to_rgb, wavelengths_from_names
+
+    model = load_fit_model(path)
+    c = int(getattr(model, "channels", 1))
+    if c in (1, 3):
+        return model, []
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        names = (doc.get("data") or {}).get("channels") if isinstance(doc, dict) else None
+    except (OSError, ValueError, AttributeError):
+        names = None
+    wl = wavelengths_from_names(names or ())
+    if wl is None or wl.size != c:
+        raise FormatError(
+            f"{path}: a {c}-channel model without wavelengths in data.channels; cannot show it "
+            "in colour"
+        )
+    note = (
+        f"{c} spectral channels ({wl[0]:g}..{wl[-1]:g} nm) shown as linear sRGB under {illuminant}"
+    )
+    return to_rgb(model, wl, illuminant), [note]
+
+
+def fitted_labels(paths: list[str]) -> tuple[list[str], list[str]]:
+    """Unique image labels for fit files: the file name, prefixed by as many parent folders as
+    it takes to tell same-named files apart. Returns (labels, warnings about renamed ones)."""
+    resolved = [Path(p).resolve() for p in paths]
+    for i, r in enumerate(resolved):
+        if r in resolved[:i]:
+            raise ParameterError(f"--fitted {paths[i]} is given twice")
+    parts = [r.with_suffix("").parts for r in resolved]
+    labels = [pt[-1] for pt in parts]
+    warnings: list[str] = []
+    for name in sorted({lbl for lbl in labels if labels.count(lbl) > 1}):
+        group = [i for i, lbl in enumerate(labels) if lbl == name]
+        depth = 2
+        while len({parts[i][-depth:] for i in group}) < len(group):
+            depth += 1
+        for i in group:
+            labels[i] = "-".join(parts[i][-depth:])
+        shown = ", ".join(labels[i] for i in group)
+        warnings.append(f"several --fitted files are named {name}.json; labelled {shown}")
+    return labels, warnings
+
+
+def load_table(path: str | Path, illuminant: str = "D65") -> Any:
+    """A measured file (any :func:`gonio.io.load` format) as a renderable material.
+
+    Scattered, holey or spectral data is adapted by :func:`gonio.render.measured.renderable`;
+    use :func:`load_measured` for the notes saying how.
+    """
+    return load_measured(path, illuminant)[0]
+
+
+def load_measured(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[str]]:
+    """``(material, notes)`` of a measured file; see :func:`gonio.render.measured.renderable`."""
     p = Path(path)
     if not p.exists():
         raise ParameterError(f"measured table not found: {p}")
     from gonio import io as gio
+    from gonio.render.measured import renderable
 
     load = getattr(gio, "load", None)
     if load is None:
         raise FormatError("this gonio build cannot read measured tables (gonio.io.load missing)")
-    obj = load(p)
-    if not hasattr(obj, "values"):
-        raise FormatError(f"{p}: holds scattered samples, not a table; tabulate it first")
-    return obj
+    return renderable(load(p), illuminant=illuminant)
 
 
 def parse_light(spec: str, irradiance: float = 1.0):
@@ -129,6 +184,14 @@ def register(subparsers: Any) -> None:
         default=1.0,
         help="multiplies the environment radiance (default 1)",
     )
+    p.add_argument(
+        "--illuminant",
+        default="D65",
+        choices=("D65", "E"),
+        help="spectrum of the lights for spectral data (Cornell files, spectral fits), which is "
+        "shown as linear sRGB through CIE 1931 XYZ under it; D65 (default) is sRGB's white, so a "
+        "grey BRDF stays grey",
+    )
     p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
     p.add_argument("--resolution", type=int, default=256, help="image size in pixels (256)")
     p.add_argument(
@@ -178,9 +241,18 @@ def run(args: argparse.Namespace) -> int:
     lights = _lights(args)
     items: list[tuple[str, Any]] = []
     if args.measured:
-        items.append(("measured", load_table(args.measured)))
-    for f in args.fitted:
-        items.append((Path(f).name.removesuffix(".json"), load_fit_model(f)))
+        table, notes = load_measured(args.measured, args.illuminant)
+        for note in notes:
+            print(f"measured: {note}", file=sys.stderr)
+        items.append(("measured", table))
+    labels, warnings = fitted_labels(list(args.fitted))
+    for w in warnings:
+        print(f"gonio: warning: {w}", file=sys.stderr)
+    for label, f in zip(labels, args.fitted, strict=True):
+        model, notes = load_fitted(f, args.illuminant)
+        for note in notes:
+            print(f"{label}: {note}", file=sys.stderr)
+        items.append((label, model))
 
     images: dict[str, np.ndarray] = {}
     with Progress(
