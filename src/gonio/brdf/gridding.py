@@ -198,7 +198,7 @@ def _weights(points: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndar
     Returns ``(vertex indices (Q, 4), weights (Q, 4), inside (Q,))``; outside the hull (or when
     the points do not span three dimensions) the nearest point gets weight 1.
     """
-    from scipy.spatial import Delaunay, QhullError, cKDTree
+    from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
     q = query.shape[0]
     idx = np.zeros((q, 4), dtype=np.int64)
@@ -211,7 +211,15 @@ def _weights(points: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndar
         except QhullError:  # coplanar or collinear data: nearest sample everywhere
             tri = None
     if tri is not None:
-        simplex = tri.find_simplex(query)
+        # find_simplex falls back to a brute-force search over every simplex for each point
+        # outside the hull; test the hull's facet planes first so that only inside points walk.
+        eq = ConvexHull(points).equations
+        in_hull = np.ones(q, dtype=bool)
+        for start in range(0, q, 8192):
+            part = query[start : start + 8192]
+            in_hull[start : start + 8192] = np.all(part @ eq[:, :3].T + eq[:, 3] <= 1e-12, axis=1)
+        simplex = np.full(q, -1, dtype=np.int64)
+        simplex[in_hull] = tri.find_simplex(query[in_hull])
         inside = simplex >= 0
         s = simplex[inside]
         t = tri.transform[s]  # (n, 4, 3): affine map to barycentric coordinates
