@@ -30,6 +30,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.acquire.cli",
     "gonio.fit.cli",
     "gonio.render.cli",
+    "gonio.render.plot_cli",
     "gonio.demo.cli",
 )
 
@@ -53,6 +54,10 @@ LAZY_COMMANDS: dict[str, tuple[str, str]] = {
     "acquire": ("gonio.acquire.cli", "run (or resume) an acquisition on a rig"),
     "fit": ("gonio.fit.cli", "fit analytic BRDF models (with uncertainty) to measured files"),
     "render": ("gonio.render.cli", "render measured and fitted spheres; write a comparison figure"),
+    "plot": (
+        "gonio.render.plot_cli",
+        "plot BRDFs without fitting: polar, in-plane and theta_h-theta_d views",
+    ),
     "demo": (
         "gonio.demo.cli",
         "the whole pipeline on the simulated rig: acquire, fit, render, report",
