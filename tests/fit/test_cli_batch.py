@@ -22,8 +22,11 @@ def test_unknown_model_is_one_line_error(tmp_path, capsys):
 
 
 def test_missing_input_and_bad_flags(tmp_path, capsys):
-    assert main(["fit", str(tmp_path / "nope.brdf"), "-m", "lambert"]) == FitError.exit_code
+    # A missing file is bad input, as in 'gonio info' (exit 2 in both).
+    assert main(["fit", str(tmp_path / "nope.brdf"), "-m", "lambert"]) == 2
     assert "no such file" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "nope.brdf")]) == 2
+    capsys.readouterr()
     f = tmp_path / "x.brdf"
     f.write_text("")
     assert main(["fit", str(f), "-m", "lambert", "--fix", "albedo"]) == FitError.exit_code
@@ -35,9 +38,25 @@ def test_missing_input_and_bad_flags(tmp_path, capsys):
 
 
 def test_list_models(capsys):
-    assert main(["fit", "x", "--list-models"]) == 0
+    assert main(["fit", "--list-models"]) == 0  # no dummy argument needed
     names = capsys.readouterr().out.split()
     assert "lambert" in names
+    assert main(["fit"]) == 2
+    assert "give at least one measurement file" in capsys.readouterr().err
+
+
+def test_out_that_is_a_file_is_refused_before_the_fit(tmp_path, capsys):
+    import time
+
+    f = tmp_path / "x.brdf"
+    f.write_text("")
+    out = tmp_path / "taken.json"
+    out.write_text("{}")
+    t0 = time.monotonic()
+    assert main(["fit", str(f), "-m", "lambert", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "exists and is not a folder" in err and err.count("\n") == 1
+    assert out.read_text() == "{}" and time.monotonic() - t0 < 30
 
 
 def test_help_documents_every_flag(capsys):

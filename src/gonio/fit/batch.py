@@ -25,7 +25,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-from gonio.errors import FitError, GonioError
+from gonio.errors import FitError, GonioError, ParameterError
 
 #: File name endings considered measurement files when a folder is given.
 DATA_SUFFIXES = (".h5", ".hdf5", ".binary", ".bsdf", ".brdf", ".alta", ".dat", ".csv")
@@ -65,7 +65,7 @@ def expand_inputs(inputs: Sequence[str | Path]) -> list[Path]:
         elif p.is_file():
             found = [p]
         else:
-            raise FitError(f"{s}: no such file or directory")
+            raise ParameterError(f"{s}: no such file or directory")
         if not found:
             raise FitError(f"{s}: no measurement files found")
         out.extend(found)

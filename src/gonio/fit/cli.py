@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from gonio.errors import FitError
+from gonio.errors import FitError, ParameterError
 
 
 def register(subparsers: Any) -> None:
@@ -27,7 +27,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "inputs",
-        nargs="+",
+        nargs="*",
         metavar="FILE_DIR_OR_GLOB",
         help="measurement file(s), folder(s) of files, or quoted glob patterns",
     )
@@ -38,7 +38,7 @@ def register(subparsers: Any) -> None:
         dest="models",
         metavar="NAME",
         help="model to fit (repeatable): a lobe name or lobes joined by '+', e.g. "
-        "lambert+ward; 'gonio fit --list-models x' lists them. Default: lambert+ward "
+        "lambert+ward; 'gonio fit --list-models' lists them. Default: lambert+ward "
         "and lambert+ts where available",
     )
     p.add_argument(
@@ -162,6 +162,10 @@ def run(args: argparse.Namespace) -> int:
     if args.list_models:
         print("\n".join(available()))
         return 0
+    if not args.inputs:
+        raise ParameterError("give at least one measurement file, folder or glob pattern")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise ParameterError(f"--out {args.out}: exists and is not a folder")
     models = args.models or _default_models()
     for m in models:
         build(m)  # unknown names fail here, before any work

@@ -203,7 +203,11 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
-        "--out", default="compare.png", help="comparison figure (PNG/PDF/SVG; default compare.png)"
+        "--out",
+        default="compare.png",
+        help="comparison figure: .png (default compare.png), .pdf or .svg (other extensions are "
+        "refused); a folder (ending in /) gets compare.png inside. Per-image EXR and PNG files "
+        "are written next to it",
     )
     p.add_argument(
         "--no-images", action="store_true", help="write only the figure, no per-image EXR/PNG"
@@ -220,7 +224,49 @@ def _lights(args: argparse.Namespace) -> list[Any]:
     env = args.env or "studio"
     if env != "studio" and not Path(env).is_file():
         raise ParameterError(f"--env: no such file {env!r} (or use 'studio')")
+    if env != "studio":
+        check_environment_file(env)
     return [Environment(env, scale=args.env_scale)]
+
+
+def _write_figure_image(out: Path, img: np.ndarray, exposure: float) -> None:
+    """A tone-mapped rendering as a PDF or SVG image (matplotlib, atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gonio.render.output import _atomic_target, tonemap
+
+    shown = tonemap(img, exposure)
+    if shown.shape[-1] == 1:
+        shown = np.repeat(shown, 3, axis=-1)
+    tmp = _atomic_target(out, out.suffix)
+    try:
+        plt.imsave(tmp, np.clip(shown, 0, 1), format=out.suffix.lstrip(".").lower())
+        tmp.replace(out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def check_environment_file(path: str | Path) -> None:
+    """Refuse an EXR that is not a lat-long radiance image: a BRDF slice file written by
+    ``gonio convert ... .exr`` (its parts carry ``gonio_phi_d_rad``/``gonio_units``)."""
+    if not str(path).lower().endswith(".exr"):
+        return
+    try:
+        import OpenEXR
+
+        with OpenEXR.File(str(path), header_only=True) as f:
+            headers = [part.header for part in f.parts]
+    except Exception:  # unreadable here: the environment loader reports it in its own words
+        return
+    if any("gonio_phi_d_rad" in h or h.get("gonio_units") == "1/sr" for h in headers):
+        raise ParameterError(
+            f"--env {path}: a BRDF slice image (theta_h x theta_d per phi_d, values in 1/sr), "
+            "not a lat-long environment map"
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -237,7 +283,9 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--spp must be >= 1, got {args.spp}")
     if not 8 <= args.resolution <= 4096:
         raise ParameterError(f"--resolution must be in [8, 4096], got {args.resolution}")
-    out = Path(args.out)
+    from gonio.render.plot_cli import output_path
+
+    out = output_path(args.out, "compare.png")
     lights = _lights(args)
     items: list[tuple[str, Any]] = []
     if args.measured:
@@ -299,8 +347,12 @@ def run(args: argparse.Namespace) -> int:
         comparison_figure(out, reference, comps, exp, title=f"{Path(args.measured).name}")
         report["errors"] = {c.label: c.errors.as_dict() for c in comps}
     else:
-        # One rendering: the figure is its tone-mapped image.
-        write_png(out, next(iter(images.values())), exposure)
+        # One rendering: the figure is its tone-mapped image, in the format OUT names.
+        only = next(iter(images.values()))
+        if out.suffix.lower() == ".png":
+            write_png(out, only, exposure)
+        else:
+            _write_figure_image(out, only, exposure)
     if args.json:
         print(json.dumps(report, indent=2))
     else:
