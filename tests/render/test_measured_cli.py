@@ -165,3 +165,46 @@ def test_grid_command_bins_and_interpolates(tmp_path, run_table):
     assert out.returncode == 0, out.stderr
     assert "filled by log-linear Delaunay interpolation" in out.stderr
     assert Path(tmp_path / "r.png").is_file()
+
+
+@pytest.mark.parametrize(
+    "doc, why",
+    [
+        (
+            {"schema": "gonio/fit-result", "version": 2, "model_spec": {"type": "Lambert"}},
+            "unsupported fit file",
+        ),
+        (
+            {"model_spec": {"type": "Lambert", "params": {}, "static": {}, "children": {}}},
+            "lacks parameter(s) albedo",
+        ),
+    ],
+)
+def test_fit_file_of_unknown_version_or_missing_parameter_is_refused(tmp_path, doc, why):
+    fit = tmp_path / "f.json"
+    fit.write_text(json.dumps(doc))
+    out = gonio("render", "--fitted", fit, *FAST, "--out", tmp_path / "x.png")
+    assert out.returncode == 2 and why in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_render_output_checks(tmp_path):
+    fit = _spectral_fit(tmp_path / "l.json", np.full(31, 0.5), np.arange(400, 701, 10.0))
+    bad = gonio("render", "--fitted", fit, *FAST, "--out", tmp_path / "a.jpg")
+    assert bad.returncode == 2 and "unsupported figure format" in bad.stderr
+    assert not list(tmp_path.glob("a*"))
+    ok = gonio("render", "--fitted", fit, "--light", "dir:0,0", *FAST, "--out", f"{tmp_path}/d/")
+    assert ok.returncode == 0, ok.stderr
+    assert (tmp_path / "d" / "compare.png").read_bytes()[:4] == b"\x89PNG"
+    assert not (tmp_path / "d").is_file()
+
+
+def test_brdf_slice_exr_is_not_an_environment(tmp_path, run_table):
+    assert gonio("grid", run_table, tmp_path / "g.brdf.h5", "--res", "6").returncode == 0
+    assert gonio("convert", tmp_path / "g.brdf.h5", tmp_path / "s.exr", "--quiet").returncode == 0
+    fit = _spectral_fit(tmp_path / "l.json", np.full(31, 0.5), np.arange(400, 701, 10.0))
+    out = gonio("render", "--fitted", fit, "--env", tmp_path / "s.exr", *FAST, "--out",
+                tmp_path / "e.png")  # fmt: skip
+    assert out.returncode == 2 and "not a lat-long environment map" in out.stderr
+    assert not (tmp_path / "e.png").exists()

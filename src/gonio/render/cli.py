@@ -16,6 +16,31 @@ from gonio.errors import FormatError, ParameterError
 # Fit files hold a model description made by ``Node.to_dict``; they are parsed through the model
 # registry (gonio.brdf) so that gonio.render never imports gonio.fit (DESIGN.md dependency rule).
 MAX_FIT_BYTES = 16 * 1024 * 1024
+#: The fit-result format read here (``gonio.fit.result.SCHEMA_ID`` / ``SCHEMA_VERSION``; not
+#: imported from gonio.fit, which gonio.render must not depend on).
+FIT_SCHEMA = "gonio/fit-result"
+FIT_VERSION = 1
+
+
+def missing_parameters(desc: Any, where: str = "") -> list[str]:
+    """Parameters a model description (``Node.to_dict`` form) leaves out, as ``"path.name"``."""
+    from gonio.brdf.models import registry
+
+    out: list[str] = []
+    if isinstance(desc, list):
+        for i, d in enumerate(desc):
+            out += missing_parameters(d, f"{where}{i}.")
+        return out
+    if not isinstance(desc, dict) or "type" not in desc:
+        return out
+    cls = registry().get(desc["type"])
+    if cls is None:
+        return out  # Node.from_dict names the unknown type
+    params = desc.get("params") or {}
+    out += [f"{where}{p.name}" for p in cls.PARAMS if p.name not in params]
+    for name, child in (desc.get("children") or {}).items():
+        out += missing_parameters(child, f"{where}{name}.")
+    return out
 
 
 def load_fit_model(path: str | Path) -> Any:
@@ -34,10 +59,22 @@ def load_fit_model(path: str | Path) -> Any:
     # A fit result keeps the description under "model_spec" ("model" is the preset's name);
     # a bare to_dict() (or {"model": {...}}) is accepted too.
     desc = doc
+    if isinstance(doc, dict) and ("schema" in doc or "version" in doc):
+        if doc.get("schema") != FIT_SCHEMA or doc.get("version") != FIT_VERSION:
+            raise FormatError(
+                f"{path}: unsupported fit file (schema {doc.get('schema')!r} version "
+                f"{doc.get('version')!r}; this gonio reads {FIT_SCHEMA!r} version {FIT_VERSION})"
+            )
     if isinstance(doc, dict) and "type" not in doc:
         desc = doc.get("model_spec", doc.get("model"))
     if not isinstance(desc, dict) or "type" not in desc:
         raise FormatError(f"{path}: no model description (expected a 'model_spec' object)")
+    missing = missing_parameters(desc)
+    if missing:
+        raise FormatError(
+            f"{path}: the model description lacks parameter(s) {', '.join(missing)} "
+            "(a fit file states every parameter; none is filled in with a default)"
+        )
     try:
         model = Node.from_dict(desc)
     except ParameterError as exc:
@@ -259,10 +296,11 @@ def check_environment_file(path: str | Path) -> None:
         import OpenEXR
 
         with OpenEXR.File(str(path), header_only=True) as f:
-            headers = [part.header for part in f.parts]
+            # read the keys while the file is open (the header is not kept after closing)
+            keys = [set(part.header.keys()) for part in f.parts]
     except Exception:  # unreadable here: the environment loader reports it in its own words
         return
-    if any("gonio_phi_d_rad" in h or h.get("gonio_units") == "1/sr" for h in headers):
+    if any({"gonio_phi_d_rad", "gonio_units"} & k for k in keys):
         raise ParameterError(
             f"--env {path}: a BRDF slice image (theta_h x theta_d per phi_d, values in 1/sr), "
             "not a lat-long environment map"
@@ -332,6 +370,7 @@ def run(args: argparse.Namespace) -> int:
             )
             bar.update(task, completed=1.0)
 
+    out.parent.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {"out": str(out), "spp": args.spp, "images": {}}
     reference = images.get("measured")
     exposure = auto_exposure(reference if reference is not None else next(iter(images.values())))
