@@ -178,6 +178,11 @@ def write_run_tables(journal, rig, channels) -> tuple[str | None, str, dict]:
         f"{len(rows)} samples; gridded {int(grid.mask.sum())}/{grid.mask.size} cells covered;"
         f" reciprocity: {recip.get('pairs', 0)} pairs"
     )
+    if not recip.get("pairs"):
+        note += (
+            " (no configuration was measured with light and camera swapped;"
+            " plan iso-reciprocal does)"
+        )
     if recip.get("pairs"):
         note += (
             f", relative difference median {recip['rel_diff_median']:.3g}"
