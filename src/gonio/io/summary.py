@@ -37,6 +37,26 @@ def _channels(ch: Any) -> dict[str, Any]:
     }
 
 
+#: How ``value_range`` of an RGL file is obtained: its stored tensor holds warped, VNDF-scaled
+#: luminance samples, not BRDF values, so the file's own evaluator is sampled instead.
+RGL_VALUES_NOTE = (
+    "BRDF f(wi, wo) from the file's evaluator at 4096 direction pairs with both polar angles "
+    "at most 80 deg (fixed seed); stored_range holds the raw tensor values, which are not 1/sr"
+)
+
+
+def _rgl_brdf_stats(b: Any) -> dict[str, Any]:
+    """Value statistics of an RGL file's BRDF (see :data:`RGL_VALUES_NOTE`)."""
+    rng = np.random.default_rng(0)
+    u = rng.random((2, 4096, 2))
+    cmax = np.cos(np.radians(80.0))
+    ct = 1.0 - u[..., 0] * (1.0 - cmax)  # cos theta uniform in [cos 80 deg, 1]
+    st = np.sqrt(1.0 - ct**2)
+    p = 2 * np.pi * u[..., 1]
+    w = np.stack([st * np.cos(p), st * np.sin(p), ct], -1)
+    return _value_stats(np.asarray(b.f(w[0], w[1])), None)
+
+
 def summarize(path: PathLike) -> dict[str, Any]:
     """Describe a BRDF file: format, kind, grid, channels, valid fraction, value range,
     provenance, size on disk and compression ratio (float32 in memory / bytes on disk)."""
@@ -54,7 +74,9 @@ def summarize(path: PathLike) -> dict[str, Any]:
             isotropic=b.isotropic,
             grid={name: list(b.fields[name].shape) for name in ("theta_i", "phi_i", "vndf")},
             channels=_channels(b.channels),
-            value_range=_value_stats(np.moveaxis(colour, 2, -1), None),
+            value_range=_rgl_brdf_stats(b),
+            value_range_note=RGL_VALUES_NOTE,
+            stored_range=_value_stats(np.moveaxis(colour, 2, -1), None),
             valid_fraction=1.0,
             provenance={"source": {"format": "rgl-tensor", "file": os.fspath(path)}},
             raw_bytes=int(sum(a.nbytes for a in b.fields.values())),
