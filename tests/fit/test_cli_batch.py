@@ -188,3 +188,22 @@ def test_batch_process_pool_and_dask_local_cluster(tmp_path):
     assert sorted(s["material"] for s in res) == ["mat0", "mat1"]
     assert all(s["status"] == "ok" for s in res)
     assert (tmp_path / "dask" / "mat1" / "phong.json").exists()
+
+
+def test_ctrl_c_while_writing_leaves_no_half_written_folder(tmp_path, monkeypatch, capsys):
+    (path,) = _native_files(tmp_path / "in", n=1)
+    out = tmp_path / "out"
+    import gonio.fit.plots as plots
+
+    calls = []
+
+    def interrupted(*a, **k):
+        calls.append(1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plots, "plot_result", interrupted)
+    rc = main(["fit", str(path), "-m", "lambert", "--out", str(out)])
+    assert rc == 130 and calls
+    assert "interrupted" in capsys.readouterr().err
+    # No result folder, no staging folder left beside it.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -223,22 +226,32 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
             r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
             results += r if isinstance(r, list) else [r]
         comp = summarize(results)
-        files = []
-        for r in results:
-            stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
-            bar.update(task, description=f"writing {stem}")
-            files.append(str(r.save(out / f"{stem}.json")))
-            if options["plots"]:
-                from gonio.fit.plots import plot_result
+        # Write into a hidden staging folder beside OUT and move the files in at the end, so
+        # that Ctrl-C (or an error) while writing leaves no half-written result behind.
+        out.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+        try:
+            files = []
+            for r in results:
+                stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
+                bar.update(task, description=f"writing {stem}")
+                files.append(str(out / r.save(staging / f"{stem}.json").name))
+                if options["plots"]:
+                    from gonio.fit.plots import plot_result
 
-                files += [str(p) for p in plot_result(r, data, out, stem)]
-    summary = {
-        "material": data.source.get("name"),
-        "path": str(path),
-        "files": files,
-        **comp.to_json(),
-    }
-    write_json(summary, out / "summary.json")
+                    files += [str(out / p.name) for p in plot_result(r, data, staging, stem)]
+            summary = {
+                "material": data.source.get("name"),
+                "path": str(path),
+                "files": files,
+                **comp.to_json(),
+            }
+            write_json(summary, staging / "summary.json")
+            out.mkdir(parents=True, exist_ok=True)
+            for f in sorted(staging.iterdir()):
+                os.replace(f, out / f.name)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     if as_json:
         json.dump(summary, sys.stdout, indent=2)
         sys.stdout.write("\n")
