@@ -30,3 +30,21 @@ def test_cornell_description_is_the_header_not_the_section_labels():
     s = info(shared_file("cornell", "garnet_red.brdf"))
     d = s["provenance"]["source"]["description"]
     assert d == "Cornell University, Program of Computer Graphics / Garnet Red / Medium-gloss Paint"
+
+
+def test_info_on_a_native_table_imports_no_heavy_library(tmp_path):
+    import numpy as np
+
+    from gonio import io
+    from gonio.brdf.tabulated import MeasuredSamples
+
+    w = np.tile([[0.0, 0.6, 0.8]], (4, 1))
+    io.save(MeasuredSamples(w, w, np.full((4, 3), 0.2)), tmp_path / "t.brdf.h5")
+    code = (
+        "import sys\nfrom gonio.cli import main\n"
+        f"main(['info', {str(tmp_path / 't.brdf.h5')!r}])\n"
+        "print(sorted(m for m in ('jax', 'scipy', 'matplotlib') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
+    assert "0.2" in out.stdout  # the values are still reported
