@@ -23,7 +23,6 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 figure { display: inline-block; margin: 0.5em; text-align: center; }
 figure img { max-width: 100%; }
 .spheres img { max-width: none; }
-.plots img { width: 30em; }
 .warn { color: #a40; font-size: 90%; }
 .ok { color: #070; }
 .bad { color: #a00; }
