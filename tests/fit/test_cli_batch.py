@@ -207,3 +207,25 @@ def test_ctrl_c_while_writing_leaves_no_half_written_folder(tmp_path, monkeypatc
     assert "interrupted" in capsys.readouterr().err
     # No result folder, no staging folder left beside it.
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_batch_redoes_other_options_and_keeps_every_model_in_the_summary(tmp_path, monkeypatch):
+    monkeypatch.setattr(fit_data, "load_data", _fake_loader)
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "m0.dat").write_bytes(np.int32(0).tobytes())
+    paths = expand_inputs([src])
+    out = tmp_path / "out"
+    opts = {"models": ["lambert"], "fit": {"n_starts": 2}, "plots": False}
+    assert [s["material"] for s in run_batch(paths, out, opts, jobs=1)] == ["m0"]
+    assert run_batch(paths, out, opts, jobs=1) == []  # same options: done
+    # Another --theta-max is another fit: redone, not skipped.
+    other = {**opts, "fit": {"n_starts": 2, "theta_max_deg": 60.0}}
+    assert [s["material"] for s in run_batch(paths, out, other, jobs=1)] == ["m0"]
+    summary = json.loads((out / "m0" / "summary.json").read_text())
+    assert summary["fit_options"]["theta_max_deg"] == 60.0
+    # A new model: the summary compares it with the earlier one, not the new one alone.
+    run_batch(paths, out, {**other, "models": ["oren-nayar"]}, jobs=1)
+    summary = json.loads((out / "m0" / "summary.json").read_text())
+    assert sorted(summary["models"]) == ["lambert", "oren-nayar"]
+    assert sorted(r["model"] for r in summary["table"]) == ["lambert", "oren-nayar"]

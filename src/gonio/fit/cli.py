@@ -296,7 +296,7 @@ def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any)
 
     console = Console(stderr=True)
     separate = options["fit"].get("channels") == "separate"
-    todo, done = pending(paths, out, () if separate else options["models"])
+    todo, done = pending(paths, out, () if separate else options["models"], options)
     if done and not args.json:
         console.print(f"{len(done)} of {len(paths)} materials already done in {out}; resuming")
     failures = []
