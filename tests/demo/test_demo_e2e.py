@@ -177,6 +177,7 @@ def test_report_opens_in_headless_chromium_without_console_errors(demo, tmp_path
         "--disable-component-update",
         "--disable-sync",
         f"--user-data-dir={tmp_path / 'profile'}",
+        "--window-size=4000,3000",
     ):
         options.add_argument(flag)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
@@ -188,6 +189,14 @@ def test_report_opens_in_headless_chromium_without_console_errors(demo, tmp_path
             "return Array.from(document.images).map(i => [i.src, i.complete, i.naturalWidth]);"
         )
         assert images and all(done and width > 0 for _, done, width in images), images
+        # Every image is shown at its native size (no CSS downscaling, which aliases the
+        # spheres' pixels and shrinks the plots' text), in a window wide enough for all of them.
+        sizes = driver.execute_script(
+            "return Array.from(document.images).map(i => [i.src, i.width, i.naturalWidth,"
+            " i.height, i.naturalHeight]);"
+        )
+        scaled = [s for s in sizes if (s[1], s[3]) != (s[2], s[4])]
+        assert not scaled, scaled
         errors = [e for e in driver.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
         assert not errors, errors
     finally:

@@ -22,8 +22,11 @@ def test_unknown_model_is_one_line_error(tmp_path, capsys):
 
 
 def test_missing_input_and_bad_flags(tmp_path, capsys):
-    assert main(["fit", str(tmp_path / "nope.brdf"), "-m", "lambert"]) == FitError.exit_code
+    # A missing file is bad input, as in 'gonio info' (exit 2 in both).
+    assert main(["fit", str(tmp_path / "nope.brdf"), "-m", "lambert"]) == 2
     assert "no such file" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "nope.brdf")]) == 2
+    capsys.readouterr()
     f = tmp_path / "x.brdf"
     f.write_text("")
     assert main(["fit", str(f), "-m", "lambert", "--fix", "albedo"]) == FitError.exit_code
@@ -35,9 +38,25 @@ def test_missing_input_and_bad_flags(tmp_path, capsys):
 
 
 def test_list_models(capsys):
-    assert main(["fit", "x", "--list-models"]) == 0
+    assert main(["fit", "--list-models"]) == 0  # no dummy argument needed
     names = capsys.readouterr().out.split()
     assert "lambert" in names
+    assert main(["fit"]) == 2
+    assert "give at least one measurement file" in capsys.readouterr().err
+
+
+def test_out_that_is_a_file_is_refused_before_the_fit(tmp_path, capsys):
+    import time
+
+    f = tmp_path / "x.brdf"
+    f.write_text("")
+    out = tmp_path / "taken.json"
+    out.write_text("{}")
+    t0 = time.monotonic()
+    assert main(["fit", str(f), "-m", "lambert", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "exists and is not a folder" in err and err.count("\n") == 1
+    assert out.read_text() == "{}" and time.monotonic() - t0 < 30
 
 
 def test_help_documents_every_flag(capsys):
@@ -169,3 +188,44 @@ def test_batch_process_pool_and_dask_local_cluster(tmp_path):
     assert sorted(s["material"] for s in res) == ["mat0", "mat1"]
     assert all(s["status"] == "ok" for s in res)
     assert (tmp_path / "dask" / "mat1" / "phong.json").exists()
+
+
+def test_ctrl_c_while_writing_leaves_no_half_written_folder(tmp_path, monkeypatch, capsys):
+    (path,) = _native_files(tmp_path / "in", n=1)
+    out = tmp_path / "out"
+    import gonio.fit.plots as plots
+
+    calls = []
+
+    def interrupted(*a, **k):
+        calls.append(1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plots, "plot_result", interrupted)
+    rc = main(["fit", str(path), "-m", "lambert", "--out", str(out)])
+    assert rc == 130 and calls
+    assert "interrupted" in capsys.readouterr().err
+    # No result folder, no staging folder left beside it.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_batch_redoes_other_options_and_keeps_every_model_in_the_summary(tmp_path, monkeypatch):
+    monkeypatch.setattr(fit_data, "load_data", _fake_loader)
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "m0.dat").write_bytes(np.int32(0).tobytes())
+    paths = expand_inputs([src])
+    out = tmp_path / "out"
+    opts = {"models": ["lambert"], "fit": {"n_starts": 2}, "plots": False}
+    assert [s["material"] for s in run_batch(paths, out, opts, jobs=1)] == ["m0"]
+    assert run_batch(paths, out, opts, jobs=1) == []  # same options: done
+    # Another --theta-max is another fit: redone, not skipped.
+    other = {**opts, "fit": {"n_starts": 2, "theta_max_deg": 60.0}}
+    assert [s["material"] for s in run_batch(paths, out, other, jobs=1)] == ["m0"]
+    summary = json.loads((out / "m0" / "summary.json").read_text())
+    assert summary["fit_options"]["theta_max_deg"] == 60.0
+    # A new model: the summary compares it with the earlier one, not the new one alone.
+    run_batch(paths, out, {**other, "models": ["oren-nayar"]}, jobs=1)
+    summary = json.loads((out / "m0" / "summary.json").read_text())
+    assert sorted(summary["models"]) == ["lambert", "oren-nayar"]
+    assert sorted(r["model"] for r in summary["table"]) == ["lambert", "oren-nayar"]

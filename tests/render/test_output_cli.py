@@ -184,3 +184,13 @@ def test_cli_measured_table_against_fits(tmp_path, capsys):
     assert errs["good"]["rmse"] < 0.5 * errs["bad"]["rmse"]
     assert out.stat().st_size > 1000
     assert {"measured", "good", "bad"} <= set(report["images"])
+
+
+def test_comparison_figure_names_its_reference_and_states_the_clipping(tmp_path):
+    rng = np.random.default_rng(2)
+    ref = rng.random((16, 16, 3)).astype(np.float32) + 0.5
+    exp, comps = compare_images(ref, [("fit", ref * 1.2)])
+    p = comparison_figure(tmp_path / "c.svg", ref, comps, exp, reference_label="ground truth")
+    svg = p.read_text()
+    assert "ground truth" in svg and ">measured<" not in svg
+    assert "clipped at" in svg and "99.5th percentile" in svg

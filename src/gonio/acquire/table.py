@@ -4,11 +4,8 @@
 root and, in the group ``/gridded``, an isotropic half/diff table resampled from them
 (:func:`grid_samples`) with a coverage mask, sigma and counts; see ``data-schema/FORMAT.md``.
 
-Resampling is binning, not interpolation: each sample falls into the grid cell of its
-(theta_h, theta_d, phi_d) (nearest node, phi_d folded into [0, pi) by reciprocity), and a node's
-value is the inverse-variance weighted mean of its samples, with sigma ``1 / sqrt(sum w)``.
-Nodes without samples are masked invalid: the table never claims data it does not have. A node's
-value is that of the samples' directions, which lie within half a cell of the node.
+Resampling is binning, not interpolation (:func:`gonio.brdf.gridding.grid_samples`, re-exported
+here): nodes without samples are masked invalid, the table never claims data it does not have.
 """
 
 from __future__ import annotations
@@ -18,84 +15,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gonio.brdf.tabulated import Axis, Channels, MeasuredSamples, TabulatedBRDF
+from gonio.brdf.gridding import default_grid, grid_samples, half_diff_iso
+from gonio.brdf.tabulated import Channels, MeasuredSamples
 
-
-def half_diff_iso(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(theta_h, theta_d, phi_d) in radians of direction pairs (N, 3); phi_d folded to [0, pi)."""
-    from gonio.brdf import frames
-
-    th, _, td, pd = (np.asarray(x, dtype=float) for x in frames.half_diff(wi, wo))
-    return th, td, np.mod(pd, math.pi)
-
-
-def default_grid(n_theta_h: int = 16, n_theta_d: int = 15, n_phi_d: int = 12) -> tuple[Axis, ...]:
-    """A coarse isotropic half/diff grid suited to plans of tens to thousands of samples.
-
-    theta_h is sqrt-warped (dense near the specular peak), theta_d linear, phi_d periodic over
-    [0, pi); nodes at cell centres (``node_offset = 0.5``) so that every cell is centred on its
-    node.
-    """
-    half = math.pi / 2
-    return (
-        Axis("theta_h", n_theta_h, 0.0, half, "sqrt", False, 0.0),
-        Axis("theta_d", n_theta_d, 0.0, half, "linear", False, 0.5),
-        Axis("phi_d", n_phi_d, 0.0, math.pi, "linear", True, 0.5),
-    )
-
-
-def grid_samples(samples: MeasuredSamples, axes: tuple[Axis, ...] | None = None) -> TabulatedBRDF:
-    """Bin scattered samples onto an isotropic half/diff grid (see the module docstring).
-
-    Samples without sigma are weighted equally (sigma of the node: the standard error of the
-    mean when the node has two or more samples, else none is claimed: the node's sigma is 0 and
-    its count tells).
-    """
-    axes = axes or default_grid()
-    th, td, pd = half_diff_iso(samples.wi, samples.wo)
-    idx = [np.asarray(a.nearest_index(x)) for a, x in zip(axes, (th, td, pd), strict=True)]
-    shape = tuple(a.size for a in axes)
-    flat = np.ravel_multi_index(tuple(idx), shape)
-    vals = np.asarray(samples.values, dtype=float)
-    n_ch = vals.shape[1]
-    if samples.sigma is not None:
-        w = 1.0 / np.maximum(np.asarray(samples.sigma, dtype=float), 1e-30) ** 2
-    else:
-        w = np.ones_like(vals)
-    n_cells = int(np.prod(shape))
-    sw = np.zeros((n_cells, n_ch))
-    swx = np.zeros((n_cells, n_ch))
-    cnt = np.bincount(flat, minlength=n_cells)
-    for c in range(n_ch):
-        sw[:, c] = np.bincount(flat, weights=w[:, c], minlength=n_cells)
-        swx[:, c] = np.bincount(flat, weights=w[:, c] * vals[:, c], minlength=n_cells)
-    mask = cnt > 0
-    mean = np.where(mask[:, None], swx / np.where(sw > 0, sw, 1.0), 0.0)
-    if samples.sigma is not None:
-        sig = np.where(mask[:, None], 1.0 / np.sqrt(np.where(sw > 0, sw, 1.0)), 0.0)
-    else:
-        sq = np.zeros((n_cells, n_ch))
-        for c in range(n_ch):
-            sq[:, c] = np.bincount(flat, weights=vals[:, c] ** 2, minlength=n_cells)
-        n = np.maximum(cnt, 1)[:, None]
-        var = np.maximum(sq / n - mean**2, 0.0) / np.maximum(n - 1, 1)
-        sig = np.where(cnt[:, None] > 1, np.sqrt(var), 0.0)
-    meta = dict(samples.meta)
-    meta["resampling"] = (
-        "inverse-variance mean of the samples in each half/diff cell (nearest node);"
-        " cells without samples masked"
-    )
-    return TabulatedBRDF(
-        values=mean.reshape(*shape, n_ch).astype(np.float32),
-        axes=axes,
-        parameterization="half_diff_iso",
-        mask=mask.reshape(shape),
-        sigma=sig.reshape(*shape, n_ch).astype(np.float32),
-        counts=cnt.reshape(shape),
-        channels=samples.channels,
-        meta=meta,
-        interpolation="nearest",
-    )
+__all__ = [
+    "default_grid",
+    "grid_samples",
+    "half_diff_iso",
+    "reciprocal_pairs",
+    "reciprocity_summary",
+    "write_run_tables",
+]
 
 
 @dataclass(frozen=True)
@@ -248,6 +178,11 @@ def write_run_tables(journal, rig, channels) -> tuple[str | None, str, dict]:
         f"{len(rows)} samples; gridded {int(grid.mask.sum())}/{grid.mask.size} cells covered;"
         f" reciprocity: {recip.get('pairs', 0)} pairs"
     )
+    if not recip.get("pairs"):
+        note += (
+            " (no configuration was measured with light and camera swapped;"
+            " plan iso-reciprocal does)"
+        )
     if recip.get("pairs"):
         note += (
             f", relative difference median {recip['rel_diff_median']:.3g}"

@@ -484,7 +484,12 @@ def _render_all(
         s.rmse, s.rel_mse, s.ssim = c.errors.rmse, c.errors.rel_mse, c.errors.ssim
         s.files["render"] = files[s.preset.replace("+", "-")]
     comparison_figure(
-        out / "compare.png", reference, comps, exposure, title=f"{material.name}: {ref_label}"
+        out / "compare.png",
+        reference,
+        comps,
+        exposure,
+        title=f"{material.name}: fits against the {ref_label}",
+        reference_label=ref_label,
     )
     return {
         "reference": ref_label,

@@ -22,8 +22,7 @@ th { background: #f3f3f3; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }
 figure { display: inline-block; margin: 0.5em; text-align: center; }
 figure img { max-width: 100%; }
-.spheres img { width: 192px; image-rendering: pixelated; }
-.plots img { width: 30em; }
+.spheres img { max-width: none; }
 .warn { color: #a40; font-size: 90%; }
 .ok { color: #070; }
 .bad { color: #a00; }
@@ -170,7 +169,9 @@ def render_html(summary: Any) -> str:
     parts += [
         "</div>",
         "<figure>" + _img(files["compare"], "measured, fitted and difference per model"),
-        "<figcaption>measured | fitted | |difference| per model</figcaption></figure>",
+        f"<figcaption>{_e(ren['reference'])} | fitted | |difference| per model (the"
+        " colour scale ends at the 99.5th percentile of the differences; larger ones show at"
+        " its top colour)</figcaption></figure>",
         "<h2>Per model</h2>",
     ]
     truth_all = mat.get("truth_params", {})

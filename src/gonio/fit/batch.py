@@ -7,9 +7,12 @@ Layout of ``out_dir``::
     <material>/summary.json         the comparison; written last, it marks the material done
     batch.jsonl                     one line per finished (or failed) material, appended
 
-A rerun skips every material whose ``summary.json`` exists, so an interrupted batch resumes where
-it stopped. Work runs in a local process pool (``spawn`` start method: JAX is multithreaded and
-must not be forked) or on a Dask cluster (``scheduler="tcp://host:8786"``); each task reads its
+A rerun skips every material whose ``summary.json`` exists and records the same fit options
+(loss, theta_max, ...) and models, so an interrupted batch resumes where it stopped; a material
+fitted earlier with other options is redone, and one asked for a new model is refitted with its
+earlier models too, so that ``summary.json`` always compares every model of the folder. Work
+runs in a local process pool (``spawn`` start method: JAX is multithreaded and must not be
+forked) or on a Dask cluster (``scheduler="tcp://host:8786"``); each task reads its
 file, fits, writes its folder and returns a small summary, so results never travel back in bulk.
 """
 
@@ -25,7 +28,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-from gonio.errors import FitError, GonioError
+from gonio.errors import FitError, GonioError, ParameterError
 
 #: File name endings considered measurement files when a folder is given.
 DATA_SUFFIXES = (".h5", ".hdf5", ".binary", ".bsdf", ".brdf", ".alta", ".dat", ".csv")
@@ -65,7 +68,7 @@ def expand_inputs(inputs: Sequence[str | Path]) -> list[Path]:
         elif p.is_file():
             found = [p]
         else:
-            raise FitError(f"{s}: no such file or directory")
+            raise ParameterError(f"{s}: no such file or directory")
         if not found:
             raise FitError(f"{s}: no measurement files found")
         out.extend(found)
@@ -84,6 +87,23 @@ def safe_stem(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "+-_." else "_" for ch in name)
 
 
+def fit_options_key(options: dict[str, Any]) -> Any:
+    """The fit options (``options["fit"]``) as recorded in a material's ``summary.json``:
+    JSON-normalized so that a rerun can tell whether a material was fitted the same way."""
+    return json.loads(json.dumps(options.get("fit", {}), sort_keys=True, default=str))
+
+
+def _previous_models(folder: Path, key: Any) -> list[str]:
+    """Models of an earlier run on this material with the same fit options (none otherwise)."""
+    try:
+        prev = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return []
+    if not isinstance(prev, dict) or prev.get("fit_options") != key:
+        return []
+    return [m for m in prev.get("models", []) if isinstance(m, str)]
+
+
 def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, Any]:
     """Fit every model of ``options["models"]`` to one file and write its folder.
 
@@ -99,11 +119,17 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     name = options.get("material") or material_name(src)
     folder = Path(out_dir) / name
     opts = dict(options.get("fit", {}))
+    key = fit_options_key(options)
+    # A rerun that adds a model refits the earlier ones too (same options), so that the
+    # comparison in summary.json covers every model of the folder, not only the new one.
+    models = list(options["models"])
+    plain = [m for m in models if isinstance(m, str)]
+    models = [m for m in _previous_models(folder, key) if m not in plain] + models
     try:
         from gonio.fit.api import fit
 
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
-        results = fit(data, model=list(options["models"]), **opts)
+        results = fit(data, model=models, **opts)
         results = results if isinstance(results, list) else [results]
         folder.mkdir(parents=True, exist_ok=True)
         files = []
@@ -120,6 +146,8 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
             "path": str(src),
             "status": "ok",
             "files": files,
+            "models": [m for m in models if isinstance(m, str)],
+            "fit_options": key,
             **comp.to_json(),
         }
         write_json(summary, folder / "summary.json")
@@ -141,16 +169,27 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
 
 
 def pending(
-    paths: Iterable[Path], out_dir: Path, models: Sequence[str] = ()
+    paths: Iterable[Path],
+    out_dir: Path,
+    models: Sequence[str] = (),
+    options: dict[str, Any] | None = None,
 ) -> tuple[list[Path], list[Path]]:
-    """Split ``paths`` into (to do, already done): done means ``summary.json`` exists and so
-    does the result of every model in ``models`` (a rerun asking for a new model redoes the
-    material)."""
+    """Split ``paths`` into (to do, already done): done means ``summary.json`` exists, so does
+    the result of every model in ``models`` (a rerun asking for a new model redoes the
+    material), and, when ``options`` are given, the summary records the same fit options (a
+    rerun with another ``--loss`` or ``--theta-max`` redoes it; so does a summary that records
+    none)."""
+    key = None if options is None else fit_options_key(options)
     todo, done = [], []
     for p in paths:
         folder = out_dir / material_name(p)
         ok = (folder / "summary.json").exists()
         ok = ok and all((folder / f"{safe_stem(m)}.json").exists() for m in models)
+        if ok and key is not None:
+            try:
+                ok = json.loads((folder / "summary.json").read_text()).get("fit_options") == key
+            except (OSError, ValueError, AttributeError):
+                ok = False
         (done if ok else todo).append(p)
     return todo, done
 
@@ -191,7 +230,7 @@ def run_batch(
         raise FitError(f"several inputs share the material name(s) {', '.join(sorted(dup))}")
     plain = [m for m in options.get("models", ()) if isinstance(m, str)]
     separate = options.get("fit", {}).get("channels") == "separate"
-    todo, _ = pending(paths, out, () if separate else plain)
+    todo, _ = pending(paths, out, () if separate else plain, options)
     summaries: list[dict[str, Any]] = []
 
     def finish(s: dict[str, Any]) -> None:

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
-from gonio.errors import FitError
+from gonio.errors import FitError, ParameterError
 
 
 def register(subparsers: Any) -> None:
@@ -27,7 +30,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "inputs",
-        nargs="+",
+        nargs="*",
         metavar="FILE_DIR_OR_GLOB",
         help="measurement file(s), folder(s) of files, or quoted glob patterns",
     )
@@ -38,7 +41,7 @@ def register(subparsers: Any) -> None:
         dest="models",
         metavar="NAME",
         help="model to fit (repeatable): a lobe name or lobes joined by '+', e.g. "
-        "lambert+ward; 'gonio fit --list-models x' lists them. Default: lambert+ward "
+        "lambert+ward; 'gonio fit --list-models' lists them. Default: lambert+ward "
         "and lambert+ts where available",
     )
     p.add_argument(
@@ -162,6 +165,10 @@ def run(args: argparse.Namespace) -> int:
     if args.list_models:
         print("\n".join(available()))
         return 0
+    if not args.inputs:
+        raise ParameterError("give at least one measurement file, folder or glob pattern")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise ParameterError(f"--out {args.out}: exists and is not a folder")
     models = args.models or _default_models()
     for m in models:
         build(m)  # unknown names fail here, before any work
@@ -219,22 +226,32 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
             r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
             results += r if isinstance(r, list) else [r]
         comp = summarize(results)
-        files = []
-        for r in results:
-            stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
-            bar.update(task, description=f"writing {stem}")
-            files.append(str(r.save(out / f"{stem}.json")))
-            if options["plots"]:
-                from gonio.fit.plots import plot_result
+        # Write into a hidden staging folder beside OUT and move the files in at the end, so
+        # that Ctrl-C (or an error) while writing leaves no half-written result behind.
+        out.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+        try:
+            files = []
+            for r in results:
+                stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
+                bar.update(task, description=f"writing {stem}")
+                files.append(str(out / r.save(staging / f"{stem}.json").name))
+                if options["plots"]:
+                    from gonio.fit.plots import plot_result
 
-                files += [str(p) for p in plot_result(r, data, out, stem)]
-    summary = {
-        "material": data.source.get("name"),
-        "path": str(path),
-        "files": files,
-        **comp.to_json(),
-    }
-    write_json(summary, out / "summary.json")
+                    files += [str(out / p.name) for p in plot_result(r, data, staging, stem)]
+            summary = {
+                "material": data.source.get("name"),
+                "path": str(path),
+                "files": files,
+                **comp.to_json(),
+            }
+            write_json(summary, staging / "summary.json")
+            out.mkdir(parents=True, exist_ok=True)
+            for f in sorted(staging.iterdir()):
+                os.replace(f, out / f.name)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     if as_json:
         json.dump(summary, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -279,7 +296,7 @@ def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any)
 
     console = Console(stderr=True)
     separate = options["fit"].get("channels") == "separate"
-    todo, done = pending(paths, out, () if separate else options["models"])
+    todo, done = pending(paths, out, () if separate else options["models"], options)
     if done and not args.json:
         console.print(f"{len(done)} of {len(paths)} materials already done in {out}; resuming")
     failures = []

@@ -123,7 +123,16 @@ def cmd_info(args: argparse.Namespace) -> int:
     t.add_row("valid fraction", f"{s['valid_fraction']:.4f}")
     r = s["value_range"]
     if r["min"] is not None:
-        t.add_row("values (1/sr)", f"min {r['min']:.4g}  max {r['max']:.4g}  mean {r['mean']:.4g}")
+        label = "values (1/sr)" if "value_range_note" not in s else "BRDF values (1/sr)*"
+        t.add_row(label, f"min {r['min']:.4g}  max {r['max']:.4g}  mean {r['mean']:.4g}")
+    if "stored_range" in s and s["stored_range"]["min"] is not None:
+        st = s["stored_range"]
+        t.add_row(
+            "stored values",
+            f"min {st['min']:.4g}  max {st['max']:.4g}  mean {st['mean']:.4g} (file units)",
+        )
+    if "value_range_note" in s:
+        t.add_row("", f"* {s['value_range_note']}")
     if "encoding" in s:
         e = s["encoding"]
         text = e["values"]

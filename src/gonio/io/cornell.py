@@ -99,7 +99,11 @@ def read_cornell(path: PathLike, color: str = "spectral", illuminant: str = "D65
     wi = spherical(d["theta_i"], d["phi_i"])
     wo = spherical(d["theta_s"], d["phi_s"])
     meta: dict[str, Any] = {
-        "source": {"format": "cornell", "file": str(path), "description": " ".join(d["comments"])}
+        "source": {
+            "format": "cornell",
+            "file": str(path),
+            "description": _description(d["comments"]),
+        }
     }
     if color == "spectral":
         values = d["values"]
@@ -119,3 +123,20 @@ def read_cornell(path: PathLike, color: str = "spectral", illuminant: str = "D65
         weights=None,
         meta=meta,
     )
+
+
+#: Comment lines of a Cornell file that label its sections rather than describe the material.
+_SECTION_LABELS = ("num wls", "wls", "theta i")
+
+
+def _description(comments: list[str]) -> str:
+    """The descriptive header comments (lab, material, finish), joined with " / "; the section
+    labels that follow them ("num wls", "wls", "theta i, phi i, ...") are left out."""
+    keep = []
+    for c in comments:
+        text = c.strip().lstrip("#").strip()
+        if text.lower().startswith(_SECTION_LABELS):
+            break
+        if text:
+            keep.append(text)
+    return " / ".join(keep)

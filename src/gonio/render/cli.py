@@ -16,6 +16,31 @@ from gonio.errors import FormatError, ParameterError
 # Fit files hold a model description made by ``Node.to_dict``; they are parsed through the model
 # registry (gonio.brdf) so that gonio.render never imports gonio.fit (DESIGN.md dependency rule).
 MAX_FIT_BYTES = 16 * 1024 * 1024
+#: The fit-result format read here (``gonio.fit.result.SCHEMA_ID`` / ``SCHEMA_VERSION``; not
+#: imported from gonio.fit, which gonio.render must not depend on).
+FIT_SCHEMA = "gonio/fit-result"
+FIT_VERSION = 1
+
+
+def missing_parameters(desc: Any, where: str = "") -> list[str]:
+    """Parameters a model description (``Node.to_dict`` form) leaves out, as ``"path.name"``."""
+    from gonio.brdf.models import registry
+
+    out: list[str] = []
+    if isinstance(desc, list):
+        for i, d in enumerate(desc):
+            out += missing_parameters(d, f"{where}{i}.")
+        return out
+    if not isinstance(desc, dict) or "type" not in desc:
+        return out
+    cls = registry().get(desc["type"])
+    if cls is None:
+        return out  # Node.from_dict names the unknown type
+    params = desc.get("params") or {}
+    out += [f"{where}{p.name}" for p in cls.PARAMS if p.name not in params]
+    for name, child in (desc.get("children") or {}).items():
+        out += missing_parameters(child, f"{where}{name}.")
+    return out
 
 
 def load_fit_model(path: str | Path) -> Any:
@@ -34,10 +59,22 @@ def load_fit_model(path: str | Path) -> Any:
     # A fit result keeps the description under "model_spec" ("model" is the preset's name);
     # a bare to_dict() (or {"model": {...}}) is accepted too.
     desc = doc
+    if isinstance(doc, dict) and ("schema" in doc or "version" in doc):
+        if doc.get("schema") != FIT_SCHEMA or doc.get("version") != FIT_VERSION:
+            raise FormatError(
+                f"{path}: unsupported fit file (schema {doc.get('schema')!r} version "
+                f"{doc.get('version')!r}; this gonio reads {FIT_SCHEMA!r} version {FIT_VERSION})"
+            )
     if isinstance(doc, dict) and "type" not in doc:
         desc = doc.get("model_spec", doc.get("model"))
     if not isinstance(desc, dict) or "type" not in desc:
         raise FormatError(f"{path}: no model description (expected a 'model_spec' object)")
+    missing = missing_parameters(desc)
+    if missing:
+        raise FormatError(
+            f"{path}: the model description lacks parameter(s) {', '.join(missing)} "
+            "(a fit file states every parameter; none is filled in with a default)"
+        )
     try:
         model = Node.from_dict(desc)
     except ParameterError as exc:
@@ -49,20 +86,75 @@ def load_fit_model(path: str | Path) -> Any:
     return model
 
 
-def load_table(path: str | Path) -> Any:
-    """A tabulated BRDF through :func:`gonio.io.load`."""
+def load_fitted(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[str]]:
+    """``(model, notes)`` of a fit file, a spectral model projected to linear sRGB
+    (:mod:`gonio.render.spectral`) using the wavelengths named in the fit's ``data.channels``."""
+    from gonio.render.spectral import to_rgb, wavelengths_from_names
+
+    model = load_fit_model(path)
+    c = int(getattr(model, "channels", 1))
+    if c in (1, 3):
+        return model, []
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        names = (doc.get("data") or {}).get("channels") if isinstance(doc, dict) else None
+    except (OSError, ValueError, AttributeError):
+        names = None
+    wl = wavelengths_from_names(names or ())
+    if wl is None or wl.size != c:
+        raise FormatError(
+            f"{path}: a {c}-channel model without wavelengths in data.channels; cannot show it "
+            "in colour"
+        )
+    note = (
+        f"{c} spectral channels ({wl[0]:g}..{wl[-1]:g} nm) shown as linear sRGB under {illuminant}"
+    )
+    return to_rgb(model, wl, illuminant), [note]
+
+
+def fitted_labels(paths: list[str]) -> tuple[list[str], list[str]]:
+    """Unique image labels for fit files: the file name, prefixed by as many parent folders as
+    it takes to tell same-named files apart. Returns (labels, warnings about renamed ones)."""
+    resolved = [Path(p).resolve() for p in paths]
+    for i, r in enumerate(resolved):
+        if r in resolved[:i]:
+            raise ParameterError(f"--fitted {paths[i]} is given twice")
+    parts = [r.with_suffix("").parts for r in resolved]
+    labels = [pt[-1] for pt in parts]
+    warnings: list[str] = []
+    for name in sorted({lbl for lbl in labels if labels.count(lbl) > 1}):
+        group = [i for i, lbl in enumerate(labels) if lbl == name]
+        depth = 2
+        while len({parts[i][-depth:] for i in group}) < len(group):
+            depth += 1
+        for i in group:
+            labels[i] = "-".join(parts[i][-depth:])
+        shown = ", ".join(labels[i] for i in group)
+        warnings.append(f"several --fitted files are named {name}.json; labelled {shown}")
+    return labels, warnings
+
+
+def load_table(path: str | Path, illuminant: str = "D65") -> Any:
+    """A measured file (any :func:`gonio.io.load` format) as a renderable material.
+
+    Scattered, holey or spectral data is adapted by :func:`gonio.render.measured.renderable`;
+    use :func:`load_measured` for the notes saying how.
+    """
+    return load_measured(path, illuminant)[0]
+
+
+def load_measured(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[str]]:
+    """``(material, notes)`` of a measured file; see :func:`gonio.render.measured.renderable`."""
     p = Path(path)
     if not p.exists():
         raise ParameterError(f"measured table not found: {p}")
     from gonio import io as gio
+    from gonio.render.measured import renderable
 
     load = getattr(gio, "load", None)
     if load is None:
         raise FormatError("this gonio build cannot read measured tables (gonio.io.load missing)")
-    obj = load(p)
-    if not hasattr(obj, "values") and not hasattr(obj, "sample"):  # RGL files sample themselves
-        raise FormatError(f"{p}: holds scattered samples, not a table; tabulate it first")
-    return obj
+    return renderable(load(p), illuminant=illuminant)
 
 
 def parse_light(spec: str, irradiance: float = 1.0):
@@ -129,6 +221,14 @@ def register(subparsers: Any) -> None:
         default=1.0,
         help="multiplies the environment radiance (default 1)",
     )
+    p.add_argument(
+        "--illuminant",
+        default="D65",
+        choices=("D65", "E"),
+        help="spectrum of the lights for spectral data (Cornell files, spectral fits), which is "
+        "shown as linear sRGB through CIE 1931 XYZ under it; D65 (default) is sRGB's white, so a "
+        "grey BRDF stays grey",
+    )
     p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
     p.add_argument("--resolution", type=int, default=256, help="image size in pixels (256)")
     p.add_argument(
@@ -140,7 +240,11 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
-        "--out", default="compare.png", help="comparison figure (PNG/PDF/SVG; default compare.png)"
+        "--out",
+        default="compare.png",
+        help="comparison figure: .png (default compare.png), .pdf or .svg (other extensions are "
+        "refused); a folder (ending in /) gets compare.png inside. Per-image EXR and PNG files "
+        "are written next to it",
     )
     p.add_argument(
         "--no-images", action="store_true", help="write only the figure, no per-image EXR/PNG"
@@ -157,7 +261,46 @@ def _lights(args: argparse.Namespace) -> list[Any]:
     env = args.env or "studio"
     if env != "studio" and not Path(env).is_file():
         raise ParameterError(f"--env: no such file {env!r} (or use 'studio')")
+    if env != "studio":
+        check_environment_file(env)
     return [Environment(env, scale=args.env_scale)]
+
+
+def _write_figure_image(out: Path, img: np.ndarray, exposure: float) -> None:
+    """A tone-mapped rendering as a PDF or SVG image (matplotlib, atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gonio.io.atomic import atomic_output
+    from gonio.render.output import tonemap
+
+    shown = tonemap(img, exposure)
+    if shown.shape[-1] == 1:
+        shown = np.repeat(shown, 3, axis=-1)
+    with atomic_output(out, out.suffix, make_parents=True) as tmp:
+        plt.imsave(tmp, np.clip(shown, 0, 1), format=out.suffix.lstrip(".").lower())
+
+
+def check_environment_file(path: str | Path) -> None:
+    """Refuse an EXR that is not a lat-long radiance image: a BRDF slice file written by
+    ``gonio convert ... .exr`` (its parts carry ``gonio_phi_d_rad``/``gonio_units``)."""
+    if not str(path).lower().endswith(".exr"):
+        return
+    try:
+        import OpenEXR
+
+        with OpenEXR.File(str(path), header_only=True) as f:
+            # read the keys while the file is open (the header is not kept after closing)
+            keys = [set(part.header.keys()) for part in f.parts]
+    except Exception:  # unreadable here: the environment loader reports it in its own words
+        return
+    if any({"gonio_phi_d_rad", "gonio_units"} & k for k in keys):
+        raise ParameterError(
+            f"--env {path}: a BRDF slice image (theta_h x theta_d per phi_d, values in 1/sr), "
+            "not a lat-long environment map"
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -174,13 +317,24 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--spp must be >= 1, got {args.spp}")
     if not 8 <= args.resolution <= 4096:
         raise ParameterError(f"--resolution must be in [8, 4096], got {args.resolution}")
-    out = Path(args.out)
+    from gonio.render.plot_cli import output_path
+
+    out = output_path(args.out, "compare.png")
     lights = _lights(args)
     items: list[tuple[str, Any]] = []
     if args.measured:
-        items.append(("measured", load_table(args.measured)))
-    for f in args.fitted:
-        items.append((Path(f).name.removesuffix(".json"), load_fit_model(f)))
+        table, notes = load_measured(args.measured, args.illuminant)
+        for note in notes:
+            print(f"measured: {note}", file=sys.stderr)
+        items.append(("measured", table))
+    labels, warnings = fitted_labels(list(args.fitted))
+    for w in warnings:
+        print(f"gonio: warning: {w}", file=sys.stderr)
+    for label, f in zip(labels, args.fitted, strict=True):
+        model, notes = load_fitted(f, args.illuminant)
+        for note in notes:
+            print(f"{label}: {note}", file=sys.stderr)
+        items.append((label, model))
 
     images: dict[str, np.ndarray] = {}
     with Progress(
@@ -212,6 +366,7 @@ def run(args: argparse.Namespace) -> int:
             )
             bar.update(task, completed=1.0)
 
+    out.parent.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {"out": str(out), "spp": args.spp, "images": {}}
     reference = images.get("measured")
     exposure = auto_exposure(reference if reference is not None else next(iter(images.values())))
@@ -227,8 +382,12 @@ def run(args: argparse.Namespace) -> int:
         comparison_figure(out, reference, comps, exp, title=f"{Path(args.measured).name}")
         report["errors"] = {c.label: c.errors.as_dict() for c in comps}
     else:
-        # One rendering: the figure is its tone-mapped image.
-        write_png(out, next(iter(images.values())), exposure)
+        # One rendering: the figure is its tone-mapped image, in the format OUT names.
+        only = next(iter(images.values()))
+        if out.suffix.lower() == ".png":
+            write_png(out, only, exposure)
+        else:
+            _write_figure_image(out, only, exposure)
     if args.json:
         print(json.dumps(report, indent=2))
     else:

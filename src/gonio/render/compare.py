@@ -101,11 +101,15 @@ def comparison_figure(
     comparisons: Sequence[Comparison],
     exposure: float | None = None,
     title: str | None = None,
+    reference_label: str = "measured",
 ) -> Path:
     """Write the figure: one row per fit, ``measured | fitted | |difference|`` heat map.
 
     Renders share one exposure (the measured image's). The heat map shows the absolute luminance
-    difference relative to the measured image's 99th luminance percentile, on a shared scale.
+    difference relative to the measured image's 99th luminance percentile, on a shared scale
+    that ends at the 99.5th percentile of the differences: larger ones are drawn at the top
+    colour, which the colour bar's label says. ``reference_label`` names the first column
+    (e.g. "ground truth" when the reference is a simulated sample's analytic truth).
     """
     import matplotlib
 
@@ -126,7 +130,7 @@ def comparison_figure(
     for row, (c, d) in enumerate(zip(comparisons, diffs, strict=True)):
         ax_m, ax_f, ax_d = axes[row]
         ax_m.imshow(shown_m, interpolation="nearest")
-        ax_m.set_title("measured", fontsize=10)
+        ax_m.set_title(reference_label, fontsize=10)
         ax_f.imshow(tonemap(c.image, exp), interpolation="nearest")
         ax_f.set_title(c.label, fontsize=10)
         im = ax_d.imshow(d, cmap="magma", vmin=0.0, vmax=vmax, interpolation="nearest")
@@ -134,9 +138,10 @@ def comparison_figure(
         text = f"RMSE {e.rmse:.3g}   relMSE {e.rel_mse:.3g}"
         if e.ssim is not None:
             text += f"   SSIM {e.ssim:.3f}"
-        ax_d.set_title("|difference| / measured p99", fontsize=10)
+        ax_d.set_title(f"|difference| / {reference_label} p99", fontsize=10)
         ax_d.text(0.5, -0.06, text, transform=ax_d.transAxes, ha="center", va="top", fontsize=9)
-        fig.colorbar(im, ax=ax_d, fraction=0.046, pad=0.04)
+        bar = fig.colorbar(im, ax=ax_d, fraction=0.046, pad=0.04, extend="max")
+        bar.set_label(f"clipped at {vmax:.3g} (99.5th percentile)", fontsize=8)
         for ax in (ax_m, ax_f, ax_d):
             ax.set_xticks([])
             ax.set_yticks([])

@@ -50,8 +50,14 @@ def _io_exr():
     return exr if hasattr(exr, "write_exr") and hasattr(exr, "read_exr") else None
 
 
-def write_exr(path: str | os.PathLike, img: np.ndarray) -> Path:
-    """Write linear float32 ``img`` (H, W, C) as a ZIP-compressed scanline OpenEXR file."""
+def write_exr(
+    path: str | os.PathLike, img: np.ndarray, names: list[str] | tuple[str, ...] | None = None
+) -> Path:
+    """Write linear float32 ``img`` (H, W, C) as a ZIP-compressed scanline OpenEXR file.
+
+    ``names`` are the channel names (spectral images: ``"400nm"``, ...; a spectral material's
+    ``channels.names``); default ``R, G, B`` / ``Y`` / ``c<i>``.
+    """
     import OpenEXR
 
     # gonio.io owns the file formats; its EXR helper is used when present, this is the fallback
@@ -59,13 +65,15 @@ def write_exr(path: str | os.PathLike, img: np.ndarray) -> Path:
     io_exr = _io_exr()
     if io_exr is not None:
         a = _as_image(img)
-        io_exr.write_exr(path, a, _channel_names(a.shape[2]))
+        io_exr.write_exr(path, a, list(names) if names else _channel_names(a.shape[2]))
         return Path(path)
 
     a = _as_image(img)
     path = Path(path)
     tmp = _atomic_target(path, ".exr")
-    names = _channel_names(a.shape[2])
+    names = list(names) if names else _channel_names(a.shape[2])
+    if len(names) != a.shape[2]:
+        raise ParameterError(f"{len(names)} channel names for {a.shape[2]} channels")
     channels = {n: np.ascontiguousarray(a[..., i]) for i, n in enumerate(names)}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     try:
