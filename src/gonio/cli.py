@@ -53,6 +53,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if func is None:
         parser.print_help()
         return 0
+    if hasattr(args, "no_compile_cache"):  # commands that compile JAX kernels
+        from gonio import compile_cache
+
+        compile_cache.from_args(args)
     try:
         return int(func(args) or 0)
     except GonioError as exc:
