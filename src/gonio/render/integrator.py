@@ -40,10 +40,10 @@ samples, BRDF samples), shading. Tile shapes do not follow the request: ``spp`` 
 multiple of :data:`SAMPLE_BATCH` and pixels to one of a few tile sizes (padding has zero
 weight), and delta lights of one kind are looped over with a traced count, so that a new
 ``spp``, image size or number of delta lights reuses the compiled kernels (with the persistent
-cache of :mod:`gonio.compile_cache`, across processes too). Analytic models are traced into the middle stage; tabulated
-BRDFs are called there directly, because their samplers keep host-side state (per-outgoing-
-direction CDFs built lazily for the buckets of outgoing directions actually seen, rejection
-loops).
+cache of :mod:`gonio.compile_cache`, across processes too). Analytic models are traced into
+the middle stage; tabulated BRDFs are called there directly, because their samplers keep
+host-side state (per-outgoing-direction CDFs built lazily for the buckets of outgoing directions
+actually seen, rejection loops).
 """
 
 from __future__ import annotations
