@@ -6,8 +6,9 @@ Pairs (RGB, 3 channels on both sides; gonio jitted float32, Mitsuba ``llvm_ad_rg
 - Torrance-Sparrow, Beckmann, Smith, conductor Fresnel (gold-like eta, k) / ``roughconductor``
   Beckmann without visible-normal sampling;
 - the same with GGX and visible-normal sampling on both sides;
-- Torrance-Sparrow GGX with dielectric Fresnel (eta 1.5) / ``roughconductor`` with ``k = 0``
-  (its conductor formula is then the exact dielectric one).
+- Torrance-Sparrow GGX with dielectric Fresnel (eta 1.5 per RGB channel, so that both sides
+  compute 3 channels) / ``roughconductor`` with ``k = 0`` (its conductor formula is then the
+  exact dielectric one).
 
 Operations: ``f`` vs ``eval`` (Mitsuba's value includes the cosine), ``pdf`` vs ``pdf``, and
 ``sample`` (direction, pdf and weight) vs ``sample`` (``BSDFSample3f`` and weight), on the same
@@ -74,7 +75,7 @@ def pairs() -> list[tuple[str, models.BRDFModel, dict]]:
          {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2,
           "sample_visible": True, "eta": rgb(GOLD_ETA), "k": rgb(GOLD_K)}),
         ("TS GGX Smith dielectric F / roughconductor k=0",
-         ts(alpha=0.2, distribution="ggx", shadowing="smith", fresnel=models.Dielectric(1.5),
+         ts(alpha=0.2, distribution="ggx", shadowing="smith", fresnel=models.Dielectric([1.5] * 3),
             sampling="visible"),
          {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2,
           "sample_visible": True, "eta": 1.5, "k": 0.0}),
