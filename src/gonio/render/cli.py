@@ -250,6 +250,9 @@ def register(subparsers: Any) -> None:
         "--no-images", action="store_true", help="write only the figure, no per-image EXR/PNG"
     )
     p.add_argument("--json", action="store_true", help="print the error numbers as JSON")
+    from gonio import compile_cache
+
+    compile_cache.add_argument(p)
     p.set_defaults(func=run)
 
 

@@ -36,10 +36,14 @@ unbiased estimates while each pixel keeps the Sobol' stratification.
 
 Work is split into tiles of pixels x samples of bounded size (``tile_samples``), each run as
 three jitted float32 stages: light sampling, the material (``f`` and ``pdf`` at the light
-samples, BRDF samples), shading. Analytic models are traced into the middle stage; tabulated
-BRDFs are called there directly, because their samplers keep host-side state (per-outgoing-
-direction CDFs built lazily for the buckets of outgoing directions actually seen, rejection
-loops).
+samples, BRDF samples), shading. Tile shapes do not follow the request: ``spp`` is padded to a
+multiple of :data:`SAMPLE_BATCH` and pixels to one of a few tile sizes (padding has zero
+weight), and delta lights of one kind are looped over with a traced count, so that a new
+``spp``, image size or number of delta lights reuses the compiled kernels (with the persistent
+cache of :mod:`gonio.compile_cache`, across processes too). Analytic models are traced into
+the middle stage; tabulated BRDFs are called there directly, because their samplers keep
+host-side state (per-outgoing-direction CDFs built lazily for the buckets of outgoing directions
+actually seen, rejection loops).
 """
 
 from __future__ import annotations
@@ -70,6 +74,16 @@ TABLE_METHODS = ("inversion", "alias", "rejection")
 
 #: Samples (pixels x spp) processed per kernel call: bounds memory to a few tens of MB.
 DEFAULT_TILE_SAMPLES = 1 << 17
+
+#: Samples per pixel in one kernel call: ``spp`` is padded up to a multiple of it (masked by zero
+#: weights), so that every ``spp`` runs the same compiled kernel; an ``spp`` that is a multiple
+#: of ``4 * SAMPLE_BATCH`` uses that larger batch (a second kernel shape), which measured ~15 %
+#: faster at 64 spp on a 2-core CPU.
+SAMPLE_BATCH = 16
+
+#: Smallest pixel tile; tiles are this times a power of 4 (up to ``tile_samples / SAMPLE_BATCH``),
+#: so that all image sizes share a handful of compiled kernels instead of one each.
+MIN_PIXEL_TILE = 256
 
 #: Tiles dispatched ahead of the one being collected (one per core keeps every core busy).
 IN_FLIGHT = max(1, min(4, os.cpu_count() or 1))
@@ -398,14 +412,48 @@ def _tile(material, lights, pos, frame, wo, sob, shift, weights, tech: _Techniqu
 
 
 @jax.jit
-def _delta_kernel_model(model, lights, position, frame, wo):
+def _delta_kernel_model(model, groups, position, frame, wo):
+    """Sum over delta lights of f E cos; ``groups`` from :func:`_delta_groups`."""
     total = 0.0
-    for light in lights:
-        ls = light.sample(position, jnp.zeros((*position.shape[:-1], 2), jnp.float32))
-        wi = jnp.einsum("pij,pj->pi", frame, ls.wi)
-        f = model.f(wi, wo)
-        total = total + f * ls.value * jnp.maximum(wi[..., 2], 0.0)[..., None]
+    for stacked, count in groups:
+
+        def term(i, stacked=stacked):
+            light = jax.tree_util.tree_map(lambda leaf: leaf[i], stacked)
+            ls = light.sample(position, jnp.zeros((*position.shape[:-1], 2), jnp.float32))
+            wi = jnp.einsum("pij,pj->pi", frame, ls.wi)
+            return model.f(wi, wo) * ls.value * jnp.maximum(wi[..., 2], 0.0)[..., None]
+
+        # A traced trip count: renders with 1 .. capacity lights of a kind share this kernel,
+        # and the padding costs nothing.
+        total = total + jax.lax.fori_loop(1, count, lambda i, acc: acc + term(i), term(0))
     return total
+
+
+def _delta_groups(lights: Sequence[Light]) -> tuple:
+    """Delta lights grouped by kind (pytree structure and leaf shapes), each group's leaves
+    stacked along a new first axis padded to a power of 2 (at least 8): ``((stacked, count),
+    ...)``. The capacity, not the count, is part of the kernel's shape."""
+    groups: dict[Any, list] = {}
+    for light in lights:
+        leaves, treedef = jax.tree_util.tree_flatten(light)
+        leaves = [np.asarray(x, np.float32) for x in leaves]
+        groups.setdefault((treedef, tuple(x.shape for x in leaves)), []).append(leaves)
+    out = []
+    for (treedef, _), members in groups.items():
+        cap = max(8, 1 << (len(members) - 1).bit_length())
+        padded = members + [members[-1]] * (cap - len(members))
+        stacked = [jnp.asarray(np.stack(col)) for col in zip(*padded, strict=True)]
+        out.append((treedef.unflatten(stacked), jnp.asarray(len(members), jnp.int32)))
+    return tuple(out)
+
+
+def _pixel_tile(n: int, cap: int) -> int:
+    """Pixels per kernel call for ``n`` pixels: ``MIN_PIXEL_TILE`` times a power of 4, or
+    ``cap``."""
+    size = MIN_PIXEL_TILE
+    while size < n and size < cap:
+        size *= 4
+    return max(1, min(size, cap))
 
 
 # -- driver ------------------------------------------------------------------------------------
@@ -604,14 +652,15 @@ def _pad(a: np.ndarray, n: int) -> np.ndarray:
 
 def _render_delta(material, lights, hits: SphereHits, tile_samples, stats) -> np.ndarray:
     n = hits.count
-    size = min(n, tile_samples)
+    size = _pixel_tile(n, tile_samples)
+    groups = _delta_groups(lights) if isinstance(material, BRDFModel) else ()
     out = []
     for a, b in _tiles(n, size):
         pos = jnp.asarray(_pad(hits.position[a:b], size))
         frame = jnp.asarray(_pad(hits.frame[a:b], size))
         wo = jnp.asarray(_pad(hits.wo[a:b], size))
         if isinstance(material, BRDFModel):
-            r = _delta_kernel_model(material, lights, pos, frame, wo)
+            r = _delta_kernel_model(material, groups, pos, frame, wo)
         else:
             r = 0.0
             for light in lights:
@@ -631,13 +680,13 @@ def _render_area(
     dims = 2 + 2 * len(lights)
     sobol = _sobol(spp, dims, seed)
     shift = np.random.default_rng([seed, 1]).random((n_pix, dims), dtype=np.float32)
-    s_batch = min(spp, 64)
+    s_batch = 4 * SAMPLE_BATCH if spp % (4 * SAMPLE_BATCH) == 0 else SAMPLE_BATCH
     n_batches = math.ceil(spp / s_batch)
     sob = np.zeros((n_batches * s_batch, dims), np.float32)
     sob[:spp] = sobol
     wts = np.zeros(n_batches * s_batch, np.float32)
     wts[:spp] = 1.0
-    p_tile = max(1, min(n_pix, tile_samples // s_batch))
+    p_tile = _pixel_tile(n_pix, max(1, tile_samples // s_batch))
     tiles = list(_tiles(n_pix, p_tile))
     total = len(tiles) * n_batches
     done = 0

@@ -32,7 +32,13 @@ class Fresnel(Node):
 
     def mean(self, cos_theta: Array) -> Array:
         """Channel mean of :meth:`eval`, shape ``(...)`` (used for lobe-selection weights)."""
-        return jnp.mean(self.eval(cos_theta), axis=-1)
+        e = self.eval(cos_theta)
+        # Summed per channel: jnp.mean's reduction over the short channel axis is a separate
+        # XLA:CPU pass, 4x slower than the whole Fresnel evaluation at 1e6 lanes (same-run A/B).
+        total = e[..., 0]
+        for i in range(1, e.shape[-1]):
+            total = total + e[..., i]
+        return total / e.shape[-1]
 
 
 def _per_channel(p: Array, like: Array) -> Array:

@@ -49,6 +49,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax.scipy.special import erfc
 
+from gonio.brdf._trig import cos_sin_turns
 from gonio.brdf.frames import dot, normalize, safe_sqrt
 from gonio.errors import ParameterError
 
@@ -205,9 +206,10 @@ def shadowing_g(wi: Array, wo: Array, alpha: Array, dist: str, shadowing: str) -
 
 
 # -- sampling the distribution of normals ------------------------------------------------------
-def _from_sin2_cos2(s2: Array, c2: Array, phi: Array) -> Array:
+def _from_sin2_cos2(s2: Array, c2: Array, phi_turns: Array) -> Array:
     s = safe_sqrt(s2)
-    return jnp.stack([s * jnp.cos(phi), s * jnp.sin(phi), safe_sqrt(c2)], -1)
+    cp, sp = cos_sin_turns(phi_turns)
+    return jnp.stack([s * cp, s * sp, safe_sqrt(c2)], -1)
 
 
 def sample_ndf(u: Array, alpha: Array, dist: str) -> Array:
@@ -219,7 +221,7 @@ def sample_ndf(u: Array, alpha: Array, dist: str) -> Array:
     alpha = jnp.asarray(alpha).astype(u.dtype)
     a2 = alpha * alpha
     u0 = jnp.minimum(u[..., 0], 1.0 - 1e-7)
-    phi = 2.0 * jnp.pi * u[..., 1]
+    phi = u[..., 1]  # in turns
     if dist == "beckmann":
         t = -a2 * jnp.log1p(-u0)  # tan^2 theta_h
         s2, c2 = t / (1.0 + t), 1.0 / (1.0 + t)
@@ -257,9 +259,9 @@ def sample_visible_ggx(wo: Array, u: Array, alpha: Array) -> Array:
     )  # fmt: skip
     t2 = jnp.cross(v, t1)
     r = jnp.sqrt(u[..., 0])
-    phi = 2.0 * jnp.pi * u[..., 1]
-    p1 = r * jnp.cos(phi)
-    p2 = r * jnp.sin(phi)
+    cp, sp = cos_sin_turns(u[..., 1])
+    p1 = r * cp
+    p2 = r * sp
     s = 0.5 * (1.0 + v[..., 2])
     p2 = (1.0 - s) * safe_sqrt(1.0 - p1 * p1) + s * p2
     pz = safe_sqrt(1.0 - p1 * p1 - p2 * p2)

@@ -1,0 +1,184 @@
+"""Time from a fresh process to its first sphere image: gonio (cold and warm compilation cache,
+and with the cache off) next to Mitsuba 3 (fresh Dr.Jit kernel cache and warm one).
+
+gonio runs its real entry point, ``gonio render --fitted lambert.json --env FILE.exr`` (a
+Lambertian sphere, albedo 0.5, under a lat-long environment, ``--res``² pixels, ``--spp``
+samples per pixel, one PNG written). Mitsuba renders the same scene (``sphere`` with
+``diffuse``, ``envmap`` of the same EXR, orthographic camera, ``direct`` integrator, same
+resolution and spp) in a fresh ``python`` process and writes one PNG. Each figure is wall time
+measured by this script from spawning the process to its exit: interpreter start, imports,
+kernel compilation or cache load, rendering and writing.
+
+- gonio cold: an empty ``XDG_CACHE_HOME`` (no compiled kernels on disk),
+- gonio warm: the cache filled by an earlier run (the second process a user starts),
+- gonio off: ``--no-compile-cache``,
+- Mitsuba cold: ``HOME`` pointed at an empty folder (Dr.Jit keeps its kernel cache in
+  ``~/.drjit``), Mitsuba warm: that folder kept from an earlier run.
+
+Rounds alternate the order of the configurations (ABBA), so that a drift of the machine's speed
+favours none; the table reports medians and the ratios gonio / Mitsuba of each round's figures.
+
+Writes benchmarks/results/first_image.csv and first_image.png and prints a Markdown table.
+Run: PYTHONPATH=src python benchmarks/bench_first_image.py [--rounds K] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+SRC = Path(__file__).resolve().parent.parent / "src"
+
+MITSUBA_SCRIPT = r"""
+import sys
+import mitsuba as mi
+mi.set_variant(sys.argv[1])
+res, spp, env, out = int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
+scene = mi.load_dict({
+    "type": "scene",
+    "integrator": {"type": "direct"},
+    "sensor": {
+        "type": "orthographic",
+        "to_world": mi.ScalarTransform4f.look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0])
+        @ mi.ScalarTransform4f.scale([1, 1, 1]),
+        "film": {"type": "hdrfilm", "width": res, "height": res},
+        "sampler": {"type": "independent", "sample_count": spp},
+    },
+    "sphere": {
+        "type": "sphere",
+        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}},
+    },
+    "env": {"type": "envmap", "filename": env},
+})
+img = mi.render(scene, spp=spp)
+mi.util.write_bitmap(out, img)
+"""
+
+
+def _run(cmd: list[str], env: dict[str, str]) -> float:
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    dt = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{cmd[:4]} failed: {proc.stderr.strip().splitlines()[-1:]}")
+    return dt
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (llvm_ad_rgb)")
+    ap.add_argument("--quick", action="store_true", help="2 rounds")
+    args = ap.parse_args()
+    rounds = 2 if args.quick else args.rounds
+
+    from gonio.brdf.models import Lambert
+    from gonio.render.lights import studio_environment
+    from gonio.render.output import write_exr
+
+    work = Path(tempfile.mkdtemp(prefix="gonio-first-image-"))
+    try:
+        env_file = write_exr(work / "env.exr", studio_environment())
+        fit = work / "lambert.json"
+        fit.write_text(json.dumps(Lambert(albedo=0.5).to_dict()))
+        mi_script = work / "mi_first.py"
+        mi_script.write_text(MITSUBA_SCRIPT)
+        base = {k: v for k, v in os.environ.items() if k != "GONIO_COMPILE_CACHE"}
+        base.update(PYTHONPATH=f"{SRC}{os.pathsep}{base.get('PYTHONPATH', '')}")
+        base.setdefault("JAX_PLATFORMS", "cpu")
+        gonio_cmd = [sys.executable, "-m", "gonio", "render", "--fitted", str(fit)]
+        gonio_cmd += ["--env", str(env_file), "--resolution", str(args.res), "--spp"]
+        gonio_cmd += [str(args.spp), "--no-images", "--out", str(work / "g.png")]
+        mi_cmd = [sys.executable, str(mi_script), args.variant, str(args.res), str(args.spp)]
+        mi_cmd += [str(env_file), str(work / "m.png")]
+        warm_cache, warm_home = work / "warm-cache", work / "warm-home"
+        # Fill the warm caches once (not timed).
+        _run(gonio_cmd, {**base, "XDG_CACHE_HOME": str(warm_cache)})
+        _run(mi_cmd, {**base, "HOME": str(warm_home)})
+
+        def gonio_cold() -> float:
+            d = Path(tempfile.mkdtemp(dir=work))
+            try:
+                return _run(gonio_cmd, {**base, "XDG_CACHE_HOME": str(d)})
+            finally:
+                shutil.rmtree(d, ignore_errors=True)
+
+        def mitsuba_cold() -> float:
+            d = Path(tempfile.mkdtemp(dir=work))
+            try:
+                return _run(mi_cmd, {**base, "HOME": str(d)})
+            finally:
+                shutil.rmtree(d, ignore_errors=True)
+
+        configs = {
+            "gonio cold cache": gonio_cold,
+            "gonio warm cache": lambda: _run(
+                gonio_cmd, {**base, "XDG_CACHE_HOME": str(warm_cache)}
+            ),
+            "gonio cache off": lambda: _run(
+                [*gonio_cmd, "--no-compile-cache"], {**base, "XDG_CACHE_HOME": str(warm_cache)}
+            ),
+            "Mitsuba cold": mitsuba_cold,
+            "Mitsuba warm": lambda: _run(mi_cmd, {**base, "HOME": str(warm_home)}),
+        }
+        times: dict[str, list[float]] = {k: [] for k in configs}
+        order = list(configs)
+        for r in range(rounds):
+            for name in order if r % 2 == 0 else order[::-1]:
+                times[name].append(configs[name]())
+                print(f"round {r}: {name} {times[name][-1]:.2f} s", flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+    load = os.getloadavg()[0]
+    RESULTS.mkdir(exist_ok=True)
+    rows = []
+    for name, ts in times.items():
+        ref = times["Mitsuba warm" if "warm" in name else "Mitsuba cold"]
+        ratio = statistics.median(a / b for a, b in zip(ts, ref, strict=True))
+        rows.append((name, statistics.median(ts), min(ts), max(ts), ratio))
+    with open(RESULTS / "first_image.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["config", "median_s", "min_s", "max_s", "ratio_to_mitsuba", "load_avg_1min"])
+        w.writerow(["# res", args.res, "spp", args.spp, args.variant, f"rounds {rounds}"])
+        for row in rows:
+            w.writerow([row[0], *(f"{x:.3f}" for x in row[1:]), f"{load:.1f}"])
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 3))
+    names = [r[0] for r in rows]
+    ax.barh(names, [r[1] for r in rows], xerr=None, color=["C0"] * 3 + ["C1"] * 2)
+    for i, ts in enumerate(times.values()):
+        ax.plot(ts, [i] * len(ts), "k.", ms=4)
+    ax.invert_yaxis()
+    ax.set_xlabel("fresh process to first image (s)")
+    ax.set_title(f"{args.res}² sphere, {args.spp} spp, load avg {load:.1f}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "first_image.png", dpi=120)
+
+    print(f"\n{args.res}² Lambert sphere, {args.spp} spp, Mitsuba {args.variant}, "
+          f"{rounds} rounds, load average {load:.1f}\n")  # fmt: skip
+    print("| process | median (s) | range (s) | / Mitsuba (same cache state) |")
+    print("|---|---:|---:|---:|")
+    for name, med, lo, hi, ratio in rows:
+        print(f"| {name} | {med:.2f} | {lo:.2f}–{hi:.2f} | {ratio:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

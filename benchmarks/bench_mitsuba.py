@@ -1,0 +1,215 @@
+"""Throughput of gonio's analytic BRDF kernels against Mitsuba 3's BSDFs, in one process.
+
+Pairs (RGB, 3 channels on both sides; gonio jitted float32, Mitsuba ``llvm_ad_rgb`` by default):
+
+- ``Lambert`` / ``diffuse``;
+- Torrance-Sparrow, Beckmann, Smith, conductor Fresnel (gold-like eta, k) / ``roughconductor``
+  Beckmann without visible-normal sampling;
+- the same with GGX and visible-normal sampling on both sides;
+- Torrance-Sparrow GGX with dielectric Fresnel (eta 1.5 per RGB channel, so that both sides
+  compute 3 channels) / ``roughconductor`` with ``k = 0`` (its conductor formula is then the
+  exact dielectric one).
+
+Operations: ``f`` vs ``eval`` (Mitsuba's value includes the cosine), ``pdf`` vs ``pdf``, and
+``sample`` (direction, pdf and weight) vs ``sample`` (``BSDFSample3f`` and weight), on the same
+``--batch`` float32 queries (directions uniform over the upper hemisphere). The models are not
+bit-identical: Mitsuba's Smith term is the separable ``G1 G1``, gonio's the height-correlated
+one, so the ratio is "the same job", not "the same arithmetic".
+
+Each round times every pair and operation on both sides, in an order that alternates between
+rounds (ABBA); a figure is the median of ``--repeats`` calls after a warm-up (compilation and
+Dr.Jit's kernel cache excluded). The ratio is gonio's throughput over Mitsuba's in the same
+round; the table gives the median ratio over rounds (>1: gonio faster).
+
+Writes benchmarks/results/mitsuba_kernels.csv and mitsuba_kernels.png and prints a Markdown
+table. Run: PYTHONPATH=src python benchmarks/bench_mitsuba.py [--rounds K] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from gonio.brdf import models
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+GOLD_ETA = [0.143, 0.374, 1.442]
+GOLD_K = [3.983, 2.385, 1.603]
+
+
+def upper(n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` directions uniform over the upper hemisphere, float32 ``(n, 3)``."""
+    z = rng.uniform(1e-3, 1.0, n)
+    phi = rng.uniform(0, 2 * math.pi, n)
+    r = np.sqrt(1 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1).astype(np.float32)
+
+
+def pairs() -> list[tuple[str, models.BRDFModel, dict]]:
+    """(label, gonio model, Mitsuba BSDF dict)."""
+
+    def rgb(v):
+        return {"type": "rgb", "value": v}
+
+    ts = models.TorranceSparrow
+    cond = models.Conductor(eta=GOLD_ETA, k=GOLD_K)
+    return [
+        ("Lambert / diffuse", models.Lambert([0.5, 0.4, 0.3]),
+         {"type": "diffuse", "reflectance": rgb([0.5, 0.4, 0.3])}),
+        ("TS Beckmann Smith conductor / roughconductor",
+         ts(alpha=0.2, distribution="beckmann", shadowing="smith", fresnel=cond),
+         {"type": "roughconductor", "distribution": "beckmann", "alpha": 0.2,
+          "sample_visible": False, "eta": rgb(GOLD_ETA), "k": rgb(GOLD_K)}),
+        ("TS GGX Smith conductor, visible / roughconductor",
+         ts(alpha=0.2, distribution="ggx", shadowing="smith", fresnel=cond, sampling="visible"),
+         {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2,
+          "sample_visible": True, "eta": rgb(GOLD_ETA), "k": rgb(GOLD_K)}),
+        ("TS GGX Smith dielectric F / roughconductor k=0",
+         ts(alpha=0.2, distribution="ggx", shadowing="smith", fresnel=models.Dielectric([1.5] * 3),
+            sampling="visible"),
+         {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2,
+          "sample_visible": True, "eta": 1.5, "k": 0.0}),
+    ]  # fmt: skip
+
+
+def median_time(fn: Callable[[], None], repeats: int) -> float:
+    fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts)
+
+
+def gonio_ops(model, wi, wo, u) -> dict[str, Callable[[], None]]:
+    f = jax.jit(lambda a, b: model.f(a, b))
+    p = jax.jit(lambda a, b: model.pdf(a, b))
+    s = jax.jit(lambda w, uu: model.sample(w, uu))
+    return {
+        "f": lambda: jax.block_until_ready(f(wi, wo)),
+        "pdf": lambda: jax.block_until_ready(p(wi, wo)),
+        "sample": lambda: jax.block_until_ready(s(wo, u)),
+    }
+
+
+def mitsuba_ops(mi, dr, desc: dict, wi, wo, u) -> dict[str, Callable[[], None]]:
+    n = wi.shape[0]
+    bsdf = mi.load_dict(desc)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(wo.T)
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    v_wi = mi.Vector3f(wi.T)
+    u1, u2 = mi.Float(u[:, 0]), mi.Point2f(u.T)
+    dr.make_opaque(si, v_wi, u1, u2)
+    ctx = mi.BSDFContext()
+
+    def ev():
+        dr.eval(bsdf.eval(ctx, si, v_wi))
+        dr.sync_thread()
+
+    def pdf():
+        dr.eval(bsdf.pdf(ctx, si, v_wi))
+        dr.sync_thread()
+
+    def sample():
+        bs, w = bsdf.sample(ctx, si, u1, u2)
+        dr.eval(bs.wo, bs.pdf, w)
+        dr.sync_thread()
+
+    return {"f": ev, "pdf": pdf, "sample": sample}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--batch", type=int, default=1_000_000)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--variant", default="llvm_ad_rgb")
+    ap.add_argument("--quick", action="store_true", help="3 rounds of 3 repeats")
+    args = ap.parse_args()
+    rounds, repeats = (3, 3) if args.quick else (args.rounds, args.repeats)
+
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant(args.variant)
+    rng = np.random.default_rng(0)
+    n = args.batch
+    wi, wo = upper(n, rng), upper(n, rng)
+    u = rng.random((n, 2)).astype(np.float32)
+    jwi, jwo, ju = (jax.device_put(x) for x in (wi, wo, u))
+
+    jobs = []
+    for label, model, desc in pairs():
+        g = gonio_ops(model, jwi, jwo, ju)
+        m = mitsuba_ops(mi, dr, desc, wi, wo, u)
+        for op in ("f", "pdf", "sample"):
+            jobs.append((label, op, g[op], m[op]))
+    res: dict[tuple[str, str], dict[str, list[float]]] = {
+        (j[0], j[1]): {"gonio": [], "mitsuba": []} for j in jobs
+    }
+    for r in range(rounds):
+        for label, op, g, m in jobs:
+            sides = [("gonio", g), ("mitsuba", m)]
+            for side, fn in sides if r % 2 == 0 else sides[::-1]:
+                res[(label, op)][side].append(median_time(fn, repeats))
+        print(f"round {r + 1}/{rounds} done", flush=True)
+
+    load = os.getloadavg()[0]
+    rows = []
+    for (label, op), d in res.items():
+        ratio = statistics.median(m / g for g, m in zip(d["gonio"], d["mitsuba"], strict=True))
+        rows.append({
+            "pair": label, "op": op, "batch": n,
+            "gonio_M_per_s": f"{n / statistics.median(d['gonio']) / 1e6:.3g}",
+            "mitsuba_M_per_s": f"{n / statistics.median(d['mitsuba']) / 1e6:.3g}",
+            "ratio_gonio_over_mitsuba": f"{ratio:.3f}",
+            "variant": args.variant, "rounds": rounds, "load_avg_1min": f"{load:.1f}",
+        })  # fmt: skip
+    RESULTS.mkdir(exist_ok=True)
+    with open(RESULTS / "mitsuba_kernels.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 0.3 * len(rows) + 1.4))
+    y = np.arange(len(rows))
+    ax.barh(y, [float(r["ratio_gonio_over_mitsuba"]) for r in rows], color="tab:blue")
+    ax.axvline(1.0, color="gray", ls="--", lw=0.8)
+    ax.set_yticks(y, [f"{r['pair']}: {r['op']}" for r in rows], fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set_xlabel(f"gonio / Mitsuba {args.variant} throughput (same run; >1: gonio faster)")
+    ax.set_title(f"batch {n:.0e} float32, {rounds} rounds, load average {load:.1f}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "mitsuba_kernels.png", dpi=120)
+
+    print(f"\nbatch {n:.0e}, Mitsuba {args.variant}, {rounds} rounds x {repeats} calls, "
+          f"load average {load:.1f}\n")  # fmt: skip
+    print("| gonio model / Mitsuba BSDF | op | gonio M/s | Mitsuba M/s | gonio / Mitsuba |")
+    print("|---|---|---:|---:|---:|")
+    for r in rows:
+        print(
+            f"| {r['pair']} | {r['op']} | {r['gonio_M_per_s']} | {r['mitsuba_M_per_s']} "
+            f"| {r['ratio_gonio_over_mitsuba']} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
