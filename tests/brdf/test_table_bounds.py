@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gonio.brdf import frames
-from gonio.brdf._table_sampling import _half_diff_ranges, _RangeMax2D
+from gonio.brdf.table_rejection import _half_diff_ranges, _RangeMax2D
 
 HALF_PI = math.pi / 2
 
