@@ -482,7 +482,8 @@ def hash_uniform(seed: Array, counter: int | Array, dtype: Any = jnp.float32) ->
 
 def _later_uniforms(seeds: Array, rounds: Array, dtype: Any) -> tuple[Array, Array]:
     """``(u_prop (m, 2), u_acc (m,))`` of proposal number ``rounds`` (1, 2, ...) of each query:
-    :func:`hash_uniform` counters ``3r, 3r + 1`` and ``3r + 2`` (see :func:`rejection_sample_traced`)."""
+    :func:`hash_uniform` counters ``3r, 3r + 1`` and ``3r + 2`` (see
+    :func:`rejection_sample_traced`)."""
     r = jnp.asarray(rounds, jnp.uint32)
     up = jnp.stack([hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1)
     return up, hash_uniform(seeds, 3 * r + 2, dtype)
@@ -505,8 +506,9 @@ def rejection_sample_traced(
     after that; its acceptance test uses ``3r + 2`` (counter 2 in the first round).
 
     Returns ``(x, ok (N,), rounds (N,) int32)``: the accepted proposals (the last one where a
-    query failed), whether each query accepted, and how many proposals it used. Every query's first proposal is made in one pass; after that each
-    iteration gathers the pending queries into a fixed number of lanes (an eighth of the
+    query failed), whether each query accepted, and how many proposals it used.
+
+    Every query's first proposal is made in one pass; after that each iteration gathers the pending queries into a fixed number of lanes (an eighth of the
     batch, at least 1024) and, when fewer are pending than there are lanes, gives each of them
     several consecutive proposals, keeping the first accepted. Proposals depend only on the
     query's seed and counter, so the result is that of query-by-query rounds.
