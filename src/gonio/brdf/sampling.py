@@ -508,10 +508,11 @@ def rejection_sample_traced(
     Returns ``(x, ok (N,), rounds (N,) int32)``: the accepted proposals (the last one where a
     query failed), whether each query accepted, and how many proposals it used.
 
-    Every query's first proposal is made in one pass; after that each iteration gathers the pending queries into a fixed number of lanes (an eighth of the
-    batch, at least 1024) and, when fewer are pending than there are lanes, gives each of them
-    several consecutive proposals, keeping the first accepted. Proposals depend only on the
-    query's seed and counter, so the result is that of query-by-query rounds.
+    Every query's first proposal is made in one pass; after that each iteration gathers the
+    pending queries into a fixed number of lanes (an eighth of the batch, at least 1024) and,
+    when fewer are pending than there are lanes, gives each of them several consecutive
+    proposals, keeping the first accepted. Proposals depend only on the query's seed and
+    counter, so the result is that of query-by-query rounds.
     """
     n = u.shape[0]
     dtype = u.dtype
