@@ -104,7 +104,8 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
     step = 1 << max(0, (n - 1).bit_length() - 1) if n > 1 else 0
     # base and each step's index are stored (gonio.brdf._xla.materialize): otherwise XLA
     # recomputes them inside every later step's gather loop and keeps every step's gathered
-    # values alive to the end (together ~3x slower)
+    # values alive to the end (without it inversion sampling runs at 0.67x: same-run A/B,
+    # benchmarks/ab_xla.py)
     if step:
         (base,) = materialize([jnp.broadcast_to(base, u.shape)], u)
     while step:

@@ -38,8 +38,8 @@ class BucketGeometry:
 
 def bucket_of(geo: BucketGeometry, wo: Array) -> Array:
     x, y, z = wo[..., 0], wo[..., 1], wo[..., 2]
-    # fast polynomial atan2 in float32 (XLA's is ~25x slower on CPU), exact in float64; sample
-    # and pdf both bucket through here, so they always agree
+    # the lookup's polynomial atan2 in float32 (see gonio.brdf.lookup.atan2 for its A/B figure),
+    # exact in float64; sample and pdf both bucket through here, so they always agree
     theta = atan2(jnp.sqrt(x * x + y * y), z)
     bt = jnp.clip(jnp.floor(theta * (geo.n_to / HALF_PI)).astype(jnp.int32), 0, geo.n_to - 1)
     if geo.iso:

@@ -45,7 +45,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf._xla import materialize
 from gonio.brdf.grid import (
     INTERPOLATIONS,
     PARAMETERIZATIONS,
@@ -99,14 +98,7 @@ def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
 
 def _sampled_values(spec: LookupSpec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
     """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample` when
-    the sampler has not looked it up. Called eagerly, the lookup is a jit call of its own, not
-    part of :func:`_sample_result`, where XLA's CPU backend fuses the weight arithmetic into
-    the lookup's gather loops (about 1.1x slower)."""
-    if isinstance(wi, jax.core.Tracer):
-        # under an outer jit, wi stored once, per component, before the lookup and used after
-        # it: otherwise XLA fuses the sampler's arithmetic into the lookup's loops (about 5 %
-        # slower; called eagerly, storing it costs 13 %)
-        wi = jnp.stack(materialize([wi[..., 0], wi[..., 1], wi[..., 2]], wi[..., 0]), -1)
+    the sampler has not looked it up."""
     return wi, eval_kernel(data, wi, wo_s, spec)
 
 
