@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gonio.brdf import frames
+from gonio.brdf import frames, warp
 from gonio.brdf.chi2 import chi2_test
 from gonio.brdf.sampling import (
     AliasTable,
@@ -340,6 +340,32 @@ def test_rejection_of_a_black_table_fails_at_once(proposal):
     assert np.all(np.asarray(s.pdf) == 0) and np.all(np.asarray(s.weight) == 0)
     stats = t._sampler().stats
     assert stats["rejection_proposals"] == stats["rejection_samples"] == 3
+
+
+class _MirrorLobe:
+    """A cosine-power lobe about the mirror direction (a stand-in for a fitted analytic lobe)."""
+
+    def __init__(self, n):
+        self.n = n
+
+    def sample(self, wo, u):
+        r = frames.reflect(jnp.asarray(wo))
+        w = warp.square_to_cosine_power_lobe(jnp.asarray(u), self.n)
+
+        class S:
+            wi = frames.to_world(frames.frame_from_normal(r), w)
+
+        return S
+
+    def pdf(self, wi, wo):
+        c = jnp.sum(jnp.asarray(wi) * frames.reflect(jnp.asarray(wo)), -1)
+        return jnp.where(c > 0, warp.cosine_power_lobe_pdf(jnp.maximum(c, 0.0), self.n), 0.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("theta_o", [20, 60])
+def test_rejection_chi2_lobe_proposal(glossy, theta_o):
+    _chi2(glossy, theta_o, "rejection", proposal=_MirrorLobe(8.0))
 
 
 @pytest.mark.slow

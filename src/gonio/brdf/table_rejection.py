@@ -15,10 +15,16 @@ reference that the faster samplers are checked against. Two proposals ``q``:
 ``"cosine"``
     A cosine-weighted hemisphere, accepted with probability ``g cos / (M q)``, ``M`` a bound of
     ``pi g`` over the bucket. Simple, but a glossy lobe makes ``M`` large.
+a BRDF model
+    The model's own sampling mixed with 10 % cosine sampling, ``M`` a bound of ``g cos / q``
+    over the bucket. The bucket's theta_o range is bounded in 4 parts, and the lower bound of the
+    model's pdf per cell of a 48 x 96 grid comes from evaluating it at 3 x 3 points x 12
+    outgoing directions per part (the one heuristic part; the cosine part of the mixture keeps
+    the bound finite).
 
 The table bounds are rigorous: interval bounds of theta_h and theta_d over each incident-grid
 cell and the bucket (in forms that stay tight near grazing mirror configurations, see
-``_half_diff_ranges``), interval bounds of ``cos theta_o`` and ``cos theta_i`` over each table
+``half_diff_ranges``), interval bounds of ``cos theta_o`` and ``cos theta_i`` over each table
 cell, which say which cells, phi_d included, the bucket can reach at all and how large
 ``g cos theta_i`` can be in them, and multilinear interpolation never exceeds the largest valid
 node it uses. ``rho(wo) = int g cos dwi`` is computed by a 128 x 256 midpoint quadrature over
@@ -48,6 +54,7 @@ from gonio.brdf.sampling import (
     seeds_from_rng,
     seeds_from_u,
 )
+from gonio.brdf.table_bounds import RangeMax2D, axis_cells, cos_range, half_diff_ranges
 from gonio.brdf.table_buckets import (
     HALF_PI,
     TWO_PI,
@@ -67,6 +74,9 @@ _RHO_NODES_ANISO = 5
 _RHO_RES = (128, 256)
 _BOUND_RES = (16, 32)  # incident cells for the cosine-proposal bound
 _MAJORANT_REFINE = 2  # the majorant's incident grid is this much finer than sampling_res's
+_PROPOSAL_EPS = 0.1  # share of cosine sampling in a model proposal's mixture
+_BOUND_RES_MODEL = (48, 96)  # finer: a model proposal's pdf varies within a cell
+_MODEL_BOUND_SPLIT = 4  # theta_o parts per bucket bounded separately for a model proposal
 # Rejection bound of a bucket where g = 0 everywhere: negative, so that the acceptance test
 # (u * bound < g cos) passes at once; the sample's pdf is then 0 (rho = 0) and it fails as it
 # should, after one proposal instead of max_rounds rejected ones.
@@ -98,15 +108,16 @@ class TableRejection:
         with jax.ensure_compile_time_eval():  # the sampler may be created under a jit trace
             self._major_cos_desc = jnp.asarray(self.cos_desc_major, jnp.float32)
         self.stores = {p: LazyBuckets(partial(self._build, proposal=p)) for p in PROPOSALS}
-        self._node_max: _RangeMax2D | None = None
+        self._node_max: RangeMax2D | None = None
         self._sup_cache: dict[str, np.ndarray] | None = None
         self._runs: dict[str, Any] = {}
         self.stats: dict[str, float] = {}
 
     def store(self, proposal: Any) -> LazyBuckets:
-        if not isinstance(proposal, str) or proposal not in PROPOSALS:
-            raise ParameterError(f"proposal must be 'majorant' or 'cosine', got {proposal!r}")
-        return self.stores[proposal]
+        key = _proposal_key(proposal)
+        if key not in self.stores:  # an analytic model, kept by the store's build function
+            self.stores[key] = LazyBuckets(partial(self._build, proposal=proposal))
+        return self.stores[key]
 
     def _bucket_ranges(self, b: int) -> tuple[float, float, float, float]:
         return bucket_ranges(self.geo, b)
@@ -115,7 +126,7 @@ class TableRejection:
         v = np.asarray(self.table.f(wi, wo))
         return np.maximum(v.mean(axis=-1), 0.0)
 
-    # -- rejection -----------------------------------------------------------------------------
+    # -- bounds of g cos ------------------------------------------------------------------------
     def _h_max(self) -> np.ndarray:
         """Largest valid node value (channel mean, at least 0) per (theta_h, theta_d) node."""
         v = self._node_means()
@@ -129,7 +140,7 @@ class TableRejection:
         t = self.table
         return np.where(t.mask, t.values.mean(axis=-1, dtype=np.float64), -np.inf)
 
-    def _reachable(self, t0: float, t1: float) -> tuple[float, _RangeMax2D, _RangeMax2D]:
+    def _reachable(self, t0: float, t1: float) -> tuple[float, RangeMax2D, RangeMax2D]:
         """``(sup, g_cells, gcos_cells)`` for outgoing directions with theta_o in ``[t0, t1]``:
         a bound of ``g`` over them and every ``wi`` above the horizon, and per (theta_h,
         theta_d) table cell (sorted by angle, see ``_sup_static``) bounds of ``g`` and of
@@ -155,9 +166,9 @@ class TableRejection:
         m = np.where(reach, st["cmax"], 0.0)
         sup = float(m.max()) * (1 + 1e-5)
         order = np.ix_(st["oh"], st["od"])
-        cells = _RangeMax2D(m.max(axis=2)[order])
+        cells = RangeMax2D(m.max(axis=2)[order])
         m *= np.clip(st["wi_hi"] + eps, 0.0, 1.0)
-        cos_cells = _RangeMax2D(m.max(axis=2)[order])
+        cos_cells = RangeMax2D(m.max(axis=2)[order])
         return sup, cells, cos_cells
 
     def _sup_static(self) -> dict[str, np.ndarray]:
@@ -172,9 +183,9 @@ class TableRejection:
             v = v.max(axis=names.index("phi_h"))
             ih, idd, ip = (0, 1, 2)
         v = np.moveaxis(v, (ih, idd, ip), (0, 1, 2))
-        h_lo, h_hi, h_a, h_b = _axis_cells(t.axes[names.index("theta_h")])
-        d_lo, d_hi, d_a, d_b = _axis_cells(t.axes[names.index("theta_d")])
-        p_lo, p_hi, p_a, p_b = _axis_cells(t.axes[names.index("phi_d")])
+        h_lo, h_hi, h_a, h_b = axis_cells(t.axes[names.index("theta_h")])
+        d_lo, d_hi, d_a, d_b = axis_cells(t.axes[names.index("theta_d")])
+        p_lo, p_hi, p_a, p_b = axis_cells(t.axes[names.index("phi_d")])
         # largest corner of every cell, as a bound of g = max(mean, 0)
         cmax = np.zeros((len(h_a), len(d_a), len(p_a)))
         for hs in (h_a, h_b):
@@ -183,7 +194,7 @@ class TableRejection:
                     cmax = np.maximum(cmax, v[np.ix_(hs, ds, ps)])
         ca = (np.cos(h_hi)[:, None] * np.cos(d_hi)[None, :], np.cos(h_lo)[:, None] * np.cos(d_lo))
         sb = (np.sin(h_lo)[:, None] * np.sin(d_lo)[None, :], np.sin(h_hi)[:, None] * np.sin(d_hi))
-        c_lo, c_hi = _cos_range(p_lo, p_hi)
+        c_lo, c_hi = cos_range(p_lo, p_hi)
         if t._spec.fold >= 1:  # the folded cell also serves phi_d + pi (and pi - phi_d): cos < 0
             c_lo, c_hi = np.minimum(c_lo, -c_hi), np.maximum(c_hi, -c_lo)
         A_lo, A_hi = ca[0][:, :, None], ca[1][:, :, None]
@@ -208,7 +219,7 @@ class TableRejection:
         self,
         th: tuple[np.ndarray, np.ndarray],
         td: tuple[np.ndarray, np.ndarray],
-        reach: tuple[float, _RangeMax2D, _RangeMax2D],
+        reach: tuple[float, RangeMax2D, RangeMax2D],
     ) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of ``g`` and of ``g cos theta_i`` over boxes of (theta_h, theta_d) angle
         ranges (arrays of lo, hi), for the outgoing range whose :meth:`_reachable` is
@@ -217,7 +228,7 @@ class TableRejection:
         ax_h = next(a for a in t.axes if a.name == "theta_h")
         ax_d = next(a for a in t.axes if a.name == "theta_d")
         if self._node_max is None:
-            self._node_max = _RangeMax2D(self._h_max())
+            self._node_max = RangeMax2D(self._h_max())
 
         def node_range(ax, lo, hi):
             tl = np.asarray(ax.continuous_index(jnp.asarray(lo, jnp.float64)))
@@ -269,7 +280,7 @@ class TableRejection:
         else:
             d0, d1 = pi0 - p1, pi1 - p0
         ci = (np.cos(ti1), np.cos(ti0))
-        th, td = _half_diff_ranges((ti0, ti1), (d0, d1), (t0, t1))
+        th, td = half_diff_ranges((ti0, ti1), (d0, d1), (t0, t1))
         U, gcos = self._table_bound(th, td, self._reachable(t0, t1))
         return U, np.minimum(U * ci[1], gcos), ci[0]
 
@@ -299,15 +310,17 @@ class TableRejection:
         rho = np.asarray(out)
         return rho if self.geo.iso else rho.reshape(_RHO_NODES_ANISO, _RHO_NODES_ANISO)
 
-    def _build(self, buckets: list[int], proposal: str) -> dict[int, dict[str, np.ndarray]]:
+    def _build(self, buckets: list[int], proposal: Any) -> dict[int, dict[str, np.ndarray]]:
         out = {}
         for b in buckets:
             if proposal == "majorant":
                 out[b] = {**self._majorant(b), "rho": self._rho_nodes(b)}
                 continue
-            # cosine: g cos / (cos / pi) = pi g
-            U, _, _ = self._cell_bounds(b, _BOUND_RES)  # U <= the bucket's sup of g
-            M = math.pi * U.max()
+            if proposal == "cosine":  # g cos / (cos / pi) = pi g
+                U, _, _ = self._cell_bounds(b, _BOUND_RES)  # U <= the bucket's sup of g
+                M = math.pi * U.max()
+            else:
+                M = self._model_bound(b, proposal)
             out[b] = {"bound": np.asarray(M if M > 0 else _EMPTY), "rho": self._rho_nodes(b)}
         return out
 
@@ -340,8 +353,61 @@ class TableRejection:
         bound = np.where(q > 0, M * q, m) * (1 + 1e-6)
         return {**arrays, "bound": bound}
 
+    def _model_bound(self, b: int, model: Any) -> float:
+        """Bound of ``g cos / q`` over bucket ``b`` for the mixture proposal ``q``.
+
+        The bucket's theta_o range is split in ``_MODEL_BOUND_SPLIT`` parts, each bounded on
+        its own (the table bound and the proposal's pdf move together with theta_o; one bound
+        over the whole bucket pairs the largest table value at one end with the smallest pdf
+        at the other, which near grazing angles overstates the ratio a hundredfold).
+        """
+        nt, npp = _BOUND_RES_MODEL
+        t0, t1, p0, p1 = self._bucket_ranges(b)
+        k = _MODEL_BOUND_SPLIT
+        s = np.linspace(0, 1, 3)
+        te = np.linspace(0, HALF_PI, nt + 1)
+        pe = np.linspace(0, TWO_PI, npp + 1)
+        tt = te[:-1, None] + s[None, :] * (te[1:] - te[:-1])[:, None]  # (nt, 3)
+        pp = pe[:-1, None] + s[None, :] * (pe[1:] - pe[:-1])[:, None]  # (npp, 3)
+        tt = np.clip(tt, 0, HALF_PI - 1e-4)
+        thetas = np.linspace(t0, t1, 2 * k + 1)  # ends and middles of the k parts
+        phis = (
+            (0, 0.5 * math.pi, math.pi, 1.5 * math.pi) if self.geo.iso else np.linspace(p0, p1, 4)
+        )
+        st = np.sin(tt)[:, :, None, None]
+        wis, wos = [], []
+        for t in thetas:
+            for p in phis:
+                wo = np.array(
+                    [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), max(math.cos(t), 1e-4)]
+                )
+                phi = pp[None, None] + (p if self.geo.iso else 0.0)
+                wi = np.stack(
+                    np.broadcast_arrays(
+                        st * np.cos(phi), st * np.sin(phi), np.cos(tt)[:, :, None, None]
+                    ),
+                    -1,
+                ).reshape(-1, 3)  # (nt, 3, npp, 3) points
+                wis.append(wi)
+                wos.append(np.broadcast_to(wo / np.linalg.norm(wo), wi.shape))
+        q = np.asarray(model.pdf(np.concatenate(wis), np.concatenate(wos)), np.float64)
+        q = q.reshape(len(thetas), len(phis), nt, 3, npp, 3).min(axis=(1, 3, 5))  # (thetas, cells)
+        eps = _PROPOSAL_EPS
+        out = 0.0
+        for j in range(k):
+            U, gcos, cmin = self._cell_bounds(
+                b, _BOUND_RES_MODEL, (thetas[2 * j], thetas[2 * j + 2])
+            )
+            qmin = q[2 * j : 2 * j + 3].min(axis=0)
+            lower = eps * cmin / math.pi + (1 - eps) * 0.5 * np.maximum(qmin, 0.0)
+            with np.errstate(divide="ignore"):
+                ratio = np.where(lower > 0, gcos / np.where(lower > 0, lower, 1.0), np.inf)
+            ratio = np.minimum(ratio, math.pi * U / eps)
+            out = max(out, float(ratio.max()))
+        return out
+
     # -- entry points ----------------------------------------------------------------------------
-    def sample(self, wo: Array, u: Array, rng: Any, proposal: str, dt: Any):
+    def sample(self, wo: Array, u: Array, rng: Any, proposal: Any, dt: Any):
         """``(wi, pdf, f)`` for ``wo (..., 3)``, ``u (..., 2)``: ``f (..., C)`` is the table at
         ``(wi, wo)`` when the acceptance test looked it up in the caller's precision (float32),
         else None."""
@@ -361,7 +427,7 @@ class TableRejection:
         if proposal == "majorant":
             keys = ("q", "alias", "bound")
             consts = (slot_of, *(arrays[k] for k in keys), self._major_cos_desc)
-        else:
+        else:  # cosine or a model
             consts = (slot_of, arrays["bound"])
         t = self.table
         if isinstance(wo, jax.core.Tracer) or isinstance(u, jax.core.Tracer):
@@ -379,25 +445,42 @@ class TableRejection:
         pdf = jnp.where(ok, self._pdf(slot_of, arrays, wi, wo_f), 0.0)
         return wi.reshape(*shape, 3), pdf.reshape(shape), None
 
-    def _round_fn(self, proposal: str) -> Any:
+    def _round_fn(self, proposal: Any) -> Any:
         """The proposal function for :func:`_run` (one object per proposal, so that the
         jit cache of :func:`_run_jit` is hit on every call)."""
-        fn = self._runs.get(proposal)
+        key = _proposal_key(proposal)
+        fn = self._runs.get(key)
         if fn is None:
             if proposal == "majorant":
                 fn = partial(_majorant_round, self.geo_major)
-            else:
+            elif proposal == "cosine":
                 fn = partial(_cosine_round, self.geo)
-            self._runs[proposal] = fn
+            else:
+                fn = partial(_model_round, self.geo, proposal)
+            self._runs[key] = fn
         return fn
 
-    def pdf(self, wi: Array, wo: Array, proposal: str, dt: Any) -> Array:
+    def pdf(self, wi: Array, wo: Array, proposal: Any, dt: Any) -> Array:
         slot_of, arrays = self.store(proposal).prepare(self.geo, wo, dt, also_float32=True)
         return self._pdf(slot_of, arrays, wi, wo)
 
     def _pdf(self, slot_of: Array, arrays: dict[str, Array], wi: Array, wo: Array) -> Array:
         t = self.table
         return _pdf_kernel(self.geo, t._spec, t._data, slot_of, arrays["rho"], wi, wo)
+
+
+def _proposal_key(proposal: Any) -> Any:
+    if isinstance(proposal, str):
+        if proposal not in PROPOSALS:
+            raise ParameterError(
+                f"proposal must be 'majorant', 'cosine' or a BRDF model, got {proposal!r}"
+            )
+        return proposal
+    if not (hasattr(proposal, "sample") and hasattr(proposal, "pdf")):
+        raise ParameterError(
+            "proposal must be 'majorant', 'cosine' or a BRDF model with sample and pdf"
+        )
+    return id(proposal)
 
 
 def _run(round_fn, table, consts, wo, u, seeds):
@@ -408,116 +491,6 @@ def _run(round_fn, table, consts, wo, u, seeds):
 
 
 _run_jit = jax.jit(_run, static_argnums=0)
-
-
-class _RangeMax2D:
-    """Maxima of a 2-D array over index rectangles, vectorized over many rectangles.
-
-    A 2-D sparse table: ``levels[k, l, i, j]`` is the maximum of ``a[i : i + 2**k, j : j +
-    2**l]``, so any rectangle is covered by four (overlapping) blocks, O(1) per query. Written
-    here because neither NumPy nor SciPy answers batches of rectangle-maximum queries.
-    """
-
-    def __init__(self, a: np.ndarray) -> None:
-        a = np.asarray(a, np.float64)
-        nr, nc = a.shape
-        kr, kc = nr.bit_length(), nc.bit_length()
-        lv = np.full((kr, kc, nr, nc), -np.inf)
-        lv[0, 0] = a
-        for k in range(kr):
-            if k:
-                h = 1 << (k - 1)
-                lv[k, 0, : nr - h] = np.maximum(lv[k - 1, 0, : nr - h], lv[k - 1, 0, h:])
-            for m in range(1, kc):
-                h = 1 << (m - 1)
-                lv[k, m, :, : nc - h] = np.maximum(lv[k, m - 1, :, : nc - h], lv[k, m - 1, :, h:])
-        self.levels = lv
-
-    def query(self, r0: Any, r1: Any, c0: Any, c1: Any) -> np.ndarray:
-        """Maximum over ``a[r0:r1, c0:c1]`` (integer arrays, non-empty ranges)."""
-        r0, r1, c0, c1 = np.broadcast_arrays(*(np.asarray(x, np.int64) for x in (r0, r1, c0, c1)))
-        k = np.frexp(r1 - r0)[1] - 1  # floor(log2(length)), exact for integers
-        m = np.frexp(c1 - c0)[1] - 1
-        r2, c2 = r1 - (1 << k), c1 - (1 << m)
-        lv = self.levels
-        return np.maximum(
-            np.maximum(lv[k, m, r0, c0], lv[k, m, r2, c0]),
-            np.maximum(lv[k, m, r0, c2], lv[k, m, r2, c2]),
-        )
-
-
-def _axis_cells(ax: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Interpolation cells of an axis: angle ranges ``(lo, hi)`` and their two nodes ``(a, b)``.
-
-    Cells between consecutive nodes, plus the end ranges that the lookup clamps to one node
-    (``a == b``), or, on a periodic axis, the cell that wraps from the last node to the first.
-    """
-    nodes = ax.nodes()
-    n = ax.size
-    lo, hi, a, b = list(nodes[:-1]), list(nodes[1:]), list(range(n - 1)), list(range(1, n))
-    if ax.periodic:
-        lo.append(nodes[-1])
-        hi.append(nodes[0] + (ax.hi - ax.lo))
-        a.append(n - 1)
-        b.append(0)
-    else:
-        if nodes[0] > ax.lo:
-            lo.append(ax.lo), hi.append(nodes[0]), a.append(0), b.append(0)
-        if nodes[-1] < ax.hi or n == 1:
-            lo.append(nodes[-1]), hi.append(ax.hi), a.append(n - 1), b.append(n - 1)
-    return np.asarray(lo), np.asarray(hi), np.asarray(a), np.asarray(b)
-
-
-def _half_diff_ranges(
-    theta_i: tuple[np.ndarray, np.ndarray],
-    dphi: tuple[np.ndarray, np.ndarray],
-    theta_o: tuple[float, float],
-) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """Ranges ``(lo, hi)`` of theta_h and theta_d (radians) over boxes of directions.
-
-    Each box holds ``wi`` with theta_i in ``theta_i`` and an azimuth ``dphi`` away from
-    ``wo``'s, and ``wo`` with theta_o in ``theta_o`` (both above the horizon). The expressions
-    are chosen so that interval arithmetic stays tight where ``wi`` and ``wo`` are nearly
-    opposite (grazing, near the mirror direction), where ``cos theta_h = (cos theta_i +
-    cos theta_o) / |wi + wo|`` evaluated term by term loses everything to cancellation:
-
-    * ``wi . wo = cos(theta_i - theta_o) - sin theta_i sin theta_o (1 - cos dphi)`` and
-      ``cos theta_d = sqrt((1 + wi . wo) / 2)``;
-    * ``tan^2 theta_h = ((sin theta_i - sin theta_o)^2 + 2 sin theta_i sin theta_o
-      (1 + cos dphi)) / (cos theta_i + cos theta_o)^2``.
-    """
-    ti0, ti1 = theta_i
-    t0, t1 = theta_o
-    cp_lo, cp_hi = _cos_range(*dphi)
-    cdel_lo, cdel_hi = _cos_range(ti0 - t1, ti1 - t0)
-    ss_lo, ss_hi = np.sin(ti0) * math.sin(t0), np.sin(ti1) * math.sin(t1)
-    p_lo = np.clip(cdel_lo - ss_hi * (1 - cp_lo), -1.0, 1.0)
-    p_hi = np.clip(cdel_hi - ss_lo * (1 - cp_hi), -1.0, 1.0)
-    td = (np.arccos(np.sqrt((1 + p_hi) / 2)), np.arccos(np.sqrt((1 + p_lo) / 2)))
-    # sin theta_i - sin theta_o over the box (each variable once: exact), squared
-    dlo, dhi = np.sin(ti0) - math.sin(t1), np.sin(ti1) - math.sin(t0)
-    sq_lo = np.where((dlo <= 0) & (dhi >= 0), 0.0, np.minimum(dlo * dlo, dhi * dhi))
-    sq_hi = np.maximum(dlo * dlo, dhi * dhi)
-    num_lo = sq_lo + 2 * ss_lo * (1 + cp_lo)
-    num_hi = sq_hi + 2 * ss_hi * (1 + cp_hi)
-    den_lo = np.cos(ti1) + math.cos(t1)  # cos theta_i + cos theta_o >= 0
-    den_hi = np.cos(ti0) + math.cos(t0)
-    th = (
-        np.arctan2(np.sqrt(np.maximum(num_lo, 0.0)), den_hi),
-        np.arctan2(np.sqrt(np.maximum(num_hi, 0.0)), np.maximum(den_lo, 0.0)),
-    )
-    return th, td
-
-
-def _cos_range(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Range of cos over each interval [lo, hi] (hi - lo <= 2 pi)."""
-    c_lo = np.minimum(np.cos(lo), np.cos(hi))
-    c_hi = np.maximum(np.cos(lo), np.cos(hi))
-    k_max = np.ceil(lo / TWO_PI)  # a multiple of 2 pi inside -> max 1
-    has_max = k_max * TWO_PI <= hi
-    k_min = np.ceil((lo - math.pi) / TWO_PI)
-    has_min = k_min * TWO_PI + math.pi <= hi
-    return np.where(has_min, -1.0, c_lo), np.where(has_max, 1.0, c_hi)
 
 
 @partial(jax.jit, static_argnames=("geo", "spec"))
@@ -610,6 +583,23 @@ def _cosine_round(geo, table, slot_of, bound, wo, up, ua):
     wi = warp.square_to_cosine_hemisphere(up).astype(wo.dtype)
     f = table.f(wi, wo)
     accept = ua * M < _g_of(f) * jnp.pi
+    return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
+
+
+def _model_round(geo, model, table, slot_of, bound, wo, up, ua):
+    """One proposal from ``model`` mixed with cosine sampling and its acceptance test per
+    query: ``((wi, f), accepted)``."""
+    M = jnp.take(bound, jnp.take(slot_of, bucket_of(geo, wo)))
+    eps = _PROPOSAL_EPS
+    use_cos = up[..., 0] < eps
+    u0 = jnp.where(use_cos, up[..., 0] / eps, (up[..., 0] - eps) / (1 - eps))
+    uu = jnp.clip(jnp.stack([u0, up[..., 1]], -1), 0.0, 1.0 - 1e-7)
+    wi_c = warp.square_to_cosine_hemisphere(uu).astype(wo.dtype)
+    wi_m = model.sample(wo, uu).wi.astype(wo.dtype)
+    wi = jnp.where(use_cos[..., None], wi_c, wi_m)
+    q = eps * jnp.maximum(wi[..., 2], 0.0) / jnp.pi + (1 - eps) * model.pdf(wi, wo).astype(wo.dtype)
+    f = table.f(wi, wo)
+    accept = ua * M * q < _g_of(f) * wi[..., 2]
     return (wi, f.astype(wi.dtype)), accept & (wi[..., 2] > 0)
 
 
