@@ -11,6 +11,10 @@ switched off by patching the module-level helper before anything is traced:
     the same in :mod:`gonio.brdf.sampling` (the CDF binary search of inversion).
 ``atan2``
     the float32 polynomial :func:`gonio.brdf.lookup.atan2` replaced by ``jnp.arctan2``.
+``materialize-direction``
+    the same identity in :mod:`gonio.brdf.table_buckets` (the direction built in a sampled cell).
+``cos-sin-series``
+    the cell azimuth's Taylor series replaced by ``jnp.cos``/``jnp.sin``.
 
 Every child times, on the same 1e6 random float32 queries as ``bench_throughput.py`` (its
 MERL-resolution table), the jitted lookup ``f`` and sampling by inversion and alias, each the
@@ -35,7 +39,14 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results"
 OPS = ("lookup", "inversion", "alias")
-VARIANTS = ("base", "materialize-lookup", "materialize-cdf", "atan2")
+VARIANTS = (
+    "base",
+    "materialize-lookup",
+    "materialize-cdf",
+    "atan2",
+    "materialize-direction",
+    "cos-sin-series",
+)
 
 
 def _switch_off(variant: str) -> None:
@@ -54,6 +65,15 @@ def _switch_off(variant: str) -> None:
     elif variant == "atan2":
         lookup.atan2 = jnp.arctan2
         table_buckets.atan2 = jnp.arctan2
+    elif variant == "materialize-direction":
+        table_buckets.materialize = identity
+    elif variant == "cos-sin-series":
+
+        def cos_sin(n_p, col, rx, dtype):
+            phi = (col.astype(dtype) + rx) * (2 * jnp.pi / n_p)
+            return jnp.cos(phi), jnp.sin(phi)
+
+        table_buckets._cos_sin_in_column = cos_sin
 
 
 def child(variant: str, batch: int, calls: int) -> dict[str, float]:
@@ -88,19 +108,21 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=2, help="ABBA alternations of the variants")
     ap.add_argument("--calls", type=int, default=5, help="timed calls per figure (median)")
     ap.add_argument("--batch", type=float, default=1e6, help="queries per call (default 1e6)")
+    ap.add_argument("--only", nargs="*", help="variants to run (default: all)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     batch = int(args.batch)
     if args.child:
         print(json.dumps(child(args.child, batch, args.calls)))
         return
+    variants = ("base", *args.only) if args.only else VARIANTS
     rows = []
     env = dict(
         os.environ,
         PYTHONPATH=os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]),
     )
     for r in range(args.rounds):
-        for variant in VARIANTS if r % 2 == 0 else VARIANTS[::-1]:
+        for variant in variants if r % 2 == 0 else variants[::-1]:
             cmd = [sys.executable, __file__, "--child", variant, "--batch", str(batch)]
             out = subprocess.run(
                 [*cmd, "--calls", str(args.calls)], env=env, capture_output=True, text=True
@@ -129,7 +151,7 @@ def main() -> None:
     print(f"\n| switched off (batch {batch:.0e}) | " + " | ".join(OPS) + " |")
     print("|---" + "|---:" * len(OPS) + "|")
     print("| none (M/s) | " + " | ".join(f"{med('base', op):.2f}" for op in OPS) + " |")
-    for v in VARIANTS[1:]:
+    for v in variants[1:]:
         print(
             f"| {v} (ratio) | "
             + " | ".join(f"{med(v, op) / med('base', op):.2f}" for op in OPS)

@@ -200,7 +200,7 @@ def _grid_distribution(stacks: dict[str, np.ndarray]) -> dict[str, Distribution2
 @partial(jax.jit, static_argnames=("geo",))
 def _inversion_kernel(geo, slot_of, dist, cos_desc, omega, wo, u):
     s = jnp.take(slot_of, bucket_of(geo, wo))
-    (row, col), (ry, rx), p = dist.sample_cell(u, s)
+    (row, col), (ry, rx), p = dist.sample_cell(u, s, clip=False)  # u: clipped by the caller
     wi = direction_in_cell(geo, row, col, ry, rx, cos_desc, wo)
     return wi, p / jnp.take(omega, row)
 
