@@ -8,11 +8,14 @@ code, ``--rounds`` times each, in ABBA order. Every child times, on the same 1e6
 queries as ``bench_throughput.py`` (its MERL-resolution Lambert + Torrance-Sparrow table), the
 jitted lookup ``f`` and sampling by inversion, alias and rejection (default majorant proposal;
 called eagerly and under ``jit``), each the median of ``--calls`` calls after warm-up, in
-millions per second.
+millions per second. With ``--clock cpu`` a call is timed by the CPU time of the child process
+(all threads) instead of wall time: on a machine shared with other work it counts what the call
+costs rather than how long it waited for a core (the figure is then CPU-seconds per query, not a
+rate anyone sees; compare ratios).
 
 Writes benchmarks/results/table_ab.csv (one row per child and operation) and prints a Markdown
 table with each side's range over the rounds and the ratio of their medians.
-Run: .venv/bin/python benchmarks/ab_table.py --ref COMMIT [--rounds R] [--calls K]
+Run: .venv/bin/python benchmarks/ab_table.py --ref COMMIT [--rounds R] [--calls K] [--clock cpu]
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -33,7 +37,20 @@ RESULTS = HERE / "results"
 OPS = ("lookup", "inversion", "alias", "rejection", "rejection-jit")
 
 
-def child(batch: int, calls: int) -> dict[str, float]:
+def median_cpu_time(fn, repeats: int) -> float:
+    """Median process CPU time (s, all threads) of ``fn()`` after one warm-up call."""
+    import jax
+
+    jax.block_until_ready(fn())
+    times = []
+    for _ in range(repeats):
+        c = time.process_time()
+        jax.block_until_ready(fn())
+        times.append(time.process_time() - c)
+    return statistics.median(times)
+
+
+def child(batch: int, calls: int, clock: str = "wall") -> dict[str, float]:
     """Throughput (M/s) of each operation with whichever gonio is importable."""
     import jax
     import numpy as np
@@ -56,13 +73,15 @@ def child(batch: int, calls: int) -> dict[str, float]:
     for op in OPS:
         fn = calls_of.get(op, lambda op=op: table.sample(wo, u, method=op))
         jax.block_until_ready(fn())  # compile and build the sampling structures
-        rates[op] = batch / median_time(fn, calls) / 1e6  # after one more warm-up call
+        timer = median_cpu_time if clock == "cpu" else median_time
+        rates[op] = batch / timer(fn, calls) / 1e6  # after one more warm-up call
     return rates
 
 
-def run_child(src: Path, batch: int, calls: int) -> dict[str, float]:
+def run_child(src: Path, batch: int, calls: int, clock: str = "wall") -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(src))
     cmd = [sys.executable, __file__, "--child", "--batch", str(batch), "--calls", str(calls)]
+    cmd += ["--clock", clock]
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     if out.returncode != 0:
         raise SystemExit(f"benchmark child for {src} failed: {out.stderr.strip().splitlines()[-1]}")
@@ -74,12 +93,15 @@ def main() -> None:
     ap.add_argument("--ref", help="commit to compare against (required unless --child)")
     ap.add_argument("--rounds", type=int, default=3, help="alternations of the two sides")
     ap.add_argument("--calls", type=int, default=9, help="timed calls per figure (median)")
+    ap.add_argument(
+        "--clock", choices=("wall", "cpu"), default="wall", help="time calls by wall or CPU time"
+    )
     ap.add_argument("--batch", type=float, default=1e6, help="queries per call (default 1e6)")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     batch = int(args.batch)
     if args.child:
-        print(json.dumps(child(batch, args.calls)))
+        print(json.dumps(child(batch, args.calls, args.clock)))
         return
     if not args.ref:
         ap.error("--ref COMMIT is required")
@@ -103,7 +125,7 @@ def main() -> None:
                 # ABBA order: with a fixed order a steady drift of the machine's speed over
                 # the run would favour whichever side goes first in every round
                 for side, src in sides if r % 2 == 0 else sides[::-1]:
-                    rates = run_child(src, batch, args.calls)
+                    rates = run_child(src, batch, args.calls, args.clock)
                     print(
                         f"round {r + 1} {side}: "
                         + ", ".join(f"{k} {v:.2f}" for k, v in rates.items())
@@ -121,7 +143,10 @@ def main() -> None:
         w = csv.DictWriter(fh, fieldnames=["round", "side", "op", "rate_M_per_s"])
         w.writeheader()
         w.writerows(rows)
-    print(f"\n| M/s (batch {batch:.0e}) | {args.ref} | working tree ({head}+) | ratio of medians |")
+    print(
+        f"\n| M/s ({args.clock} clock, batch {batch:.0e}) | {args.ref} | working tree ({head}+) "
+        "| ratio of medians |"
+    )
     print("|---|---:|---:|---:|")
     for op in OPS:
         ref = [float(x["rate_M_per_s"]) for x in rows if x["op"] == op and x["side"] == "ref"]

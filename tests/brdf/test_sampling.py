@@ -21,9 +21,7 @@ from gonio.brdf.sampling import (
     Distribution1D,
     Distribution2D,
     hash_uniform,
-    rejection_sample,
     rejection_sample_traced,
-    rejection_step,
     seeds_from_u,
 )
 from gonio.brdf.tabulated import Axis, TabulatedBRDF
@@ -157,26 +155,9 @@ def _cubic_round(dummy, up, ua):
     return x[:, None], ua < x * x
 
 
-def test_rejection_sample_generic():
-    """Target density 3 x^2 on [0, 1) from uniform proposals; independent of chunking."""
-    step = rejection_step(_cubic_round)
-    n = 300_000
-    u = np.random.default_rng(10).random((n, 2))
-    seeds = seeds_from_u(jnp.asarray(u))
-    x, ok, rounds = rejection_sample(step, (np.zeros(n),), u, seeds)
-    assert bool(np.all(np.asarray(ok)))
-    x = np.asarray(x)[:, 0]
-    counts = np.histogram(x, bins=20, range=(0, 1))[0]
-    edges = np.linspace(0, 1, 21)
-    assert _pearson(counts, np.diff(edges**3)) > SIDAK_DISCRETE
-    assert np.asarray(rounds).mean() == pytest.approx(3.0, rel=0.02)  # acceptance 1/3
-    x2, _, _ = rejection_sample(step, (np.zeros(n),), u, seeds, chunk=1024)
-    np.testing.assert_array_equal(np.asarray(x2)[:, 0], x)
-
-
 def _sequential_reference(u, seeds, max_rounds):
-    """Query by query, proposal by proposal: what rejection_sample must return for the
-    target 3 x^2 (the counters of rejection_step's documentation)."""
+    """Query by query, proposal by proposal: what rejection_sample_traced must return for the
+    target 3 x^2 (the counters of its documentation)."""
     n = u.shape[0]
     x = np.zeros(n)
     rounds = np.zeros(n, int)
@@ -198,25 +179,6 @@ def _sequential_reference(u, seeds, max_rounds):
 
 
 @pytest.mark.parametrize("max_rounds", [1, 3, 4096])
-def test_rejection_sample_matches_sequential_rounds(max_rounds):
-    """Chunks, padding and the several-proposals-per-call tail change nothing: every query
-    gets exactly the proposal a query-by-query loop accepts (or its last one, failed)."""
-    step = rejection_step(_cubic_round)
-    n = 5000
-    u = np.random.default_rng(11).random((n, 2))
-    seeds = np.asarray(seeds_from_u(jnp.asarray(u)))
-    x, ok, rounds = rejection_sample(
-        step, (np.zeros(n),), u, seeds, max_rounds=max_rounds, chunk=1024
-    )
-    x_ref, ok_ref, rounds_ref = _sequential_reference(u, seeds, min(max_rounds, 60))
-    if max_rounds > 60:  # acceptance 1/3: (2/3)^60 ~ 3e-11, no query runs longer
-        assert ok_ref.all()
-    np.testing.assert_array_equal(np.asarray(ok), ok_ref)
-    np.testing.assert_array_equal(np.asarray(rounds), rounds_ref)
-    np.testing.assert_array_equal(np.asarray(x)[:, 0], x_ref)
-
-
-@pytest.mark.parametrize("max_rounds", [1, 3, 4096])
 @pytest.mark.parametrize("n", [700, 5000])
 def test_rejection_sample_traced_matches_sequential_rounds(max_rounds, n):
     """Under jit the compacting while loop (lanes of pending queries, several proposals each
@@ -231,22 +193,6 @@ def test_rejection_sample_traced_matches_sequential_rounds(max_rounds, n):
     np.testing.assert_array_equal(np.asarray(ok), ok_ref)
     np.testing.assert_array_equal(np.asarray(rounds), rounds_ref)
     np.testing.assert_array_equal(np.asarray(x)[:, 0], x_ref)
-
-
-@pytest.mark.parametrize(
-    ("shape", "dtype"),
-    [((1000, 3), np.float32), ((7,), bool), ((0, 3), np.float64), ((5,), np.int32)],
-)
-def test_aligned_host_buffers(shape, dtype):
-    """rejection_sample's host result buffers start on a 64-byte boundary (which XLA's CPU
-    client adopts without a copy) and have the requested shape and dtype."""
-    from gonio.brdf.sampling import _HOST_ALIGN, _aligned_empty
-
-    for _ in range(5):  # several allocations: malloc's own offsets vary
-        a = _aligned_empty(shape, dtype)
-        assert a.shape == shape and a.dtype == np.dtype(dtype)
-        assert a.size == 0 or a.ctypes.data % _HOST_ALIGN == 0  # (an empty one has no data)
-        assert a.flags.c_contiguous and a.flags.writeable
 
 
 def test_bad_weights():
@@ -327,9 +273,9 @@ def test_rejection_chi2_majorant(glossy, theta_o):
 def test_majorant_bounds_g_cos_and_acceptance(glossy):
     """The per-cell bound of the majorant proposal is never exceeded by ``g cos`` for outgoing
     directions anywhere in a bucket, and it is tight enough to accept often."""
-    from gonio.brdf._table_sampling import _cell_of
+    from gonio.brdf.table_buckets import cell_of as _cell_of
 
-    smp = glossy._sampler()
+    smp = glossy._sampler().rejection
     geo = smp.geo_major
     rng = np.random.default_rng(7)
     cos_asc = jnp.asarray(smp.cos_desc_major[::-1].copy())
@@ -537,10 +483,9 @@ def test_sampling_under_jit_builds_every_bucket():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_rejection_under_jit_matches_eager(dtype):
-    """Traced, rejection runs as a compacting while loop on the device
-    (:func:`rejection_sample_traced`) instead of the host's streamed calls: the same proposals
-    (same counters), so the same samples up to float rounding (XLA fuses the two programs
-    differently)."""
+    """Traced or eager, rejection runs the same compacting while loop
+    (:func:`rejection_sample_traced`): the same proposals (same counters), so the same samples
+    up to float rounding (XLA fuses the two programs differently)."""
     t = TabulatedBRDF.from_model(_GGXLike(alpha=0.3), axes=_axes(12), sampling_res=(4, 16, 32))
     rng = np.random.default_rng(3)
     wo = np.asarray(frames.spherical_to_direction(rng.uniform(0, 1.4, 500), 0.3), dtype)

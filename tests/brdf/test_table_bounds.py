@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gonio.brdf import frames
-from gonio.brdf._table_sampling import _half_diff_ranges, _RangeMax2D
+from gonio.brdf.table_bounds import RangeMax2D as _RangeMax2D
+from gonio.brdf.table_bounds import half_diff_ranges as _half_diff_ranges
 
 HALF_PI = math.pi / 2
 

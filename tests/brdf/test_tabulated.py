@@ -233,7 +233,7 @@ def test_mask_never_leaks(interp, param, axes_of):
 
 def test_corner_bits_are_each_corners_mask():
     """The per-cell corner validity the lookup gathers once is the mask at every corner."""
-    from gonio.brdf.tabulated import _corner_bits
+    from gonio.brdf.lookup import corner_bits as _corner_bits
 
     for axes in (small_iso_axes(), small_aniso_axes(), _one_node_axes()):
         rng = np.random.default_rng(len(axes))

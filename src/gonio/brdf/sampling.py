@@ -1,5 +1,5 @@
 """Generic sampling building blocks: piecewise-constant 1-D/2-D distributions, alias tables and
-rejection sampling.
+a rejection-sampling loop.
 
 Every structure may hold a *batch* of distributions (weights of shape ``(..., n)``); a query then
 names the distribution it draws from with ``which`` (an integer array, flat index into the batch
@@ -9,7 +9,11 @@ arrays are derived from the float64 ones, and every reported probability is comp
 same arrays the sampler uses, so pdfs stay consistent with samples in either precision).
 
 Used by :class:`gonio.brdf.tabulated.TabulatedBRDF` (sampling f cos over incident directions)
-and by the renderer (environment-map importance sampling).
+and by the renderer (environment-map importance sampling). :class:`Distribution1D` and
+:class:`Distribution2D` are registered pytrees (their leaves are the JAX
+arrays the sampler reads), so they can be passed to ``jax.jit`` as arguments; the builders
+:func:`normalized_cdf`, :func:`vose_alias` and :func:`alias_arrays` are public for callers that
+stack many distributions themselves.
 
 References: Pharr, Jakob & Humphreys, *Physically Based Rendering* 4th ed., sections A.1 (alias
 method), A.5 (sampling piecewise-constant functions); Vose, "A linear algorithm for generating
@@ -18,9 +22,7 @@ random numbers with a given distribution", IEEE TSE 1991.
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Callable
-from functools import partial
 from typing import Any
 
 import jax
@@ -77,8 +79,9 @@ def _check_weights(weights: Any, what: str, min_dims: int = 1) -> np.ndarray:
     return w
 
 
-def _normalized_cdf(w: np.ndarray) -> np.ndarray:
-    """``(..., n) -> (..., n + 1)`` CDF from 0 to exactly 1; an all-zero row becomes uniform."""
+def normalized_cdf(w: np.ndarray) -> np.ndarray:
+    """``(..., n) -> (..., n + 1)`` CDF from 0 to exactly 1 (float64, host); an all-zero row
+    becomes uniform. ``w`` must be finite and non-negative."""
     total = w.sum(axis=-1, keepdims=True)
     n = w.shape[-1]
     w = np.where(total > 0, w, 1.0)
@@ -101,7 +104,8 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
     step = 1 << max(0, (n - 1).bit_length() - 1) if n > 1 else 0
     # base and each step's index are stored (gonio.brdf._xla.materialize): otherwise XLA
     # recomputes them inside every later step's gather loop and keeps every step's gathered
-    # values alive to the end (together ~3x slower)
+    # values alive to the end (without it inversion sampling runs at 0.67x: same-run A/B,
+    # benchmarks/ab_xla.py)
     if step:
         (base,) = materialize([jnp.broadcast_to(base, u.shape)], u)
     while step:
@@ -115,6 +119,7 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
     return idx
 
 
+@jax.tree_util.register_pytree_node_class
 class Distribution1D:
     """Piecewise-constant density on ``[0, 1)`` with ``n`` equal bins (or a batch of them).
 
@@ -124,18 +129,34 @@ class Distribution1D:
 
     Attributes
     ----------
-    probs : ``(..., n)`` float64 bin probabilities.
-    cdf : ``(..., n + 1)`` float64.
+    probs : ``(..., n)`` float64 bin probabilities (NumPy).
+    cdf : ``(..., n + 1)`` float64 (NumPy).
     """
 
     def __init__(self, weights: Any) -> None:
         w = _check_weights(weights, "Distribution1D")
         self.batch_shape = w.shape[:-1]
         self.n = w.shape[-1]
-        self.cdf = _normalized_cdf(w)
-        self.probs = np.diff(self.cdf, axis=-1)
-        flat = self.cdf.reshape(-1)
+        flat = normalized_cdf(w).reshape(-1)
         self._cdf = {jnp.float64: jnp.asarray(flat), jnp.float32: jnp.asarray(flat, jnp.float32)}
+
+    def tree_flatten(self) -> tuple[tuple[Array, Array], tuple[Any, ...]]:
+        return (self._cdf[jnp.float64], self._cdf[jnp.float32]), (self.batch_shape, self.n)
+
+    @classmethod
+    def tree_unflatten(cls, aux: tuple[Any, ...], leaves: Any) -> Distribution1D:
+        obj = object.__new__(cls)
+        obj.batch_shape, obj.n = aux
+        obj._cdf = {jnp.float64: leaves[0], jnp.float32: leaves[1]}
+        return obj
+
+    @property
+    def cdf(self) -> np.ndarray:
+        return np.asarray(self._cdf[jnp.float64]).reshape(*self.batch_shape, self.n + 1)
+
+    @property
+    def probs(self) -> np.ndarray:
+        return np.diff(self.cdf, axis=-1)
 
     def _arrays(self, dtype: Any) -> Array:
         return self._cdf[jnp.float64 if jnp.dtype(dtype) == jnp.float64 else jnp.float32]
@@ -147,10 +168,15 @@ class Distribution1D:
             return jnp.zeros(shape, jnp.int32)
         return jnp.asarray(which, jnp.int32) * (self.n + 1)
 
-    def sample_discrete(self, u: Any, which: Any = None) -> tuple[Array, Array, Array]:
-        """Draw a bin: ``(index int32, u_remapped in [0, 1), probability of the bin)``."""
-        u = _float_u(u)
-        return _sample_discrete_cdf(self._arrays(u.dtype), self._base(which, u.shape), self.n, u)
+    def sample_discrete(
+        self, u: Any, which: Any = None, *, clip: bool = True
+    ) -> tuple[Array, Array, Array]:
+        """Draw a bin: ``(index int32, u_remapped in [0, 1), probability of the bin)``.
+
+        ``clip=False``: ``u`` is already a float array in [0, 1) (saves a pass over it).
+        """
+        u = _float_u(u) if clip else u
+        return sample_discrete_cdf(self._arrays(u.dtype), self._base(which, u.shape), self.n, u)
 
     def sample(self, u: Any, which: Any = None) -> tuple[Array, Array, Array]:
         """Draw ``x in [0, 1)``: ``(x, density at x, bin index)``."""
@@ -176,7 +202,7 @@ class Distribution1D:
         return jnp.take(cdf, base + k + 1, mode="clip") - jnp.take(cdf, base + k, mode="clip")
 
 
-def _sample_discrete_cdf(cdf: Array, base: Array, n: int, u: Array) -> tuple[Array, Array, Array]:
+def sample_discrete_cdf(cdf: Array, base: Array, n: int, u: Array) -> tuple[Array, Array, Array]:
     k = find_interval(cdf, base, n, u)
     lo = jnp.take(cdf, base + k, mode="clip")
     hi = jnp.take(cdf, base + k + 1, mode="clip")
@@ -185,10 +211,12 @@ def _sample_discrete_cdf(cdf: Array, base: Array, n: int, u: Array) -> tuple[Arr
     return k, jnp.clip(r, 0.0, _one_minus_eps(u.dtype)), p
 
 
+@jax.tree_util.register_pytree_node_class
 class Distribution2D:
     """Piecewise-constant density on ``[0, 1)^2`` over an ``ny x nx`` grid (or a batch of them),
     sampled by marginal (rows, ``u[..., 0]``) then conditional (columns, ``u[..., 1]``) CDF
-    inversion.
+    inversion. Row ``iy`` covers ``y in [iy / ny, (iy + 1) / ny)``, column ``ix`` covers ``x``
+    likewise.
 
     Parameters
     ----------
@@ -201,7 +229,21 @@ class Distribution2D:
         self.ny, self.nx = w.shape[-2:]
         self.marginal = Distribution1D(w.sum(axis=-1))
         self.conditional = Distribution1D(w)
-        self.probs = self.marginal.probs[..., :, None] * self.conditional.probs
+
+    def tree_flatten(self) -> tuple[tuple[Distribution1D, Distribution1D], tuple[Any, ...]]:
+        return (self.marginal, self.conditional), (self.batch_shape, self.ny, self.nx)
+
+    @classmethod
+    def tree_unflatten(cls, aux: tuple[Any, ...], leaves: Any) -> Distribution2D:
+        obj = object.__new__(cls)
+        obj.batch_shape, obj.ny, obj.nx = aux
+        obj.marginal, obj.conditional = leaves
+        return obj
+
+    @property
+    def probs(self) -> np.ndarray:
+        """``(..., ny, nx)`` float64 cell probabilities (NumPy)."""
+        return self.marginal.probs[..., :, None] * self.conditional.probs
 
     def sample(self, u: Any, which: Any = None) -> tuple[Array, Array, tuple[Array, Array]]:
         """``u (..., 2) -> (xy (..., 2) in [0, 1)^2, density on the unit square, (iy, ix))``."""
@@ -212,13 +254,18 @@ class Distribution2D:
         return jnp.stack([x, y], -1), p * (self.nx * self.ny), (iy, ix)
 
     def sample_cell(
-        self, u: Any, which: Any = None
+        self, u: Any, which: Any = None, *, clip: bool = True
     ) -> tuple[tuple[Array, Array], tuple[Array, Array], Array]:
-        """Draw a cell: ``((iy, ix), (ry, rx) remapped uniforms in the cell, cell probability)``."""
-        u = _float_u(u)
-        iy, ry, py = self.marginal.sample_discrete(u[..., 0], which)
+        """Draw a cell: ``((iy, ix), (ry, rx) remapped uniforms in the cell, cell probability)``.
+
+        ``clip=False``: ``u`` is already a float array in [0, 1)^2. Clipping it again inside a
+        kernel makes the inversion kernel of tables take 1.3x the CPU time on XLA's CPU backend
+        (128 against 96 ms per 10^6 samples in a same-run A/B).
+        """
+        u = _float_u(u) if clip else u
+        iy, ry, py = self.marginal.sample_discrete(u[..., 0], which, clip=False)
         row = iy if which is None else jnp.asarray(which, jnp.int32) * self.ny + iy
-        ix, rx, px = self.conditional.sample_discrete(u[..., 1], row)
+        ix, rx, px = self.conditional.sample_discrete(u[..., 1], row, clip=False)
         return (iy, ix), (ry, rx), py * px
 
     def cell_prob(self, iy: Any, ix: Any, which: Any = None, dtype: Any = jnp.float64) -> Array:
@@ -241,7 +288,7 @@ class Distribution2D:
         return jnp.where(inside, p, 0.0)
 
 
-def _vose(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def vose_alias(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vose's alias construction for one normalized distribution ``p (n,)``.
 
     A plain Python loop: the construction is inherently sequential (two work lists), runs once per
@@ -266,6 +313,17 @@ def _vose(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(q), np.asarray(alias, dtype=np.int32)
 
 
+def alias_arrays(w: np.ndarray) -> dict[str, np.ndarray]:
+    """Alias table of the weights ``w (n,)`` (positive sum, host): thresholds ``q (n,)``,
+    ``alias (n,)`` int32 and the probabilities ``p (n,)`` the table *realizes* (an outcome's
+    mass collected from its own column and from the columns aliasing to it)."""
+    q, alias = vose_alias(w / w.sum())
+    n = w.size
+    realized = q / n
+    np.add.at(realized, alias, (1.0 - q) / n)
+    return {"q": q, "alias": alias, "p": realized}
+
+
 class AliasTable:
     """Walker/Vose alias table: draws one of ``n`` outcomes in O(1) (or a batch of tables).
 
@@ -287,7 +345,7 @@ class AliasTable:
         q = np.empty_like(p)
         alias = np.empty(p.shape, np.int32)
         for r in range(p.shape[0]):
-            q[r], alias[r] = _vose(p[r])
+            q[r], alias[r] = vose_alias(p[r])
         self.threshold = q.reshape(w.shape)
         self.alias = alias.reshape(w.shape)
         # the realized probabilities, recomputed from the table itself
@@ -435,159 +493,11 @@ def hash_uniform(seed: Array, counter: int | Array, dtype: Any = jnp.float32) ->
 
 def _later_uniforms(seeds: Array, rounds: Array, dtype: Any) -> tuple[Array, Array]:
     """``(u_prop (m, 2), u_acc (m,))`` of proposal number ``rounds`` (1, 2, ...) of each query:
-    :func:`hash_uniform` counters ``3r, 3r + 1`` and ``3r + 2`` (see :func:`rejection_step`)."""
+    :func:`hash_uniform` counters ``3r, 3r + 1`` and ``3r + 2`` (see
+    :func:`rejection_sample_traced`)."""
     r = jnp.asarray(rounds, jnp.uint32)
     up = jnp.stack([hash_uniform(seeds, 3 * r, dtype), hash_uniform(seeds, 3 * r + 1, dtype)], -1)
     return up, hash_uniform(seeds, 3 * r + 2, dtype)
-
-
-class RejectionStep:
-    """The jit-compiled proposal rounds that :func:`rejection_sample` runs (see
-    :func:`rejection_step`): ``first`` for every query's first proposal, drawn from the
-    caller's ``u``, and ``later`` for the hashed ones after it. Two functions rather than one
-    with a select: XLA's CPU backend then never computes hashes it throws away, and the
-    proposal fuses as it does alone (about 20 % faster)."""
-
-    def __init__(self, round_fn: Callable[..., tuple[Array, Array]]) -> None:
-        def first(inputs, u, seeds, consts):
-            return round_fn(*inputs, u, hash_uniform(seeds, 2, u.dtype), *consts)
-
-        def later(dtype, inputs, seeds, rounds, consts):
-            return round_fn(*inputs, *_later_uniforms(seeds, rounds, dtype), *consts)
-
-        self.first = jax.jit(first)
-        # one function per dtype of u: a static keyword argument would take jit's slow
-        # dispatch path on every call
-        self._later = {
-            jnp.dtype(dt): jax.jit(partial(later, jnp.dtype(dt)))
-            for dt in (jnp.float32, jnp.float64)
-        }
-
-    def later(self, inputs, seeds, rounds, consts, dtype):
-        """A proposal round after the first: ``rounds`` is its number (1, 2, ...)."""
-        return self._later[jnp.dtype(dtype)](inputs, seeds, rounds, consts)
-
-
-def rejection_step(round_fn: Callable[..., tuple[Array, Array]]) -> RejectionStep:
-    """Wrap a one-proposal function into the jit-compiled steps :func:`rejection_sample` runs.
-
-    ``round_fn(*inputs, u_prop (m, 2), u_acc (m,), *consts) -> (x, accepted (m,))`` draws one
-    proposal per query from ``u_prop`` and accepts it when ``u_acc`` is below the acceptance
-    ratio; ``x`` is an array ``(m, ...)`` or a tuple of them (a tuple rather than one
-    concatenated array: XLA fuses a concatenation's producers into it, several times slower).
-    Query ``i``'s ``r``-th proposal uses the caller's ``u`` when ``r = 0`` and
-    :func:`hash_uniform` counters ``3r, 3r + 1`` after that; its acceptance test uses ``3r + 2``
-    (counter 2 in the first round). Keep the returned step and reuse it: each new one compiles
-    again.
-    """
-    return RejectionStep(round_fn)
-
-
-_TAIL_LANES = 2048  # below this many pending queries, each gets several proposals per call
-_IN_FLIGHT = 3  # calls dispatched ahead of the one whose results the host is reading
-
-
-def _padded_size(m: int) -> int:
-    """1024 times the smallest power of 4 that holds ``m`` rows (few shapes to compile)."""
-    size = 1024
-    while size < m:
-        size *= 4
-    return size
-
-
-def _pieces(m: int, chunk: int) -> list[tuple[int, int]]:
-    """``(start, stop)`` ranges covering ``m`` queries in calls of at most ``chunk``, each
-    padded to :func:`_padded_size` with little waste: a remainder is cut into smaller pieces
-    rather than padded by more than a quarter (every padded row is a wasted proposal)."""
-    out = []
-    start = 0
-    while start < m:
-        left = m - start
-        size = min(chunk, _padded_size(left))
-        if size > left and size > 1024 and size - left > left // 3:
-            size //= 4  # e.g. 17000 left: 16384 now and 616 next, not one 65536 call
-        stop = min(m, start + size)
-        out.append((start, stop))
-        start = stop
-    return out
-
-
-_HOST_ALIGN = 64  # bytes: XLA's CPU client adopts host arrays aligned to this without a copy
-
-
-def _aligned_empty(shape: tuple[int, ...], dtype: Any) -> np.ndarray:
-    """``np.empty(shape, dtype)`` starting on a ``_HOST_ALIGN``-byte boundary (unless empty).
-
-    ``jax.device_put`` of such an array on the CPU backend wraps its memory instead of copying
-    it (for :func:`rejection_sample`'s results, about 2.5 ms less CPU per 10^6 samples). NumPy
-    has no aligned allocator (large blocks come from ``mmap`` 16 bytes past a page boundary),
-    hence the over-allocation and offset.
-    """
-    dtype = np.dtype(dtype)
-    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-    raw = np.empty(nbytes + _HOST_ALIGN, np.uint8)
-    start = -raw.ctypes.data % _HOST_ALIGN
-    return raw[start : start + nbytes].view(dtype).reshape(shape)
-
-
-def _rows(a: np.ndarray) -> np.ndarray:
-    """A view of a C-contiguous ``a (n, ...)`` as a 1-D array of opaque rows: NumPy scatters
-    those about twice as fast as the rows of a 2-D array."""
-    if a.ndim == 1:
-        return a
-    width = a.dtype.itemsize * int(np.prod(a.shape[1:]))
-    return a.reshape(a.shape[0], -1).view(np.dtype((np.void, width)))[:, 0]
-
-
-def _take_rows(a: np.ndarray, idx: Any) -> np.ndarray:
-    """``a[idx]`` for a slice or an index array."""
-    if isinstance(idx, slice):
-        return a[idx]
-    return np.take(a, idx, axis=0)  # for rows, about twice as fast as a[idx]
-
-
-def rejection_sample(
-    step: RejectionStep,
-    inputs: tuple[Any, ...],
-    u: Any,
-    seeds: Any,
-    max_rounds: int = 4096,
-    consts: tuple[Any, ...] = (),
-    chunk: int = 1 << 16,
-) -> tuple[Any, Array, np.ndarray]:
-    """Run a vectorized rejection sampler until every query has accepted a proposal.
-
-    Parameters
-    ----------
-    step : from :func:`rejection_step`.
-    inputs : per-query arrays with leading dimension N (e.g. the outgoing directions).
-    u : ``(N, 2)`` the caller's uniforms, used for the first proposals.
-    seeds : ``(N,)`` uint32 seeds of the further random numbers (:func:`seeds_from_u`,
-        :func:`seeds_from_rng`).
-    max_rounds : queries still rejected after this many proposals fail (``ok`` False).
-    consts : extra arguments passed unchanged to every call.
-    chunk : largest batch per call (1024 times a power of 4); smaller batches are padded to
-        1024 times a power of 4, so only a few shapes are ever compiled. Batches of about 65536
-        keep a proposal's intermediates in cache (1e6 at once runs about 1.5x slower on CPU).
-
-    Returns
-    -------
-    x : ``(N, ...)`` accepted proposals, as the step returns them (array or tuple of arrays;
-        the last proposal where failed).
-    ok : ``(N,)`` bool.
-    rounds : ``(N,)`` int32 NumPy array, the number of proposals each query used.
-
-    Calls of up to ``chunk`` proposals are streamed (see ``_RejectionRun``): first proposals
-    for the batch's rows in order, and further proposals for rejected queries as soon as a
-    chunk of them is waiting; when the batch is done and fewer than ``_TAIL_LANES`` queries
-    are left, each gets its next several proposals in one call and keeps the first accepted.
-    The total work is about ``N / acceptance`` proposals, and the result is exactly that of
-    query-by-query rounds, whatever the chunking.
-    """
-    inputs = tuple(np.asarray(a) for a in inputs)
-    u = np.asarray(u)
-    seeds = np.asarray(seeds)
-    return _RejectionRun(step, inputs, u, seeds, max_rounds, consts, chunk).run()
 
 
 def rejection_sample_traced(
@@ -597,15 +507,23 @@ def rejection_sample_traced(
     seeds: Array,
     max_rounds: int = 4096,
 ) -> tuple[Any, Array, Array]:
-    """:func:`rejection_sample` for traced inputs (inside ``jax.jit``): the same samples, the
-    same ``(x, ok, rounds)``, from a ``lax.while_loop`` on the device.
+    """Run a vectorized rejection sampler until every query has accepted a proposal (or used
+    ``max_rounds``): one ``lax.while_loop``, traceable, called under ``jax.jit``.
 
-    ``round_fn(*inputs, u_prop, u_acc)`` is the unwrapped proposal function of
-    :func:`rejection_step`. Every query's first proposal is made in one pass; after that each
-    iteration gathers the pending queries into a fixed number of lanes (an eighth of the
-    batch, at least 1024) and, when fewer are pending than there are lanes, gives each of them
-    several consecutive proposals, keeping the first accepted. Proposals depend only on the
-    query's seed and counter, so the result is that of query-by-query rounds.
+    ``round_fn(*inputs, u_prop (m, 2), u_acc (m,)) -> (x, accepted (m,))`` draws one proposal
+    per query from ``u_prop`` and accepts it when ``u_acc`` is below the acceptance ratio; ``x``
+    is an array ``(m, ...)`` or a tuple of them. Query ``i``'s ``r``-th proposal uses the
+    caller's ``u`` when ``r = 0`` and :func:`hash_uniform` counters ``3r, 3r + 1`` of its seed
+    after that; its acceptance test uses ``3r + 2`` (counter 2 in the first round).
+
+    Returns ``(x, ok (N,), rounds (N,) int32)``: the accepted proposals (the last one where a
+    query failed), whether each query accepted, and how many proposals it used.
+
+    Every query's first proposal is made in one pass; after that each iteration gathers the
+    pending queries into a fixed number of lanes (an eighth of the batch, at least 1024) and,
+    when fewer are pending than there are lanes, gives each of them several consecutive
+    proposals, keeping the first accepted. Proposals depend only on the query's seed and
+    counter, so the result is that of query-by-query rounds.
     """
     n = u.shape[0]
     dtype = u.dtype
@@ -664,164 +582,19 @@ def rejection_sample_traced(
     return jax.tree.unflatten(tree, leaves), ok, rounds
 
 
-class _RejectionRun:
-    """The bookkeeping of :func:`rejection_sample`, streamed.
-
-    Calls are kept ``_IN_FLIGHT`` deep: the first proposals of the next rows of the batch and,
-    as soon as ``chunk`` of them are waiting, further proposals for rejected queries (each
-    with its own proposal counter) go out while the host retires the oldest call's results,
-    so that neither the device nor the host waits for the other between rounds. A query's
-    proposals depend only on its seed and counter, so the samples are those of query-by-query
-    rounds whatever the order of the calls.
-    """
-
-    def __init__(self, step, inputs, u, seeds, max_rounds, consts, chunk) -> None:
-        self.step, self.inputs, self.u, self.seeds = step, inputs, u, seeds
-        self.max_rounds, self.consts, self.chunk = max_rounds, consts, chunk
-        n = u.shape[0]
-        self.n = n
-        self.rounds = np.ones(n, np.int32)
-        self.ok = _aligned_empty((n,), bool)
-        self.ok[:] = True
-        self.out: list[np.ndarray] | None = None
-        self.tree = None
-        # rejected queries waiting for their next proposal, and that proposal's counter
-        self.pool_q: list[np.ndarray] = []
-        self.pool_r: list[np.ndarray] = []
-        self.pool_n = 0
-
-    def run(self) -> tuple[Any, Array, np.ndarray]:
-        """Propose until every query has accepted or failed: ``(x, ok, rounds)``."""
-        chunk = self.chunk
-        in_flight: deque = deque()
-        firsts = deque(_pieces(self.n, chunk))
-        while True:
-            while len(in_flight) < _IN_FLIGHT:
-                if self.pool_n >= chunk or (self.pool_n and not firsts and not in_flight):
-                    in_flight.append(self._dispatch_later(tail=not firsts and not in_flight))
-                elif firsts:
-                    in_flight.append(self._dispatch_first(*firsts.popleft()))
-                else:
-                    break
-            if not in_flight:
-                break
-            self._retire(*in_flight.popleft())
-        return self._result()
-
-    # -- calls ---------------------------------------------------------------------------------
-    def _dispatch_first(self, start: int, stop: int):
-        m = stop - start
-        size = _padded_size(m)
-        idx = (
-            slice(start, stop)
-            if size == m
-            else np.concatenate([np.arange(start, stop), np.full(size - m, start)])
-        )
-        args = tuple(_take_rows(a, idx) for a in self.inputs)
-        res = self.step.first(args, self.u[idx], self.seeds[idx], self.consts)
-        return np.arange(start, stop), None, 1, res
-
-    def _dispatch_later(self, tail: bool):
-        q = np.concatenate(self.pool_q)
-        r = np.concatenate(self.pool_r)
-        take = min(q.size, self.chunk)
-        if take < q.size:
-            self.pool_q, self.pool_r = [q[take:]], [r[take:]]
-            q, r = q[:take], r[:take]
-        else:
-            self.pool_q, self.pool_r = [], []
-        self.pool_n -= take
-        k = 1
-        if tail:  # few queries left: each gets its next k counters in this call
-            k = max(1, min(_TAIL_LANES // q.size, int(self.max_rounds - r.max())))
-        lanes = np.repeat(q, k) if k > 1 else q
-        lane_r = (np.repeat(r, k) + np.tile(np.arange(k, dtype=np.int32), q.size)) if k > 1 else r
-        m = lanes.size
-        size = _padded_size(m)
-        if size > m:
-            lanes_p = np.concatenate([lanes, np.full(size - m, lanes[0])])
-            lane_r = np.concatenate([lane_r, np.full(size - m, lane_r[0])])
-        else:
-            lanes_p = lanes
-        args = tuple(_take_rows(a, lanes_p) for a in self.inputs)
-        res = self.step.later(args, self.seeds[lanes_p], lane_r, self.consts, dtype=self.u.dtype)
-        return q, r, k, res
-
-    # -- results -------------------------------------------------------------------------------
-    def _retire(self, q: np.ndarray, r: np.ndarray | None, k: int, res) -> None:
-        x, acc = res
-        leaves, self.tree = jax.tree.flatten(x)
-        leaves = [np.asarray(a) for a in leaves]  # on the CPU: no copy
-        if self.out is None:
-            self.out = [_aligned_empty((self.n, *a.shape[1:]), a.dtype) for a in leaves]
-        acc = np.asarray(acc)[: q.size * k]
-        if r is None:  # first proposals: contiguous rows, the rejected ones fixed up later
-            start = int(q[0])
-            for o, a in zip(self.out, leaves, strict=True):
-                o[start : start + q.size] = a[: q.size]
-            rejected = np.flatnonzero(~acc) + start  # about 4x faster than q[~acc]
-            if self.max_rounds <= 1:  # the first proposals were the last
-                self.ok[rejected] = False
-            else:
-                self._requeue(rejected, np.ones(rejected.size, np.int32))
-            return
-        used = r + k  # proposals made by each query after this call
-        if k == 1:  # one proposal per query: no search for the first accepted lane
-            done, first = acc, 0
-        else:
-            acc_q = acc.reshape(-1, k)
-            done, first = acc_q.any(axis=1), acc_q.argmax(axis=1)
-        out_of_rounds = ~done & (used >= self.max_rounds)
-        if out_of_rounds.any():  # keep their last proposal (lane k - 1), and fail them
-            self.ok[q[out_of_rounds]] = False
-            if k > 1:
-                first = np.where(out_of_rounds, k - 1, first)
-            done = done | out_of_rounds
-        sel = np.flatnonzero(done)
-        if k > 1:
-            first = first[sel]
-        lane = sel * k + first
-        finished = q[sel]
-        self.rounds[finished] = r[sel] + first + 1
-        for o, a in zip(self.out, leaves, strict=True):
-            _rows(o)[finished] = _rows(a)[lane]
-        self._requeue(q[~done], used[~done])
-
-    def _requeue(self, q: np.ndarray, r: np.ndarray) -> None:
-        if q.size:
-            self.pool_q.append(q)
-            self.pool_r.append(r)
-            self.pool_n += q.size
-
-    def _result(self) -> tuple[Any, Array, np.ndarray]:
-        if self.out is None:  # no queries: trace the step for the shapes of a proposal
-            inputs, u, seeds = self.inputs, self.u, self.seeds
-            shape = jax.eval_shape(
-                self.step.first,
-                tuple(np.zeros((1024, *a.shape[1:]), a.dtype) for a in inputs),
-                np.zeros((1024, *u.shape[1:]), u.dtype),
-                np.zeros(1024, seeds.dtype),
-                self.consts,
-            )[0]
-            leaves, self.tree = jax.tree.flatten(shape)
-            self.out = [np.zeros((0, *a.shape[1:]), a.dtype) for a in leaves]
-        # aligned host arrays: device_put wraps them without a copy (jnp.asarray would copy)
-        x = jax.tree.unflatten(self.tree, [jax.device_put(o) for o in self.out])
-        return x, jax.device_put(self.ok), self.rounds
-
-
 __all__ = [
     "AliasTable",
     "Distribution1D",
     "Distribution2D",
-    "RejectionStep",
+    "alias_arrays",
     "alias_sample",
     "alias_sample_2d",
     "find_interval",
     "hash_uniform",
-    "rejection_sample",
+    "normalized_cdf",
     "rejection_sample_traced",
-    "rejection_step",
+    "sample_discrete_cdf",
     "seeds_from_rng",
     "seeds_from_u",
+    "vose_alias",
 ]

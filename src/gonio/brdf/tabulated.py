@@ -37,594 +37,35 @@ table's values; they are shared by every copy of the table that a pytree round t
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from functools import partial
-from typing import Any, Literal
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf import frames
-from gonio.brdf._xla import materialize
+from gonio.brdf.grid import (
+    INTERPOLATIONS,
+    PARAMETERIZATIONS,
+    Axis,
+    Channels,
+    default_axes,
+    merl_axes,
+    node_directions,
+)
+from gonio.brdf.lookup import LookupSpec, corner_bits, eval_kernel, interpolate
+from gonio.brdf.measured import MeasuredSamples
 from gonio.brdf.models._base import BRDFSample
 from gonio.errors import FormatError, ParameterError
 
 Array = jnp.ndarray
 
-PARAMETERIZATIONS = {
-    "half_diff_iso": ("theta_h", "theta_d", "phi_d"),
-    "half_diff_aniso": ("theta_h", "phi_h", "theta_d", "phi_d"),
-}
-INTERPOLATIONS = ("linear", "nearest")
 _EPS_ANGLE = 1e-9
 
 
 def _one_minus_eps(dtype: Any) -> float:
     return float(np.nextafter(np.dtype(dtype).type(1.0), np.dtype(dtype).type(0.0)))
-
-
-# ---------------------------------------------------------------------------------------------
-# Channels
-# ---------------------------------------------------------------------------------------------
-class Channels:
-    """What the last axis of a table's values means.
-
-    Parameters
-    ----------
-    kind : ``"rgb"``, ``"spectral"`` or ``"mono"``.
-    names : one name per channel (defaults: ``("R", "G", "B")``, ``("Y",)``, ``("450nm", ...)``).
-    wavelengths_nm : for ``"spectral"``, the strictly increasing wavelengths in nm, shape ``(C,)``.
-    primaries : for ``"rgb"``, the colour primaries (``"sRGB"`` or ``"Rec709"``; default sRGB).
-    white_point : for ``"rgb"``, the white point (default ``"D65"``).
-
-    ``len(channels)`` (and ``operator.index``) is the channel count C. Instances are immutable,
-    hashable and compare by value.
-    """
-
-    __slots__ = ("_names", "_wl", "kind", "primaries", "white_point")
-
-    def __init__(
-        self,
-        kind: Literal["rgb", "spectral", "mono"],
-        names: Sequence[str] | None = None,
-        wavelengths_nm: Any = None,
-        primaries: str | None = None,
-        white_point: str | None = None,
-    ) -> None:
-        if kind not in ("rgb", "spectral", "mono"):
-            raise ParameterError(f"Channels: kind must be rgb, spectral or mono, got {kind!r}")
-        wl: tuple[float, ...] | None = None
-        if kind == "spectral":
-            if wavelengths_nm is None:
-                raise ParameterError("Channels: spectral channels need wavelengths_nm")
-            try:
-                arr = np.asarray(wavelengths_nm, dtype=np.float64).reshape(-1)
-            except (TypeError, ValueError):
-                raise ParameterError("Channels: wavelengths_nm must be numbers") from None
-            if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
-                raise ParameterError("Channels: wavelengths_nm must be positive and finite")
-            if np.any(np.diff(arr) <= 0):
-                raise ParameterError("Channels: wavelengths_nm must be strictly increasing")
-            wl = tuple(float(x) for x in arr)
-            default_names = tuple(f"{x:g}nm" for x in wl)
-        elif wavelengths_nm is not None:
-            raise ParameterError(f"Channels: wavelengths_nm given for {kind} channels")
-        elif kind == "rgb":
-            default_names = ("R", "G", "B")
-        else:
-            default_names = ("Y",)
-        names = tuple(str(n) for n in names) if names is not None else default_names
-        if len(names) != len(default_names):
-            raise ParameterError(
-                f"Channels: {kind} needs {len(default_names)} names, got {len(names)}"
-            )
-        if kind == "rgb":
-            primaries = primaries or "sRGB"
-            white_point = white_point or "D65"
-            if primaries not in ("sRGB", "Rec709"):
-                raise ParameterError(f"Channels: unknown primaries {primaries!r}")
-        elif primaries is not None or white_point is not None:
-            raise ParameterError(f"Channels: primaries/white_point only apply to rgb, not {kind}")
-        object.__setattr__(self, "kind", kind)
-        object.__setattr__(self, "_names", names)
-        object.__setattr__(self, "_wl", wl)
-        object.__setattr__(self, "primaries", primaries)
-        object.__setattr__(self, "white_point", white_point)
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        raise AttributeError("Channels is immutable")
-
-    @classmethod
-    def rgb(cls, primaries: str = "sRGB", white_point: str = "D65") -> Channels:
-        """Three linear RGB channels."""
-        return cls("rgb", primaries=primaries, white_point=white_point)
-
-    @classmethod
-    def mono(cls) -> Channels:
-        """A single channel."""
-        return cls("mono")
-
-    @classmethod
-    def spectral(cls, wavelengths_nm: Any) -> Channels:
-        """One channel per wavelength (nm)."""
-        return cls("spectral", wavelengths_nm=wavelengths_nm)
-
-    @classmethod
-    def for_count(cls, n: int) -> Channels:
-        """Default description for ``n`` channels: mono for 1, RGB for 3 (else ParameterError)."""
-        if n == 1:
-            return cls.mono()
-        if n == 3:
-            return cls.rgb()
-        raise ParameterError(f"{n} channels need an explicit Channels description (spectral?)")
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self._names
-
-    @property
-    def wavelengths_nm(self) -> np.ndarray | None:
-        """Wavelengths in nm ``(C,)`` for spectral channels, else None."""
-        return None if self._wl is None else np.array(self._wl)
-
-    def __len__(self) -> int:
-        return len(self._names)
-
-    def __index__(self) -> int:
-        return len(self._names)
-
-    def _key(self) -> tuple[Any, ...]:
-        return (self.kind, self._names, self._wl, self.primaries, self.white_point)
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, Channels) and self._key() == other._key()
-
-    def __hash__(self) -> int:
-        return hash(self._key())
-
-    def __repr__(self) -> str:
-        if self.kind == "spectral":
-            return f"Channels.spectral({list(self._wl or ())})"
-        if self.kind == "rgb":
-            return f"Channels.rgb({self.primaries!r}, {self.white_point!r})"
-        return "Channels.mono()"
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (inverse: :meth:`from_dict`)."""
-        return {
-            "kind": self.kind,
-            "names": list(self._names),
-            "wavelengths_nm": None if self._wl is None else list(self._wl),
-            "primaries": self.primaries,
-            "white_point": self.white_point,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> Channels:
-        """Inverse of :meth:`to_dict`; raises FormatError on a malformed description."""
-        try:
-            return cls(
-                d["kind"],
-                names=d.get("names"),
-                wavelengths_nm=d.get("wavelengths_nm"),
-                primaries=d.get("primaries"),
-                white_point=d.get("white_point"),
-            )
-        except (KeyError, TypeError) as e:
-            raise FormatError(f"malformed channel description: {e}") from None
-        except ParameterError as e:
-            raise FormatError(str(e)) from None
-
-
-# ---------------------------------------------------------------------------------------------
-# Axis
-# ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Axis:
-    """One axis of a table grid.
-
-    Attributes
-    ----------
-    name : ``"theta_h"``, ``"phi_h"``, ``"theta_d"`` or ``"phi_d"``.
-    size : number of nodes (>= 1).
-    lo, hi : angle range in radians; the warped coordinate ``x in [0, 1]`` maps onto it.
-    warp : ``"linear"`` (angle = lo + (hi - lo) x) or ``"sqrt"`` (angle = lo + (hi - lo) x**2,
-        MERL's theta_h: nodes dense near lo).
-    periodic : whether the axis wraps around with period ``hi - lo`` (azimuths); only with a
-        linear warp.
-    node_offset : node ``i`` sits at ``x_i = (i + node_offset) / size``, in [0, 1): 0 puts nodes
-        at cell starts (MERL), 0.5 at cell centres.
-    """
-
-    name: str
-    size: int
-    lo: float
-    hi: float
-    warp: Literal["linear", "sqrt"] = "linear"
-    periodic: bool = False
-    node_offset: float = 0.0
-
-    def __post_init__(self) -> None:
-        try:
-            size = int(self.size)
-            lo, hi, off = float(self.lo), float(self.hi), float(self.node_offset)
-        except (TypeError, ValueError):
-            raise ParameterError(
-                f"Axis {self.name!r}: size/lo/hi/node_offset must be numbers"
-            ) from None
-        if size != self.size or size < 1:
-            raise ParameterError(f"Axis {self.name!r}: size must be a positive integer")
-        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-            raise ParameterError(f"Axis {self.name!r}: need finite lo < hi, got [{lo}, {hi}]")
-        if self.warp not in ("linear", "sqrt"):
-            raise ParameterError(f"Axis {self.name!r}: warp must be linear or sqrt")
-        if not (0.0 <= off < 1.0):
-            raise ParameterError(f"Axis {self.name!r}: node_offset must be in [0, 1), got {off}")
-        if self.periodic and self.warp != "linear":
-            raise ParameterError(f"Axis {self.name!r}: a periodic axis must be linear")
-        object.__setattr__(self, "size", size)
-        object.__setattr__(self, "lo", lo)
-        object.__setattr__(self, "hi", hi)
-        object.__setattr__(self, "node_offset", off)
-        object.__setattr__(self, "periodic", bool(self.periodic))
-
-    # -- host-side helpers (NumPy, float64) ----------------------------------------------------
-    def nodes(self) -> np.ndarray:
-        """Angles of the nodes in radians, ``(size,)`` float64."""
-        return self.angle_of(np.arange(self.size, dtype=np.float64))
-
-    def angle_of(self, index: Any) -> np.ndarray:
-        """Angle (radians) at a continuous node index (NumPy)."""
-        x = (np.asarray(index, dtype=np.float64) + self.node_offset) / self.size
-        if self.warp == "sqrt":
-            x = np.sign(x) * x * x
-        return self.lo + (self.hi - self.lo) * x
-
-    def edges(self) -> np.ndarray:
-        """Angles of the cell boundaries halfway (in index space) between nodes, ``(size + 1,)``.
-
-        The first and last edges are the axis ends ``lo`` and ``hi``: what lies beyond the end
-        nodes is clamped to them (or wraps, for periodic axes).
-        """
-        e = self.angle_of(np.arange(self.size + 1, dtype=np.float64) - 0.5)
-        e[0], e[-1] = self.lo, self.hi
-        return np.clip(e, self.lo, self.hi)
-
-    def continuous_index(self, angle: Any) -> Any:
-        """Continuous node index of ``angle`` (JAX, keeps dtype); not clamped or wrapped."""
-        a = jnp.asarray(angle)
-        x = (a - self.lo) * (1.0 / (self.hi - self.lo))
-        if self.warp == "sqrt":
-            x = jnp.sqrt(jnp.maximum(x, 0.0))
-        return x * self.size - self.node_offset
-
-    def nearest_index(self, angle: Any) -> Any:
-        """Index of the nearest node (int32; clamped, or wrapped for periodic axes)."""
-        t = jnp.round(self.continuous_index(angle)).astype(jnp.int32)
-        if self.periodic:
-            return jnp.mod(t, self.size)
-        return jnp.clip(t, 0, self.size - 1)
-
-    def cell_index(self, angle: Any) -> Any:
-        """``floor(x * size)`` clamped to ``0..size-1`` (wrapped if periodic), int32.
-
-        With ``node_offset = 0`` this is the binning of MERL's reference code: the cell whose lower
-        edge is at or below ``angle``.
-        """
-        a = jnp.asarray(angle)
-        x = (a - self.lo) * (1.0 / (self.hi - self.lo))
-        if self.warp == "sqrt":
-            x = jnp.sqrt(jnp.maximum(x, 0.0))
-        i = jnp.floor(x * self.size).astype(jnp.int32)
-        if self.periodic:
-            return jnp.mod(i, self.size)
-        return jnp.clip(i, 0, self.size - 1)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (inverse: :meth:`from_dict`)."""
-        return {
-            "name": self.name,
-            "size": self.size,
-            "lo": self.lo,
-            "hi": self.hi,
-            "warp": self.warp,
-            "periodic": self.periodic,
-            "node_offset": self.node_offset,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> Axis:
-        """Inverse of :meth:`to_dict`; raises FormatError on a malformed description."""
-        try:
-            return cls(
-                str(d["name"]),
-                d["size"],
-                d["lo"],
-                d["hi"],
-                d.get("warp", "linear"),
-                bool(d.get("periodic", False)),
-                d.get("node_offset", 0.0),
-            )
-        except (KeyError, TypeError) as e:
-            raise FormatError(f"malformed axis description: {e}") from None
-        except ParameterError as e:
-            raise FormatError(str(e)) from None
-
-
-def merl_axes() -> tuple[Axis, Axis, Axis]:
-    """MERL's 90 x 90 x 180 isotropic grid (Matusik et al. 2003).
-
-    theta_h: 90 nodes at ``(i / 90)**2 * pi / 2`` ("sqrt" warp); theta_d: 90 nodes at
-    ``i / 90 * pi / 2``; phi_d: 180 nodes at ``i / 180 * pi`` over ``[0, pi)``, periodic (folded by
-    reciprocity). All with ``node_offset = 0``.
-    """
-    half = math.pi / 2
-    return (
-        Axis("theta_h", 90, 0.0, half, "sqrt", False, 0.0),
-        Axis("theta_d", 90, 0.0, half, "linear", False, 0.0),
-        Axis("phi_d", 180, 0.0, math.pi, "linear", True, 0.0),
-    )
-
-
-def default_axes(
-    parameterization: str = "half_diff_iso",
-    n_theta_h: int = 90,
-    n_theta_d: int = 90,
-    n_phi_d: int | None = None,
-    n_phi_h: int = 180,
-) -> tuple[Axis, ...]:
-    """Axes for a new table: MERL-like (sqrt-warped theta_h), nodes at ``node_offset = 0``.
-
-    ``n_phi_d`` defaults to 180 over ``[0, pi)`` (isotropic, folded) or 360 over ``[0, 2 pi)``
-    (anisotropic); ``n_phi_h`` is used only for anisotropic tables.
-    """
-    half = math.pi / 2
-    th = Axis("theta_h", n_theta_h, 0.0, half, "sqrt", False, 0.0)
-    td = Axis("theta_d", n_theta_d, 0.0, half, "linear", False, 0.0)
-    if parameterization == "half_diff_iso":
-        return (th, td, Axis("phi_d", n_phi_d or 180, 0.0, math.pi, "linear", True, 0.0))
-    if parameterization == "half_diff_aniso":
-        ph = Axis("phi_h", n_phi_h, 0.0, 2 * math.pi, "linear", True, 0.0)
-        pd = Axis("phi_d", n_phi_d or 360, 0.0, 2 * math.pi, "linear", True, 0.0)
-        return (th, ph, td, pd)
-    raise ParameterError(f"unknown parameterization {parameterization!r}")
-
-
-# ---------------------------------------------------------------------------------------------
-# Lookup kernels (pure JAX)
-# ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class _Spec:
-    """Static description of a table needed by the lookup kernel (hashable)."""
-
-    axes: tuple[Axis, ...]
-    parameterization: str
-    interpolation: str
-    has_mask: bool
-    n_channels: int
-    fold: int  # phi_d folding for iso tables: 0 none, 1 reciprocity, 2 reciprocity + mirror
-
-
-# atan(a) ~= a P(a^2) on [0, 1]: odd polynomial fitted for minimal relative error (max 9e-8 in
-# float64, 2.2e-7 evaluated in float32). XLA's float32 atan2 is ~40x slower on CPU and this is the
-# hot path of every table lookup; float64 input keeps jnp.arctan2.
-_ATAN_COEFFS = (
-    0.9999999110764471,
-    -0.33332092081615694,
-    0.19971358427746339,
-    -0.1402933562974844,
-    0.09942544849997133,
-    -0.05990181920915065,
-    0.024555142746539572,
-    -0.004779915421027742,
-)
-
-
-def atan2(y: Array, x: Array) -> Array:
-    """``arctan2(y, x)`` in (-pi, pi]; a fast polynomial for float32/float16, exact for float64."""
-    dtype = jnp.result_type(y, x)
-    if dtype == jnp.float64:
-        return jnp.arctan2(y, x)
-    ax, ay = jnp.abs(x), jnp.abs(y)
-    mx, mn = jnp.maximum(ax, ay), jnp.minimum(ax, ay)
-    a = mn / jnp.where(mx > 0, mx, 1.0)
-    s = a * a
-    r = jnp.full_like(a, _ATAN_COEFFS[-1])
-    for c in reversed(_ATAN_COEFFS[:-1]):
-        r = r * s + c
-    r = r * a
-    r = jnp.where(ay > ax, np.float32(np.pi / 2) - r, r)
-    r = jnp.where(x < 0, np.float32(np.pi) - r, r)
-    return jnp.where(y < 0, -r, r).astype(dtype)
-
-
-def _half_diff_fast(wi: Array, wo: Array, need_phi_h: bool) -> tuple[Array, ...]:
-    """Rusinkiewicz angles without trigonometric round trips (same conventions as
-    :func:`gonio.brdf.frames.half_diff`); hand-written because this is the hot path of lookups."""
-    # per component, not jnp.sum over the last axis: a reduction would store h as (..., 3)
-    hx, hy, hz = wi[..., 0] + wo[..., 0], wi[..., 1] + wo[..., 1], wi[..., 2] + wo[..., 2]
-    inv_h = jax.lax.rsqrt(jnp.maximum(hx * hx + hy * hy + hz * hz, 1e-30))
-    hx, hy, hz = hx * inv_h, hy * inv_h, hz * inv_h
-    r2 = hx * hx + hy * hy
-    pole = r2 <= 0
-    inv_r = jnp.where(pole, 0.0, jax.lax.rsqrt(jnp.where(pole, 1.0, r2)))
-    r = r2 * inv_r
-    c = jnp.where(pole, 1.0, hx * inv_r)
-    s = jnp.where(pole, 0.0, hy * inv_r)
-    x, y, z = wi[..., 0], wi[..., 1], wi[..., 2]
-    x1 = c * x + s * y
-    y1 = -s * x + c * y
-    dx = hz * x1 - r * z
-    dz = r * x1 + hz * z
-    theta_h = atan2(r, hz)
-    theta_d = atan2(jnp.sqrt(dx * dx + y1 * y1), dz)
-    two_pi = 2 * jnp.pi
-    phi_d = atan2(y1, dx)
-    phi_d = jnp.where(phi_d < 0, phi_d + two_pi, phi_d)
-    if not need_phi_h:
-        return theta_h, theta_d, phi_d
-    phi_h = jnp.where(pole, 0.0, atan2(hy, hx))
-    phi_h = jnp.where(phi_h < 0, phi_h + two_pi, phi_h)
-    return theta_h, phi_h, theta_d, phi_d
-
-
-def _coords(spec: _Spec, wi: Array, wo: Array) -> list[Array]:
-    """Angles along each axis of the table for the direction pairs."""
-    if spec.parameterization == "half_diff_iso":
-        th, td, pd = _half_diff_fast(wi, wo, need_phi_h=False)
-        if spec.fold >= 1:
-            pd = jnp.where(pd >= jnp.pi, pd - jnp.pi, pd)
-        if spec.fold >= 2:
-            pd = jnp.minimum(pd, jnp.pi - pd)
-        return [th, td, pd]
-    th, ph, td, pd = _half_diff_fast(wi, wo, need_phi_h=True)
-    return [th, ph, td, pd]
-
-
-def _axis_corners(ax: Axis, angle: Array) -> tuple[Array, Array, Array]:
-    """``(i0, i1, frac)`` of the two nodes bracketing ``angle`` and the weight of ``i1``."""
-    return _index_corners(ax, _wrapped_index(ax, angle))
-
-
-def _wrapped_index(ax: Axis, angle: Array) -> Array:
-    """Continuous node index of ``angle``, wrapped into ``[0, n)`` on periodic axes."""
-    t = ax.continuous_index(angle)
-    if ax.periodic and ax.size > 1:
-        t = jnp.mod(t, float(ax.size))
-    return t
-
-
-def _index_corners(ax: Axis, t: Array) -> tuple[Array, Array, Array]:
-    """:func:`_axis_corners` from the output of :func:`_wrapped_index`."""
-    n = ax.size
-    if n == 1:
-        zero = jnp.zeros(t.shape, jnp.int32)
-        return zero, zero, jnp.zeros_like(t)
-    if ax.periodic:
-        i0f = jnp.floor(t)
-        frac = t - i0f
-        i0 = i0f.astype(jnp.int32)
-        i0 = jnp.where(i0 >= n, i0 - n, i0)  # mod can round up to exactly n
-        i1 = jnp.where(i0 + 1 >= n, 0, i0 + 1)
-        return i0, i1, frac
-    t = jnp.clip(t, 0.0, float(n - 1))
-    i0 = jnp.minimum(jnp.floor(t).astype(jnp.int32), n - 2)
-    frac = t - i0.astype(t.dtype)
-    return i0, i0 + 1, frac
-
-
-def _corner_params(spec: _Spec, coords: Sequence[Array]) -> list[tuple[Array, Array, Array]]:
-    """Per axis ``(i0, i1, frac)`` (see :func:`_axis_corners`) from continuous indices stored
-    once (:func:`gonio.brdf._xla.materialize`): otherwise XLA recomputes the angle-to-index
-    arithmetic inside each of the gather loops, as scalar code."""
-    ts = [_wrapped_index(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
-    ts = materialize(ts, coords[0])
-    return [_index_corners(ax, t) for ax, t in zip(spec.axes, ts, strict=True)]
-
-
-def _strides(axes: Sequence[Axis]) -> list[int]:
-    strides = [1] * len(axes)
-    for a in range(len(axes) - 2, -1, -1):
-        strides[a] = strides[a + 1] * axes[a + 1].size
-    return strides
-
-
-def _corner_bits(mask: np.ndarray, axes: Sequence[Axis]) -> np.ndarray:
-    """Per node, which corners of the interpolation cell it starts are valid: bit ``j`` of
-    entry ``flat`` is the mask at corner ``j`` (in :func:`_interpolate`'s order) of the cell
-    whose first corner is node ``flat``. ``(*mask.shape)``, uint8 for 3-D tables (8 corners),
-    uint16 for 4-D.
-
-    One gather of these bits replaces a gather of the mask per corner in every lookup (a
-    corner's second index is a function of its first: the next node, wrapped on periodic
-    axes); the weights and sums are the same, so lookups are bit for bit those of the mask.
-    """
-    d = mask.ndim
-    dtype = np.min_scalar_type(2 ** (2**d) - 1).type  # one bit per corner
-    firsts, seconds = [], []
-    for ax in axes:
-        i0 = np.arange(ax.size)
-        if ax.size == 1:
-            i1 = i0
-        elif ax.periodic:
-            i1 = np.where(i0 + 1 >= ax.size, 0, i0 + 1)
-        else:  # the last node never starts a cell (see _index_corners)
-            i1 = np.minimum(i0 + 1, ax.size - 1)
-        firsts.append(i0)
-        seconds.append(i1)
-    bits = np.zeros(mask.shape, dtype)
-    for j, corner in enumerate(itertools.product((0, 1), repeat=d)):
-        idx = np.ix_(*(s if b else f for f, s, b in zip(firsts, seconds, corner, strict=True)))
-        bits |= mask[idx].astype(dtype) << dtype(j)
-    return bits
-
-
-def _interpolate(spec: _Spec, data: tuple[Array, Array | None], coords: Sequence[Array]) -> Array:
-    """Multilinear or nearest lookup at axis angles.
-
-    ``data`` is ``(values, bits)``: values ``(n_nodes, C)`` premultiplied by the mask (invalid
-    nodes hold 0), and per node the validity of the corners of the cell it starts
-    (:func:`_corner_bits`), or None when every node is valid. Invalid corners get no weight:
-    the result is the weighted mean of the valid ones (0 where none is).
-    """
-    vals, bits = data
-    strides = _strides(spec.axes)
-    dtype = coords[0].dtype
-    per_axis = _corner_params(spec, coords)
-    if spec.interpolation == "nearest" and bits is None:
-        flat = sum(
-            jnp.where(frac >= 0.5, i1, i0) * s
-            for (i0, i1, frac), s in zip(per_axis, strides, strict=True)
-        )
-        return jnp.take(vals, flat, axis=0, mode="clip").astype(dtype)
-    corners = []
-    for corner in itertools.product((0, 1), repeat=len(per_axis)):
-        flat = None
-        w = None
-        for (i0, i1, frac), b, s in zip(per_axis, corner, strides, strict=True):
-            idx = (i1 if b else i0) * s
-            flat = idx if flat is None else flat + idx
-            wa = frac if b else 1 - frac
-            w = wa if w is None else w * wa
-        corners.append((flat, w))
-    if bits is not None:
-        # the cell's corner validity, one gather (corner 0 is the cell's first node)
-        cell = jnp.take(bits, corners[0][0], axis=0, mode="clip").astype(jnp.int32)
-        valid = [((cell >> j) & 1).astype(dtype) for j in range(len(corners))]
-    if spec.interpolation == "nearest":
-        best_w = None
-        best_flat = None
-        for (flat, w), m in zip(corners, valid, strict=True):
-            score = w * m + m * 1e-6  # a valid corner always beats an invalid one
-            if best_w is None:
-                best_w, best_flat = score, flat
-            else:
-                better = score >= best_w  # ties go to the upper node: floor of the index
-                best_w = jnp.where(better, score, best_w)
-                best_flat = jnp.where(better, flat, best_flat)
-        val = jnp.take(vals, best_flat, axis=0, mode="clip").astype(dtype)
-        return jnp.where(best_w[..., None] > 0, val, 0.0)
-    num = sum(w[..., None] * jnp.take(vals, flat, axis=0, mode="clip") for flat, w in corners)
-    num = num.astype(dtype)
-    if bits is None:
-        return num
-    den = sum(w * m for (_, w), m in zip(corners, valid, strict=True))
-    (den,) = materialize([den.astype(dtype)], coords[0])  # once, not once per channel
-    den = den[..., None]
-    ok = den > 0
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
-
-
-@partial(jax.jit, static_argnames=("spec",))
-def _eval_kernel(data: tuple[Array, Array | None], wi: Array, wo: Array, spec: _Spec) -> Array:
-    coords = _coords(spec, wi, wo)
-    val = _interpolate(spec, data, coords)
-    ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    return jnp.where(ok[..., None], val, 0.0)
 
 
 def _as_dirs(wi: Any, wo: Any) -> tuple[Array, Array]:
@@ -655,17 +96,10 @@ def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
     return wo, wo_s, u
 
 
-def _sampled_values(spec: _Spec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
+def _sampled_values(spec: LookupSpec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
     """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample` when
-    the sampler has not looked it up. Called eagerly, the lookup is a jit call of its own, not
-    part of :func:`_sample_result`, where XLA's CPU backend fuses the weight arithmetic into
-    the lookup's gather loops (about 1.1x slower)."""
-    if isinstance(wi, jax.core.Tracer):
-        # under an outer jit, wi stored once, per component, before the lookup and used after
-        # it: otherwise XLA fuses the sampler's arithmetic into the lookup's loops (about 5 %
-        # slower; called eagerly, storing it costs 13 %)
-        wi = jnp.stack(materialize([wi[..., 0], wi[..., 1], wi[..., 2]], wi[..., 0]), -1)
-    return wi, _eval_kernel(data, wi, wo_s, spec)
+    the sampler has not looked it up."""
+    return wi, eval_kernel(data, wi, wo_s, spec)
 
 
 @jax.jit
@@ -829,9 +263,9 @@ class TabulatedBRDF:
         if parameterization == "half_diff_iso":
             span = axes[2].hi
             fold = 2 if span <= math.pi / 2 + _EPS_ANGLE else (1 if span <= math.pi + 1e-6 else 0)
-        self._spec = _Spec(axes, parameterization, interpolation, has_mask, C, fold)
+        self._spec = LookupSpec(axes, parameterization, interpolation, has_mask, C, fold)
         clean = np.where(m[..., None], vals, np.float32(0.0)).reshape(-1, C)
-        bits = jnp.asarray(_corner_bits(m, axes).reshape(-1)) if has_mask else None
+        bits = jnp.asarray(corner_bits(m, axes).reshape(-1)) if has_mask else None
         self._data = (jnp.asarray(np.ascontiguousarray(clean, dtype=np.float32)), bits)
         self._host = _Host()
 
@@ -860,7 +294,7 @@ class TabulatedBRDF:
         if parameterization not in PARAMETERIZATIONS:
             raise ParameterError(f"unknown parameterization {parameterization!r}")
         axes = tuple(axes) if axes is not None else default_axes(parameterization)
-        wi, wo = _node_directions(axes, parameterization)
+        wi, wo = node_directions(axes, parameterization)
         n = wi.shape[0]
         out = []
         for s in range(0, n, chunk):
@@ -939,7 +373,7 @@ class TabulatedBRDF:
         Keeps the directions' dtype (float32 in, float32 out). Jittable.
         """
         wi, wo = _as_dirs(wi, wo)
-        return _eval_kernel(self._data, wi, wo, self._spec)
+        return eval_kernel(self._data, wi, wo, self._spec)
 
     def f_at(self, *angles: Any) -> Array:
         """Lookup at half/diff angles given per axis (radians, broadcastable) -> ``(..., C)``.
@@ -953,11 +387,11 @@ class TabulatedBRDF:
         dtype = jnp.result_type(*arrs)
         if not jnp.issubdtype(dtype, jnp.floating):
             dtype = jnp.float64
-        return _interpolate(self._spec, self._data, [a.astype(dtype) for a in arrs])
+        return interpolate(self._spec, self._data, [a.astype(dtype) for a in arrs])
 
     # -- sampling ----------------------------------------------------------------------------------
     def _sampler(self) -> Any:
-        from gonio.brdf._table_sampling import TableSampler
+        from gonio.brdf.table_sampling import TableSampler
 
         sampler = self._host.samplers.get("table")
         if sampler is None:
@@ -980,14 +414,15 @@ class TabulatedBRDF:
         wo : ``(..., 3)`` outgoing directions.
         u : ``(..., 2)`` uniform numbers in [0, 1).
         method : ``"inversion"``, ``"alias"`` (piecewise-constant density per incident-grid cell
-            and outgoing bucket) or ``"rejection"`` (exactly ``g cos / rho(wo)``); see
-            :mod:`gonio.brdf._table_sampling`.
+            and outgoing bucket) or ``"rejection"`` (exactly ``g cos / rho(wo)``, the reference
+            density); see :mod:`gonio.brdf.table_sampling`.
         rng : rejection only: where the extra random numbers come from (a NumPy Generator, an
             int seed or a JAX key); default: derived deterministically from ``u``.
         proposal : rejection only: ``"majorant"`` (default: a piecewise-constant bound of
-            ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table; the
-            fastest), ``"cosine"``, or an analytic model whose ``sample``/``pdf`` is used (mixed
-            with 10 % cosine sampling). The sampled density is the same for all three.
+            ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table),
+            ``"cosine"``, or an analytic model whose ``sample``/``pdf`` is used (mixed with 10 %
+            cosine sampling); see :mod:`gonio.brdf.table_rejection`. The sampled density is the
+            same for all three.
 
         Returns
         -------
@@ -1048,7 +483,7 @@ class TabulatedBRDF:
     def node_directions(self) -> tuple[np.ndarray, np.ndarray]:
         """``(wi, wo)``, each ``(n_nodes, 3)`` float64, of every node in C order (phi_h = 0 for
         isotropic tables)."""
-        return _node_directions(self.axes, self.parameterization)
+        return node_directions(self.axes, self.parameterization)
 
     def cell_measure(self) -> np.ndarray:
         """Measure of each node's cell in direction-pair space, ``(n_1, ..., n_k)``, in sr^2.
@@ -1145,134 +580,6 @@ def _describe(model: Any) -> Any:
         except Exception:  # a description is best effort; tabulating must not fail on it
             pass
     return repr(model)
-
-
-def _node_directions(axes: Sequence[Axis], parameterization: str) -> tuple[np.ndarray, ...]:
-    nodes = [a.nodes() for a in axes]
-    mesh = np.meshgrid(*nodes, indexing="ij")
-    if parameterization == "half_diff_iso":
-        th, td, pd = (m.reshape(-1) for m in mesh)
-        ph = np.zeros_like(th)
-    else:
-        th, ph, td, pd = (m.reshape(-1) for m in mesh)
-    wi, wo = frames.half_diff_to_directions(th, ph, td, pd)
-    return np.asarray(wi, np.float64), np.asarray(wo, np.float64)
-
-
-# ---------------------------------------------------------------------------------------------
-# MeasuredSamples
-# ---------------------------------------------------------------------------------------------
-class MeasuredSamples:
-    """Scattered BRDF measurements, as acquired: one row per (wi, wo) pair.
-
-    Parameters
-    ----------
-    wi, wo : ``(N, 3)`` unit directions in the local frame (renormalized; a norm off by more
-        than 1e-3 is an error).
-    values : ``(N, C)`` BRDF values in 1/sr (stored float64).
-    sigma : ``(N, C)`` one-standard-deviation uncertainty in 1/sr, or None.
-    channels : :class:`Channels` (default from C: mono or RGB).
-    weights : ``(N,)`` non-negative measure or fitting weights, or None.
-    meta : provenance, JSON-ready.
-    mask : ``(N,)`` bool, optional: rows marked False are dropped here (they may hold NaN).
-
-    Raises
-    ------
-    FormatError
-        wrong shapes, non-finite values in kept rows, negative sigma or weights.
-    """
-
-    def __init__(
-        self,
-        wi: Any,
-        wo: Any,
-        values: Any,
-        sigma: Any = None,
-        channels: Channels | None = None,
-        weights: Any = None,
-        meta: Mapping[str, Any] | None = None,
-        *,
-        mask: Any = None,
-    ) -> None:
-        wi = _f64(wi, "wi")
-        wo = _f64(wo, "wo")
-        vals = _f64(values, "values")
-        if wi.ndim != 2 or wi.shape[1] != 3 or wo.shape != wi.shape:
-            raise FormatError(f"wi and wo must both be (N, 3), got {wi.shape} and {wo.shape}")
-        n = wi.shape[0]
-        if vals.ndim == 1:
-            vals = vals[:, None]
-        if vals.ndim != 2 or vals.shape[0] != n or vals.shape[1] < 1:
-            raise FormatError(f"values must be ({n}, C), got {vals.shape}")
-        sig = None
-        if sigma is not None:
-            sig = _f64(sigma, "sigma")
-            if sig.ndim == 1:
-                sig = sig[:, None]
-            if sig.shape != vals.shape:
-                raise FormatError(f"sigma has shape {sig.shape}, expected {vals.shape}")
-        w = None
-        if weights is not None:
-            w = _f64(weights, "weights")
-            if w.shape != (n,):
-                raise FormatError(f"weights must be ({n},), got {w.shape}")
-        keep = np.ones(n, dtype=bool)
-        if mask is not None:
-            keep = np.asarray(mask)
-            if keep.shape != (n,) or keep.dtype != np.bool_:
-                raise FormatError(f"mask must be a boolean ({n},) array")
-        wi, wo, vals = wi[keep], wo[keep], vals[keep]
-        sig = None if sig is None else sig[keep]
-        w = None if w is None else w[keep]
-        for arr, what in ((wi, "wi"), (wo, "wo"), (vals, "values")):
-            if not np.all(np.isfinite(arr)):
-                raise FormatError(f"{what} contains NaN or Inf (mask those rows out)")
-        for d, what in ((wi, "wi"), (wo, "wo")):
-            norm = np.linalg.norm(d, axis=1)
-            if np.any(np.abs(norm - 1) > 1e-3):
-                raise FormatError(f"{what} must be unit vectors (a norm is {norm.max():.4g})")
-        wi = wi / np.linalg.norm(wi, axis=1, keepdims=True)
-        wo = wo / np.linalg.norm(wo, axis=1, keepdims=True)
-        if sig is not None and (not np.all(np.isfinite(sig)) or np.any(sig < 0)):
-            raise FormatError("sigma must be finite and >= 0")
-        if w is not None and (not np.all(np.isfinite(w)) or np.any(w < 0)):
-            raise FormatError("weights must be finite and >= 0")
-        C = vals.shape[1]
-        if channels is None:
-            try:
-                channels = Channels.for_count(C)
-            except ParameterError as e:
-                raise ParameterError(f"values have {C} channels: {e}") from None
-        if not isinstance(channels, Channels):
-            raise ParameterError("channels must be a Channels object")
-        if len(channels) != C:
-            raise FormatError(f"values have {C} channels but channels describes {len(channels)}")
-        for arr in (wi, wo, vals, sig, w):
-            if arr is not None:
-                arr.setflags(write=False)
-        self.wi, self.wo, self.values, self.sigma, self.weights = wi, wo, vals, sig, w
-        self.channels = channels
-        self.meta: dict[str, Any] = dict(meta or {})
-
-    def __len__(self) -> int:
-        return self.wi.shape[0]
-
-    @property
-    def n_channels(self) -> int:
-        return len(self.channels)
-
-    def __repr__(self) -> str:
-        return f"MeasuredSamples(N={len(self)}, {self.channels!r})"
-
-
-def _f64(x: Any, what: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except (TypeError, ValueError):
-        raise FormatError(f"{what} is not an array") from None
-    if arr.dtype.kind not in "fiu":
-        raise FormatError(f"{what} must be numeric, got dtype {arr.dtype}")
-    return np.array(arr, dtype=np.float64)
 
 
 __all__ = [

@@ -7,11 +7,12 @@ served as it is. Text from data (material descriptions, warnings) is HTML-escape
 from __future__ import annotations
 
 import html
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from gonio.io.atomic import atomic_output
 
 _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 70em; color: #222; }
@@ -231,7 +232,7 @@ def _export_section(models: list[Any]) -> list[str]:
 def write_report(path: str | Path, summary: Any) -> Path:
     """Write ``index.html`` atomically; returns the path."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(render_html(summary), encoding="utf-8")
-    os.replace(tmp, path)
+    text = render_html(summary)
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return path

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,6 +11,7 @@ import numpy as np
 from gonio.brdf import models
 from gonio.brdf.models import BRDFModel
 from gonio.export._lobes import Lobes
+from gonio.io.atomic import atomic_output
 
 #: Fit-result JSON of an export (``gonio export --json``), version of its layout.
 REPORT_VERSION = 1
@@ -92,16 +91,9 @@ class Export:
 
 
 def write_text(path: Path, text: str) -> Path:
-    """Atomic text write: a temporary file in the same folder, then ``os.replace``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Atomic text write (:func:`gonio.io.atomic.atomic_output`), mode from the umask."""
+    with atomic_output(path, ".tmp", make_parents=True) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return path
 
 

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +23,7 @@ from gonio.brdf.models import BRDFModel, Node
 from gonio.errors import FormatError
 from gonio.fit._spec_check import check_model_spec
 from gonio.fit.uncertainty import Uncertainty
+from gonio.io.atomic import atomic_output
 
 SCHEMA_ID = "gonio/fit-result"
 SCHEMA_VERSION = 1
@@ -268,16 +267,9 @@ class FitResult:
 def write_json(obj: Any, path: str | Path) -> Path:
     """Write ``obj`` as indented JSON atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=2, allow_nan=False)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path, make_parents=True) as tmp, open(tmp, "w") as fh:
+        json.dump(obj, fh, indent=2, allow_nan=False)
+        fh.write("\n")
     return path
 
 

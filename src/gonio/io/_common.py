@@ -1,15 +1,14 @@
-"""Helpers shared by the format modules: input checks, clean failures and atomic writes."""
+"""Helpers shared by the format modules: input checks, clean failures and atomic writes
+(:func:`gonio.io.atomic.atomic_output`, re-exported here)."""
 
 from __future__ import annotations
 
-import contextlib
 import os
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 
 from gonio._bounded import MAX_DECODED_BYTES, MAX_TEXT_BYTES
 from gonio.errors import FormatError
+from gonio.io.atomic import atomic_output
 
 PathLike = str | os.PathLike[str]
 
@@ -67,36 +66,4 @@ def read_text(path: PathLike) -> str:
         raise fail(path, f"not a UTF-8 text file (byte offset {exc.start})") from None
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-@contextlib.contextmanager
-def atomic_output(path: PathLike, suffix: str = ".tmp") -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; on success rename it onto ``path``.
-
-    The temporary file lives in the destination folder so that :func:`os.replace` is an atomic
-    rename on the same file system. If the body raises (including ``KeyboardInterrupt``), the
-    temporary file is removed and ``path`` is left as it was: a crash never leaves a half-written
-    file under the final name, nor a stale temporary file.
-    """
-    dest = Path(path)
-    folder = dest.parent if str(dest.parent) else Path(".")
-    if dest.is_dir():
-        raise fail(dest, "is a directory, cannot write a file there")
-    if not folder.is_dir():
-        raise fail(dest, f"output folder {folder} does not exist")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=suffix, dir=folder)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        yield tmp
-        # mkstemp creates 0600; give the result the permissions a plain open() would
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, dest)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
+__all__ = ["PathLike", "atomic_output", "check_input_file", "fail", "read_bytes", "read_text"]

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from gonio.errors import FormatError
+from gonio.io.atomic import atomic_output
 
 #: DNG CFAPattern codes: 0 red, 1 green, 2 blue.
 _CFA_CODES = {"R": 0, "G": 1, "B": 2}
@@ -122,9 +122,7 @@ def write_dng(
     ]
     description = json.dumps(meta or {}, sort_keys=True)
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
+    with atomic_output(path) as tmp:
         tifffile.imwrite(
             tmp,
             data,
@@ -135,10 +133,6 @@ def write_dng(
             software="gonio",
             extratags=extratags,
         )
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return path
 
 

@@ -2,7 +2,7 @@
 
 The complete byte-level description for readers without gonio is ``data-schema/FORMAT.md``; the
 JSON Schema of the header (:func:`read_header`) is ``data-schema/table-metadata.schema.json``,
-generated from :func:`table_metadata_schema`.
+generated from :func:`gonio.io.native_schema.table_metadata_schema`.
 
 Summary of version 1
 --------------------
@@ -24,7 +24,6 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -39,7 +38,7 @@ from gonio.io._hdf5_guard import (
     open_bounded,
 )
 from gonio.io._sanity import check_axis_range, check_brdf_values, check_directions
-from gonio.io.schemas import register_schema
+from gonio.io.lossy import LossyEncoding, decode_lossy, encode_lossy, lossy_stats
 
 FORMAT_NAME = "gonio-brdf"
 FORMAT_VERSION = 1
@@ -67,92 +66,7 @@ CHUNK_BYTES = 1 << 18
 DEFAULT_GZIP_LEVEL = 4
 #: Datasets up to this size are stored as one uncompressed chunk (with a fletcher32 checksum).
 SMALL_BYTES = 1 << 14
-#: In lossy mode, values below ``LOSSY_FLOOR_RATIO * max`` are stored as 0.
-LOSSY_FLOOR_RATIO = 1e-7
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
-
-
-# --------------------------------------------------------------------------------------------
-# lossy encoding
-# --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class LossyEncoding:
-    """Parameters of the log-quantized delta encoding (all stored as ``/values`` attributes).
-
-    A value ``v >= floor`` gets code ``q = round((ln v - log_offset) / log_step) + 1``; values
-    below ``floor`` (and invalid cells) get ``q = 0``. Codes are stored as differences along grid
-    axis ``delta_axis`` (``d[..., 0] = q[..., 0]``, ``d[..., k] = q[..., k] - q[..., k-1]``),
-    zigzag-mapped to unsigned integers (``z = 2 d`` for ``d >= 0``, ``z = -2 d - 1`` for ``d < 0``)
-    so that small differences of either sign have small codes (this compresses far better).
-    Decoding: ``d = (z >> 1) XOR -(z AND 1)``; ``q = cumsum(d, delta_axis)``;
-    ``v = exp(log_offset + (q - 1) * log_step)`` where ``q > 0``, else 0.
-    The relative error of a decoded value ``>= floor`` is at most
-    ``bound_relative = exp(log_step / 2) - 1``.
-    """
-
-    log_offset: float
-    log_step: float
-    floor: float
-    delta_axis: int
-    bound_relative: float
-
-
-def lossy_step(precision: float) -> float:
-    """Log-domain step whose rounding error is at most ``precision`` (relative)."""
-    return 2.0 * math.log1p(precision)
-
-
-def encode_lossy(
-    values: np.ndarray, valid: np.ndarray, precision: float
-) -> tuple[np.ndarray, LossyEncoding]:
-    """Quantize ``values`` (n1..nk, C) to delta-coded integer codes, relative bound ``precision``.
-
-    Returns the code array (uint16 when the zigzag codes fit, else uint32) and the parameters.
-    """
-    from gonio.errors import ParameterError
-
-    if not (0.0 < precision < 0.5):
-        raise ParameterError(f"lossy precision must be in (0, 0.5), got {precision}")
-    v = np.asarray(values, dtype=np.float64)
-    ok = np.broadcast_to(valid[..., None], v.shape) & (v > 0)
-    vmax = float(v[ok].max()) if np.any(ok) else 1.0
-    floor = vmax * LOSSY_FLOOR_RATIO
-    ok &= v >= floor
-    step = lossy_step(precision)
-    offset = math.log(floor)
-    q = np.zeros(v.shape, dtype=np.int64)
-    q[ok] = np.rint((np.log(v[ok]) - offset) / step).astype(np.int64) + 1
-    delta_axis = v.ndim - 2  # last grid axis: smooth direction (phi_d), rows stay independent
-    d = np.diff(q, axis=delta_axis, prepend=0)
-    z = np.where(d >= 0, 2 * d, -2 * d - 1)
-    dtype = np.uint16 if z.max(initial=0) <= np.iinfo(np.uint16).max else np.uint32
-    enc = LossyEncoding(offset, step, floor, delta_axis, math.expm1(step / 2))
-    return z.astype(dtype), enc
-
-
-def decode_lossy(
-    codes: np.ndarray, enc: LossyEncoding, delta_axis: int | None = None
-) -> np.ndarray:
-    """Inverse of :func:`encode_lossy` (float32 result). ``codes`` may be a partial read as long
-    as it holds whole rows along ``delta_axis`` (pass the axis index within ``codes``)."""
-    axis = enc.delta_axis if delta_axis is None else delta_axis
-    z = np.asarray(codes, dtype=np.int64)
-    q = np.cumsum((z >> 1) ^ -(z & 1), axis=axis)
-    out = np.exp(enc.log_offset + (q - 1) * enc.log_step)
-    return np.where(q > 0, out, 0.0).astype(np.float32)
-
-
-def _lossy_stats(values: np.ndarray, decoded: np.ndarray, valid: np.ndarray, floor: float) -> dict:
-    v = np.asarray(values, dtype=np.float64)
-    sel = np.broadcast_to(valid[..., None], v.shape) & (v >= floor)
-    if not np.any(sel):
-        return {"median_relative": 0.0, "p99_relative": 0.0, "max_relative": 0.0}
-    rel = np.abs(decoded[sel].astype(np.float64) - v[sel]) / v[sel]
-    return {
-        "median_relative": float(np.median(rel)),
-        "p99_relative": float(np.percentile(rel, 99)),
-        "max_relative": float(rel.max()),
-    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -340,7 +254,7 @@ def _write_gridded(
     else:
         codes, enc = encode_lossy(clean, mask, lossy)
         decoded = decode_lossy(codes, enc)
-        achieved = _lossy_stats(clean, decoded, mask, enc.floor)
+        achieved = lossy_stats(clean, decoded, mask, enc.floor)
         ds = _dataset(h5, "values", codes, True, max(level, 6))
         ds.attrs["encoding"] = "log-quantized-delta"
         for k in ("log_offset", "log_step", "floor", "bound_relative"):
@@ -757,118 +671,3 @@ def _build(header: dict, arrays: dict) -> Any:
         weights=arrays.get("weights"),
         meta=meta,
     )
-
-
-# --------------------------------------------------------------------------------------------
-# schema
-# --------------------------------------------------------------------------------------------
-@register_schema("table-metadata.schema.json")
-def table_metadata_schema() -> dict:
-    """JSON Schema of :func:`read_header`'s result (the header of a ``*.brdf.h5`` file)."""
-    num = {"type": "number"}
-    axis = {
-        "type": "object",
-        "description": "A grid axis. Node i sits at x_i = (i + node_offset) / size; angle = "
-        "lo + (hi - lo) * x (warp 'linear') or lo + (hi - lo) * x**2 (warp 'sqrt'), radians.",
-        "required": ["name", "size", "lo", "hi", "warp", "periodic", "node_offset"],
-        "additionalProperties": False,
-        "properties": {
-            "name": {"type": "string", "description": "theta_h, phi_h, theta_d or phi_d"},
-            "size": {"type": "integer", "minimum": 1},
-            "lo": {**num, "description": "radians"},
-            "hi": {**num, "description": "radians"},
-            "warp": {"enum": list(WARPS)},
-            "periodic": {"type": "boolean"},
-            "node_offset": num,
-        },
-    }
-    provenance = {
-        name: {"type": types if len(types) > 1 else types[0], "description": doc}
-        for name, (types, doc) in PROVENANCE_FIELDS.items()
-    }
-    return {
-        "$id": "https://gonio.invalid/schemas/table-metadata.schema.json",
-        "title": "gonio tabulated BRDF header",
-        "description": f"Header of a {SUFFIX} file (format {FORMAT_NAME} version "
-        f"{FORMAT_VERSION}) as returned by gonio.io.native.read_header and 'gonio info --json'.",
-        "type": "object",
-        "required": [
-            "format",
-            "format_version",
-            "kind",
-            "units",
-            "software",
-            "created_utc",
-            "channels",
-            "datasets",
-            "encoding",
-            "metadata",
-        ],
-        "properties": {
-            "format": {"const": FORMAT_NAME},
-            "format_version": {"const": FORMAT_VERSION},
-            "kind": {"enum": list(KINDS)},
-            "units": {"const": UNITS},
-            "software": {"type": "string"},
-            "created_utc": {"type": "string", "description": "ISO 8601, UTC"},
-            "channels": {
-                "type": "object",
-                "required": ["kind", "names", "primaries", "white_point", "wavelengths_nm"],
-                "additionalProperties": False,
-                "properties": {
-                    "kind": {"enum": list(CHANNEL_KINDS)},
-                    "names": {"type": "array", "items": {"type": "string"}, "minItems": 1},
-                    "primaries": {"type": ["string", "null"], "description": "e.g. sRGB"},
-                    "white_point": {"type": ["string", "null"], "description": "e.g. D65"},
-                    "wavelengths_nm": {"type": ["array", "null"], "items": num},
-                },
-            },
-            "grid": {
-                "type": "object",
-                "required": ["parameterization", "interpolation", "axes"],
-                "additionalProperties": False,
-                "properties": {
-                    "parameterization": {"enum": list(PARAMETERIZATIONS)},
-                    "interpolation": {"enum": list(INTERPOLATIONS)},
-                    "axes": {"type": "array", "items": axis, "minItems": 1},
-                },
-            },
-            "samples": {
-                "type": "object",
-                "required": ["count"],
-                "properties": {"count": {"type": "integer", "minimum": 0}},
-            },
-            "datasets": {"type": "array", "items": {"type": "string"}},
-            "encoding": {
-                "type": "object",
-                "required": ["values"],
-                "properties": {
-                    "values": {"enum": list(ENCODINGS)},
-                    "log_offset": num,
-                    "log_step": {**num, "exclusiveMinimum": 0},
-                    "floor": num,
-                    "delta_axis": {"type": "integer", "minimum": 0},
-                    "bound_relative": {**num, "description": "guaranteed max relative error"},
-                    "requested_precision": num,
-                    "achieved": {
-                        "type": "object",
-                        "properties": {
-                            "median_relative": num,
-                            "p99_relative": num,
-                            "max_relative": num,
-                        },
-                    },
-                },
-            },
-            "metadata": {
-                "type": "object",
-                "description": "Provenance. Recommended keys are listed; others are allowed.",
-                "properties": provenance,
-                "additionalProperties": True,
-            },
-        },
-        "oneOf": [
-            {"properties": {"kind": {"const": "gridded"}}, "required": ["grid"]},
-            {"properties": {"kind": {"const": "scattered"}}, "required": ["samples"]},
-        ],
-    }

@@ -59,13 +59,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf.lookup import atan2 as _atan2  # exact in float64, fast polynomial in float32
 from gonio.brdf.models._base import (
     BRDFModel,
     BRDFSample,
     masked_outgoing,
     sample_inputs,
 )
-from gonio.brdf.tabulated import atan2 as _atan2  # exact in float64, fast polynomial in float32
 from gonio.errors import ParameterError
 from gonio.io import _warp2d as w2
 from gonio.io._common import PathLike

@@ -27,7 +27,7 @@ from pathlib import Path
 
 #: Modules whose import registers schemas (append yours; the generator imports each one).
 SCHEMA_MODULES: tuple[str, ...] = (
-    "gonio.io.native",  # table-metadata.schema.json
+    "gonio.io.native_schema",  # table-metadata.schema.json
     "gonio.rigs.schema",  # rig.schema.json (owned by rigs)
     "gonio.fit.schema",  # fit-result.schema.json (owned by fit)
 )

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from gonio.errors import ParameterError
-from gonio.render.output import _atomic_target, auto_exposure, luminance, tonemap
+from gonio.io.atomic import atomic_output
+from gonio.render.output import auto_exposure, luminance, tonemap
 
 
 @dataclass(frozen=True)
@@ -150,12 +151,9 @@ def comparison_figure(
     fig.tight_layout()
     path = Path(path)
     suffix = path.suffix or ".png"
-    tmp = _atomic_target(path, suffix)
     try:
-        fig.savefig(tmp, dpi=110, format=suffix.lstrip(".").lower())
-        os.replace(tmp, path)
+        with atomic_output(path, suffix, make_parents=True) as tmp:
+            fig.savefig(tmp, dpi=110, format=suffix.lstrip(".").lower())
     finally:
         plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
     return path

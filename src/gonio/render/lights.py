@@ -30,8 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf.sampling import Distribution2D
 from gonio.errors import ParameterError
-from gonio.render._pwc import PiecewiseConstant2D
 
 Array = jnp.ndarray
 
@@ -371,13 +371,14 @@ class Environment(Light):
             lum = img.mean(axis=-1) * sin_t[:, None]
             if not np.any(lum > 0):
                 raise ParameterError("environment is black everywhere; nothing to sample")
-            self._dist = PiecewiseConstant2D(lum)
+            self._dist = Distribution2D(lum)  # rows: latitude (y), columns: longitude (x)
         return self
 
     def sample(self, p: Array, u: Array) -> LightSample:
         if self._dist is None:
             raise ParameterError("Environment.importance() must be called before sampling")
-        xy, pdf_uv = self._dist.sample(u)
+        # u[..., 1] picks the row (y), u[..., 0] the column (x)
+        xy, pdf_uv, _ = self._dist.sample(jnp.asarray(u)[..., ::-1])
         wi = latlong_to_direction(xy)
         sin_t = jnp.sin(jnp.pi * xy[..., 1])
         pdf = jnp.where(sin_t > 0, pdf_uv / (2.0 * jnp.pi**2 * jnp.maximum(sin_t, 1e-30)), 0.0)

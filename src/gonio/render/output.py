@@ -10,19 +10,12 @@ as grey and other channel counts as the mean of their channels.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from gonio.errors import FormatError, ParameterError
-
-
-def _atomic_target(path: Path, suffix: str):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
-    os.close(fd)
-    return Path(tmp)
+from gonio.io.atomic import atomic_output
 
 
 def _channel_names(c: int) -> list[str]:
@@ -70,19 +63,13 @@ def write_exr(
 
     a = _as_image(img)
     path = Path(path)
-    tmp = _atomic_target(path, ".exr")
     names = list(names) if names else _channel_names(a.shape[2])
     if len(names) != a.shape[2]:
         raise ParameterError(f"{len(names)} channel names for {a.shape[2]} channels")
     channels = {n: np.ascontiguousarray(a[..., i]) for i, n in enumerate(names)}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    try:
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(tmp))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_output(path, ".exr", make_parents=True) as tmp, OpenEXR.File(header, channels) as f:
+        f.write(str(tmp))
     return path
 
 
@@ -194,11 +181,6 @@ def write_png(path: str | os.PathLike, img: np.ndarray, exposure: float | None =
     disp = tonemap(img, exposure)
     data = np.round(disp * 255.0).astype(np.uint8)
     path = Path(path)
-    tmp = _atomic_target(path, ".png")
-    try:
+    with atomic_output(path, ".png", make_parents=True) as tmp:
         Image.fromarray(data).save(tmp, format="PNG")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path

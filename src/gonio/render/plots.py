@@ -189,15 +189,11 @@ def plot_materials(
             ax.set_ylabel("θd (deg)")
             ax.set_title(f"{inp.label}: θh–θd at φd = {phi_d_deg:g}°", fontsize=9)
             fig.colorbar(h, ax=ax, label=f"log10 {unit}", shrink=0.85)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    from gonio.render.output import _atomic_target
+    from gonio.io.atomic import atomic_output
 
-    tmp = _atomic_target(out, out.suffix)
     try:
-        fig.savefig(tmp, dpi=120, format=out.suffix.lstrip(".").lower())
-        tmp.replace(out)
+        with atomic_output(out, out.suffix, make_parents=True) as tmp:
+            fig.savefig(tmp, dpi=120, format=out.suffix.lstrip(".").lower())
     finally:
         plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
     return out

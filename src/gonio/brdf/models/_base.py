@@ -356,7 +356,7 @@ class BRDFModel(Node):
         wi, wo = _directions(wi, wo)
         C = self.channels
         ok = upper(wi) & upper(wo)
-        wi_s, wo_s = _safe_pair(wi, wo, ok)
+        wi_s, wo_s = safe_pair(wi, wo, ok)
         val = self._f(wi_s, wo_s)
         shape = (*ok.shape, C)
         val = jnp.broadcast_to(val, shape)
@@ -366,7 +366,7 @@ class BRDFModel(Node):
         """Density of :meth:`sample` over ``wi`` per unit solid angle, shape ``(...)``."""
         wi, wo = _directions(wi, wo)
         ok = upper(wi) & upper(wo)
-        wi_s, wo_s = _safe_pair(wi, wo, ok)
+        wi_s, wo_s = safe_pair(wi, wo, ok)
         return jnp.where(ok, self._pdf(wi_s, wo_s), 0.0).astype(wi.dtype)
 
     def sample(self, wo: Array, u: Array) -> BRDFSample:
@@ -378,7 +378,7 @@ class BRDFModel(Node):
 
     def _finish(self, wi: Array, wo: Array, ok_o: Array) -> BRDFSample:
         ok = ok_o & upper(wi)
-        wi_s, _ = _safe_pair(wi, wo, ok)
+        wi_s, _ = safe_pair(wi, wo, ok)
         pdf = jnp.where(ok, self._pdf(wi_s, wo), 0.0)
         ok = ok & (pdf > 0)
         pdf = jnp.where(ok, pdf, 0.0)
@@ -400,10 +400,11 @@ class BRDFModel(Node):
         return jnp.mean(s.weight, axis=-2)
 
     def __add__(self, other: BRDFModel) -> BRDFModel:
-        from gonio.brdf.models._sum import Sum
-
         if not isinstance(other, BRDFModel):
             return NotImplemented
+        # the Sum class by name (registered when gonio.brdf.models is imported), so that this
+        # module does not import the module that subclasses it
+        Sum = _REGISTRY["Sum"]
         left = self.lobes if isinstance(self, Sum) else (self,)
         right = other.lobes if isinstance(other, Sum) else (other,)
         return Sum(*left, *right)
@@ -437,7 +438,7 @@ def masked_outgoing(wo: Array) -> tuple[Array, Array]:
     return jnp.where(ok[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype)), ok
 
 
-def _safe_pair(wi: Array, wo: Array, ok: Array) -> tuple[Array, Array]:
+def safe_pair(wi: Array, wo: Array, ok: Array) -> tuple[Array, Array]:
     """Replace masked-out directions by the normal so model code never sees degenerate input.
 
     This is what keeps gradients finite: ``jnp.where`` differentiates both branches, so the

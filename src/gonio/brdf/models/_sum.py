@@ -12,9 +12,9 @@ from gonio.brdf.models._base import (
     BRDFSample,
     Node,
     Param,
-    _safe_pair,
     choose_lobe,
     masked_outgoing,
+    safe_pair,
     sample_inputs,
 )
 from gonio.errors import ParameterError
@@ -159,7 +159,7 @@ class Sum(BRDFModel):
 
         # Smooth part: the mixture pdf over every non-delta lobe.
         ok = ok_o & upper(wi) & ~is_delta
-        wi_s, _ = _safe_pair(wi, wo_s, ok)
+        wi_s, _ = safe_pair(wi, wo_s, ok)
         pdf = jnp.zeros(shape, dtype=wo.dtype)
         for lobe, p in zip(self.lobes, probs, strict=True):
             if not lobe.is_delta:

@@ -66,10 +66,10 @@ from gonio.brdf.models._base import (
     BRDFSample,
     Node,
     Param,
-    _safe_pair,
     channel_mean,
     choose_lobe,
     masked_outgoing,
+    safe_pair,
     sample_inputs,
 )
 from gonio.brdf.models.fresnel import Conductor
@@ -423,7 +423,7 @@ class HTSG(BRDFModel):
         wi = jnp.where(is_delta[..., None], frames.reflect(wo_s), wi)
 
         ok = ok_o & upper(wi) & ~is_delta
-        wi_s, _ = _safe_pair(wi, wo_s, ok)
+        wi_s, _ = safe_pair(wi, wo_s, ok)
         pdf = (1.0 - probs[0]) * self._pdf(wi_s, wo_s)
         ok = ok & (pdf > 0)
         val = self._f(wi_s, wo_s)

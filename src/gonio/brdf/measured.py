@@ -1,0 +1,128 @@
+"""Scattered BRDF measurements (:class:`MeasuredSamples`): one row per (wi, wo) pair, as
+acquired or read from a scattered format."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from gonio.brdf.grid import Channels
+from gonio.errors import FormatError, ParameterError
+
+
+class MeasuredSamples:
+    """Scattered BRDF measurements, as acquired: one row per (wi, wo) pair.
+
+    Parameters
+    ----------
+    wi, wo : ``(N, 3)`` unit directions in the local frame (renormalized; a norm off by more
+        than 1e-3 is an error).
+    values : ``(N, C)`` BRDF values in 1/sr (stored float64).
+    sigma : ``(N, C)`` one-standard-deviation uncertainty in 1/sr, or None.
+    channels : :class:`Channels` (default from C: mono or RGB).
+    weights : ``(N,)`` non-negative measure or fitting weights, or None.
+    meta : provenance, JSON-ready.
+    mask : ``(N,)`` bool, optional: rows marked False are dropped here (they may hold NaN).
+
+    Raises
+    ------
+    FormatError
+        wrong shapes, non-finite values in kept rows, negative sigma or weights.
+    """
+
+    def __init__(
+        self,
+        wi: Any,
+        wo: Any,
+        values: Any,
+        sigma: Any = None,
+        channels: Channels | None = None,
+        weights: Any = None,
+        meta: Mapping[str, Any] | None = None,
+        *,
+        mask: Any = None,
+    ) -> None:
+        wi = _f64(wi, "wi")
+        wo = _f64(wo, "wo")
+        vals = _f64(values, "values")
+        if wi.ndim != 2 or wi.shape[1] != 3 or wo.shape != wi.shape:
+            raise FormatError(f"wi and wo must both be (N, 3), got {wi.shape} and {wo.shape}")
+        n = wi.shape[0]
+        if vals.ndim == 1:
+            vals = vals[:, None]
+        if vals.ndim != 2 or vals.shape[0] != n or vals.shape[1] < 1:
+            raise FormatError(f"values must be ({n}, C), got {vals.shape}")
+        sig = None
+        if sigma is not None:
+            sig = _f64(sigma, "sigma")
+            if sig.ndim == 1:
+                sig = sig[:, None]
+            if sig.shape != vals.shape:
+                raise FormatError(f"sigma has shape {sig.shape}, expected {vals.shape}")
+        w = None
+        if weights is not None:
+            w = _f64(weights, "weights")
+            if w.shape != (n,):
+                raise FormatError(f"weights must be ({n},), got {w.shape}")
+        keep = np.ones(n, dtype=bool)
+        if mask is not None:
+            keep = np.asarray(mask)
+            if keep.shape != (n,) or keep.dtype != np.bool_:
+                raise FormatError(f"mask must be a boolean ({n},) array")
+        wi, wo, vals = wi[keep], wo[keep], vals[keep]
+        sig = None if sig is None else sig[keep]
+        w = None if w is None else w[keep]
+        for arr, what in ((wi, "wi"), (wo, "wo"), (vals, "values")):
+            if not np.all(np.isfinite(arr)):
+                raise FormatError(f"{what} contains NaN or Inf (mask those rows out)")
+        for d, what in ((wi, "wi"), (wo, "wo")):
+            norm = np.linalg.norm(d, axis=1)
+            if np.any(np.abs(norm - 1) > 1e-3):
+                raise FormatError(f"{what} must be unit vectors (a norm is {norm.max():.4g})")
+        wi = wi / np.linalg.norm(wi, axis=1, keepdims=True)
+        wo = wo / np.linalg.norm(wo, axis=1, keepdims=True)
+        if sig is not None and (not np.all(np.isfinite(sig)) or np.any(sig < 0)):
+            raise FormatError("sigma must be finite and >= 0")
+        if w is not None and (not np.all(np.isfinite(w)) or np.any(w < 0)):
+            raise FormatError("weights must be finite and >= 0")
+        C = vals.shape[1]
+        if channels is None:
+            try:
+                channels = Channels.for_count(C)
+            except ParameterError as e:
+                raise ParameterError(f"values have {C} channels: {e}") from None
+        if not isinstance(channels, Channels):
+            raise ParameterError("channels must be a Channels object")
+        if len(channels) != C:
+            raise FormatError(f"values have {C} channels but channels describes {len(channels)}")
+        for arr in (wi, wo, vals, sig, w):
+            if arr is not None:
+                arr.setflags(write=False)
+        self.wi, self.wo, self.values, self.sigma, self.weights = wi, wo, vals, sig, w
+        self.channels = channels
+        self.meta: dict[str, Any] = dict(meta or {})
+
+    def __len__(self) -> int:
+        return self.wi.shape[0]
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channels)
+
+    def __repr__(self) -> str:
+        return f"MeasuredSamples(N={len(self)}, {self.channels!r})"
+
+
+def _f64(x: Any, what: str) -> np.ndarray:
+    try:
+        arr = np.asarray(x)
+    except (TypeError, ValueError):
+        raise FormatError(f"{what} is not an array") from None
+    if arr.dtype.kind not in "fiu":
+        raise FormatError(f"{what} must be numeric, got dtype {arr.dtype}")
+    return np.array(arr, dtype=np.float64)
+
+
+__all__ = ["MeasuredSamples"]

@@ -1,0 +1,72 @@
+"""Atomic file output: the one helper every gonio writer uses (DESIGN.md: files are written to a
+temporary file, then renamed).
+
+>>> with atomic_output("out/figure.png", suffix=".png", make_parents=True) as tmp:
+...     fig.savefig(tmp)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from gonio.errors import FormatError
+
+PathLike = str | os.PathLike[str]
+
+
+def current_umask() -> int:
+    """The process's file-mode creation mask (read without changing it for good)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_output(
+    path: PathLike, suffix: str = ".tmp", *, make_parents: bool = False
+) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; when the body succeeds, rename it onto ``path``.
+
+    The temporary file lives in the destination folder so that :func:`os.replace` is an atomic
+    rename on the same file system, and it gets the mode a plain ``open()`` would give the file
+    (``0o666`` less the umask; :func:`tempfile.mkstemp` creates it ``0o600``). If the body raises
+    (``KeyboardInterrupt`` included), the temporary file is removed and ``path`` is left as it
+    was: a crash never leaves a half-written file under the final name, nor a stale temporary.
+
+    Parameters
+    ----------
+    path : the destination file.
+    suffix : suffix of the temporary file (some writers choose the format from it, e.g. ``.exr``).
+    make_parents : create missing parent folders first; otherwise a missing folder is an error.
+
+    Raises
+    ------
+    FormatError
+        ``path`` is a folder, or its folder does not exist (and ``make_parents`` is False).
+    """
+    dest = Path(path)
+    folder = dest.parent if str(dest.parent) else Path(".")
+    if dest.is_dir():
+        raise FormatError(f"{os.fspath(dest)}: is a directory, cannot write a file there")
+    if make_parents:
+        folder.mkdir(parents=True, exist_ok=True)
+    elif not folder.is_dir():
+        raise FormatError(f"{os.fspath(dest)}: output folder {folder} does not exist")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=suffix, dir=folder)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.chmod(tmp, 0o666 & ~current_umask())
+        os.replace(tmp, dest)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
+
+
+__all__ = ["atomic_output", "current_umask"]
