@@ -275,9 +275,9 @@ def interpolate_samples(
         sig = np.sqrt(np.sum((d * pts.sigma[idx]) ** 2, axis=1))
         sig = np.where(inside[:, None], sig, 0.0)
     shape = tuple(a.size for a in axes)
-    from gonio.brdf.tabulated import _node_directions
+    from gonio.brdf.grid import node_directions
 
-    wi, wo = _node_directions(axes, "half_diff_iso")
+    wi, wo = node_directions(axes, "half_diff_iso")
     above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     c = val.shape[1]
     meta = dict(samples.meta)

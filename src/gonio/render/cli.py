@@ -320,7 +320,7 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--spp must be >= 1, got {args.spp}")
     if not 8 <= args.resolution <= 4096:
         raise ParameterError(f"--resolution must be in [8, 4096], got {args.resolution}")
-    from gonio.render.plot_cli import output_path
+    from gonio.render.output import output_path
 
     out = output_path(args.out, "compare.png")
     lights = _lights(args)

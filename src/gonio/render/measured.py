@@ -42,7 +42,7 @@ def spectral_to_rgb_matrix(wavelengths_nm: Any, illuminant: str = "D65") -> np.n
     )
 
 
-def _rgb_samples(obj: Any, illuminant: str) -> Any:
+def rgb_samples(obj: Any, illuminant: str) -> Any:
     """Scattered spectral samples -> linear sRGB samples (sigma propagated linearly)."""
     from gonio.brdf.tabulated import Channels, MeasuredSamples
 
@@ -98,7 +98,7 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
     channels = getattr(obj, "channels", None)
     if getattr(channels, "kind", None) == "spectral":
         n = len(channels)
-        obj = _rgb_samples(obj, illuminant) if isinstance(obj, MeasuredSamples) else obj
+        obj = rgb_samples(obj, illuminant) if isinstance(obj, MeasuredSamples) else obj
         if isinstance(obj, TabulatedBRDF):
             obj = _rgb_table(obj, illuminant)
         notes.append(f"spectral data ({n} wavelengths) shown as linear sRGB under {illuminant}")

@@ -184,3 +184,21 @@ def write_png(path: str | os.PathLike, img: np.ndarray, exposure: float | None =
     with atomic_output(path, ".png", make_parents=True) as tmp:
         Image.fromarray(data).save(tmp, format="PNG")
     return path
+
+
+#: Figure formats of the commands that write plots (by extension).
+FIGURE_FORMATS = (".png", ".svg", ".pdf")
+
+
+def output_path(text: str, default_name: str = "plot.png") -> Path:
+    """The figure path: a folder (existing, or written with a trailing /) gets
+    ``default_name`` inside; the extension must be one of :data:`FIGURE_FORMATS`."""
+    p = Path(text)
+    if text.endswith(("/", "\\")) or p.is_dir():
+        p = p / default_name
+    if p.suffix.lower() not in FIGURE_FORMATS:
+        raise ParameterError(
+            f"--out {text}: unsupported figure format {p.suffix or '(none)'!r}; use "
+            + ", ".join(FIGURE_FORMATS)
+        )
+    return p

@@ -9,8 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.errors import ParameterError
-
-FORMATS = (".png", ".svg", ".pdf")
+from gonio.render.output import output_path
 
 
 def register(subparsers: Any) -> None:
@@ -55,20 +54,6 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-def output_path(text: str, default_name: str = "plot.png") -> Path:
-    """The figure path: a folder (existing, or written with a trailing /) gets
-    ``default_name`` inside; the extension must be one of :data:`FORMATS`."""
-    p = Path(text)
-    if text.endswith(("/", "\\")) or p.is_dir():
-        p = p / default_name
-    if p.suffix.lower() not in FORMATS:
-        raise ParameterError(
-            f"--out {text}: unsupported figure format {p.suffix or '(none)'!r}; use "
-            + ", ".join(FORMATS)
-        )
-    return p
-
-
 def parse_angles(text: str) -> list[float]:
     try:
         vals = [float(x) for x in text.split(",") if x.strip()]
@@ -101,9 +86,9 @@ def _load(path: str) -> Any:
     samples = None
     if isinstance(obj, MeasuredSamples):
         if getattr(obj.channels, "kind", None) == "spectral":
-            from gonio.render.measured import _rgb_samples
+            from gonio.render.measured import rgb_samples
 
-            obj = _rgb_samples(obj, "D65")
+            obj = rgb_samples(obj, "D65")
         samples = (obj.wi, obj.wo, obj.values)
     return PlotInput(p.name, material, measured=True, samples=samples)
 
