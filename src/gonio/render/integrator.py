@@ -65,6 +65,14 @@ from gonio.brdf import warp
 from gonio.brdf.models import BRDFModel
 from gonio.errors import ParameterError
 from gonio.render.lights import Environment, Light, light_list
+from gonio.render.materials import (
+    has_delta,
+    is_table,
+    material_channel_names,
+    material_channels,
+    restrict_model_channels,
+    restrict_table_channels,
+)
 from gonio.render.scene import Camera, SphereHits, intersect_sphere
 
 Array = jnp.ndarray
@@ -89,74 +97,6 @@ MIN_PIXEL_TILE = 256
 IN_FLIGHT = max(1, min(4, os.cpu_count() or 1))
 
 
-# -- materials ---------------------------------------------------------------------------------
-
-
-def _is_table(material: Any) -> bool:
-    return not isinstance(material, BRDFModel) and hasattr(material, "values")
-
-
-def material_channels(material: Any) -> int:
-    """Number of channels C of a model (``.channels`` int) or a table (``values.shape[-1]``)."""
-    if isinstance(material, BRDFModel):
-        return int(material.channels)
-    values = getattr(material, "values", None)
-    if values is not None:
-        return int(np.shape(values)[-1])
-    raise ParameterError(f"not a BRDF model or table: {type(material).__name__}")
-
-
-def material_channel_names(material: Any) -> tuple[str, ...] | None:
-    """Channel names of a table (``channels.names``) or None."""
-    ch = getattr(material, "channels", None)
-    names = getattr(ch, "names", None)
-    return tuple(names) if names is not None else None
-
-
-def _has_delta(material: Any) -> bool:
-    if getattr(material, "is_delta", False):
-        return True
-    return bool(getattr(material, "has_delta", False))
-
-
-def restrict_model_channels(model: BRDFModel, idx: np.ndarray) -> BRDFModel:
-    """The model with every per-channel parameter cut down to channels ``idx``.
-
-    Evaluating only the channels asked for: per-channel parameters of length C become length
-    ``len(idx)``; scalar (grey) parameters stay. Models whose channels are not parameters
-    (a measured file, :class:`gonio.io.rgl_measured.RGLMeasured`) cut themselves
-    (``select_channels``).
-    """
-    if hasattr(model, "select_channels"):
-        return model.select_channels(idx)
-    specs = model.param_specs()
-    new = {}
-    for key, value in model.params().items():
-        v = np.asarray(value)
-        if specs[key].per_channel and v.ndim == 1 and v.size > 1:
-            new[key] = v[idx]
-    return model.replace(**new) if new else model
-
-
-def restrict_table_channels(table: Any, idx: np.ndarray) -> Any | None:
-    """A table with only the channels ``idx`` (values, sigma and channel description cut), or
-    None when the selection has no :class:`~gonio.brdf.tabulated.Channels` description (two
-    channels of an RGB table): the caller then renders every channel and cuts afterwards.
-    """
-    ch = table.channels
-    names = tuple(ch.names[i] for i in idx)
-    if ch.kind == "spectral":
-        new = type(ch)("spectral", names=names, wavelengths_nm=np.asarray(ch.wavelengths_nm)[idx])
-    elif len(idx) == 1:
-        new = type(ch)("mono", names=names)
-    elif list(idx) == list(range(len(ch.names))):
-        return table
-    else:
-        return None
-    sigma = None if table.sigma is None else np.asarray(table.sigma)[..., idx]
-    return table.replace(values=np.asarray(table.values)[..., idx], sigma=sigma, channels=new)
-
-
 @dataclass(frozen=True)
 class _Technique:
     """How BRDF samples are drawn: ``kind`` is "none" (light sampling only), "cosine", "model"
@@ -174,11 +114,11 @@ def resolve_sampler(
     """Check ``sampler`` against the material and return the technique to run."""
     if sampler not in SAMPLERS:
         raise ParameterError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
-    table = _is_table(material)
+    table = is_table(material)
     if sampler == "light":
         if mis:
             raise ParameterError("sampler='light' samples lights only; it cannot use MIS")
-        if _has_delta(material):
+        if has_delta(material):
             raise ParameterError(
                 "sampler='light' cannot render a material with delta lobes (mirror, glass)"
             )
@@ -187,12 +127,12 @@ def resolve_sampler(
         raise ParameterError(
             f"sampler={sampler!r} samples tabulated BRDFs; this is an analytic model"
         )
-    if sampler == "cosine" and _has_delta(material):
+    if sampler == "cosine" and has_delta(material):
         raise ParameterError("sampler='cosine' cannot find the delta lobes of this material")
     if proposal is not None:
         if not table:
             raise ParameterError("proposal= applies to tabulated BRDFs only")
-        if not isinstance(proposal, BRDFModel) or _has_delta(proposal):
+        if not isinstance(proposal, BRDFModel) or has_delta(proposal):
             raise ParameterError("proposal must be an analytic BRDF model without delta lobes")
         if sampler not in ("brdf", "rejection"):
             raise ParameterError("proposal= is used by sampler='brdf' (lobe) or 'rejection'")
@@ -580,7 +520,7 @@ def render_sphere(
             c_mat = material_channels(material)
             post_idx = None
     tech = resolve_sampler(material, sampler, mis, proposal)
-    if _is_table(material) and tech.kind not in ("none", "cosine", "lobe", *TABLE_METHODS):
+    if is_table(material) and tech.kind not in ("none", "cosine", "lobe", *TABLE_METHODS):
         raise ParameterError(f"tables are sampled by {TABLE_METHODS}; got {tech.kind!r}")
     c_out = _output_channels(c_mat, lights)
 
