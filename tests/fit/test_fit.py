@@ -269,5 +269,7 @@ def test_fixed_parameters_and_jnp_values():
     data, _ = synthetic(TRUTH, n=500, seed=5)
     res = gf.fit(data, model=models.Lambert() + TestLobe(), fixed={"testlobe.n": 50.0})
     assert res.params["testlobe.n"] == 50.0 and "testlobe.n" in res.fixed
-    assert res.intervals()["testlobe.n"] == [50.0, 50.0]
+    # fixed, not "known to be in [50, 50]": no interval, listed as fixed
+    assert "testlobe.n" not in res.intervals() and "testlobe.n" not in res.to_json()["intervals"]
+    assert "testlobe.n" in res.to_json()["fixed"]
     assert isinstance(res.model.params()["testlobe.n"], jnp.ndarray)

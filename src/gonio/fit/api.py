@@ -43,6 +43,28 @@ def information_criteria(
     return base + 2 * n_par, base + n_par * math.log(m)
 
 
+#: Lobe-shape parameters and the bound at which the lobe becomes a needle between the cells.
+_NEEDLE_AT = {"alpha": "lower", "alpha_x": "lower", "alpha_y": "lower", "n": "upper",
+              "nu": "upper", "nv": "upper", "B": "upper"}  # fmt: skip
+
+
+def _degenerate(layout: Layout, u: np.ndarray) -> list[str]:
+    """Lobe-shape parameters (roughness, exponents) on the search bound where the lobe becomes
+    a needle (roughness at its lower bound, an exponent at its upper bound)."""
+    lo, hi = layout.box()
+    out = []
+    for e in layout.entries:
+        side = _NEEDLE_AT.get(e.key.rpartition(".")[2])
+        if side is None:
+            continue
+        sl = slice(e.offset, e.offset + e.size)
+        tol = 1e-4 * (hi[sl] - lo[sl])
+        hit = u[sl] <= lo[sl] + tol if side == "lower" else u[sl] >= hi[sl] - tol
+        if np.any(hit):
+            out.append(e.key)
+    return out
+
+
 def _resolve_model(
     model: str | BRDFModel,
 ) -> tuple[str, BRDFModel, dict[str, Any], dict[str, str]]:
@@ -88,6 +110,10 @@ class FitOptions:
     global_method : None, ``"crs2"``, ``"mlsl"`` or ``"direct"`` before the local stage.
     n_starts, seed, subsample, max_iter : multi-start settings (see :func:`~.optimize.optimize`).
     laplace_method : ``"gauss-newton"`` or ``"hessian"``.
+    covariance : Laplace covariance: ``"auto"`` (default), ``"residual"`` (residual-scaled
+        inverse Hessian) or ``"cluster"`` (cluster-robust sandwich, which includes the model's
+        discrepancy); ``"auto"`` is ``"residual"`` only for a ``wls`` fit with measured sigma
+        that reaches the noise (chi2/dof <= 2). See :mod:`gonio.fit.uncertainty`.
     mcmc_steps, mcmc_samples : chain length per walker and data subsample size for MCMC.
     name : material name for the record.
     progress : called with a short text before each stage (for progress displays).
@@ -107,6 +133,7 @@ class FitOptions:
     subsample: int = 4000
     max_iter: int = 200
     laplace_method: str = "gauss-newton"
+    covariance: str = "auto"
     mcmc_steps: int = 2000
     mcmc_samples: int = 3000
     name: str | None = None
@@ -234,6 +261,18 @@ def _fit_one(
         subsample=subsample,
         max_iter=max_iter,
     )
+    spikes = _degenerate(layout, opt.u)
+    restarted = None
+    if spikes:
+        # A lobe shape on its lower bound (roughness -> 0, a needle between the cells): not an
+        # optimum worth reporting. Restart from twice as many other points once.
+        say(f"{name}: degenerate optimum ({', '.join(spikes)} on a bound); restarting")
+        again = optimize(problem, method=optimizer, global_method=global_method,
+                         n_starts=max(2 * n_starts, 16), seed=seed + 1, subsample=subsample,
+                         max_iter=max_iter)  # fmt: skip
+        restarted = not _degenerate(layout, again.u)
+        if restarted:
+            opt = again
     fitted = layout.model(opt.u)
     f = problem.predict(opt.u)
     if not np.all(np.isfinite(f)):
@@ -250,15 +289,22 @@ def _fit_one(
         idx = {n: i for i, n in enumerate(layout.flat_names())}
         shown = [flat[idx[n]] for n in opt.on_bounds]
         warnings_.append("parameters ended on their search bound: " + ", ".join(shown))
-    if not opt.converged:
+    if restarted is False:
+        opt.converged = False
+        opt.message = "degenerate optimum: " + ", ".join(_degenerate(layout, opt.u))
+        opt.message += " on the bound of a needle lobe, also after a restart"
+        warnings_.append(opt.message + "; not a usable fit")
+    elif restarted:
+        warnings_.append(f"restarted after a degenerate optimum ({', '.join(spikes)} on bound)")
+    if not opt.converged and restarted is not False:
         warnings_.append(f"optimizer did not converge: {opt.message}")
     unc = None
     if uncertainty == "laplace":
         say(f"{name}: Laplace approximation")
-        unc = laplace(problem, opt.u, method=laplace_method)
+        unc = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
     elif uncertainty == "mcmc":
         say(f"{name}: Laplace approximation")
-        init = laplace(problem, opt.u, method=laplace_method)
+        init = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
         say(f"{name}: MCMC ({mcmc_steps} steps)")
         unc = mcmc(
             problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed, init=init
