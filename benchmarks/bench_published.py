@@ -19,6 +19,7 @@ Run from the repository root::
     PYTHONPATH=src python benchmarks/bench_published.py            # every material
     PYTHONPATH=src python benchmarks/bench_published.py --quick    # 8 materials
     PYTHONPATH=src python benchmarks/bench_published.py --materials gold-paint,pvc
+    PYTHONPATH=src python benchmarks/bench_published.py --speed gold-paint   # timings only
 
 Writes ``results/published.csv`` (one row per material, family and metric), ``published.png``
 (gonio against published, per family and metric) and prints the summary table (wins, median
@@ -168,11 +169,52 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def _write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    keys = list(rows[0])
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
     with open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
+
+
+def speed(name: str, preset: str = "lambert+cook-torrance", loss: str = "ngan") -> list[dict]:
+    """Wall times of one fit of a MERL-resolution table, cold (a fresh ``gonio fit`` process) and
+    warm (in process, second call), and the check that the multi-start on a 4000-cell subsample
+    keeps the optimum of a multi-start on every cell."""
+    import subprocess
+    import sys
+    import tempfile
+
+    from gonio import fit as gf
+    from gonio import io
+    from gonio.fit.data import prepare
+
+    rows = []
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "gonio", "fit", f"{ARCHIVE}::{name}", "-m", preset,
+               "--loss", loss, "--no-plots", "-o", out]  # fmt: skip
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True)
+        rows.append({"what": "cold gonio fit process (import, table, fit, JSON)",
+                     "seconds": time.perf_counter() - t0})  # fmt: skip
+    t0 = time.perf_counter()
+    data = prepare(io.load(f"{ARCHIVE}::{name}"))
+    rows.append(
+        {"what": "tabulate the network + prepare cells", "seconds": time.perf_counter() - t0}
+    )
+    costs = {}
+    for label, sub in (("first fit (compiles)", 4000), ("warm fit", 4000),
+                       ("warm fit, multi-start on every cell", data.n)):  # fmt: skip
+        t0 = time.perf_counter()
+        r = gf.fit(data, preset, loss=loss, subsample=sub)
+        rows.append({"what": label, "seconds": time.perf_counter() - t0, "loss": r.loss,
+                     "polish_s": r.optimizer["timings"]["polish"],
+                     "starts_s": r.optimizer["timings"]["starts"], "n_cells": data.n})  # fmt: skip
+        costs[label] = r.loss
+    rel = abs(costs["warm fit"] - costs["warm fit, multi-start on every cell"]) / costs["warm fit"]
+    rows.append({"what": "relative loss difference, subsample vs every cell", "seconds": rel})
+    return rows
 
 
 def main() -> None:
@@ -181,9 +223,19 @@ def main() -> None:
     ap.add_argument("--materials", help="comma-separated material names")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", default="published", help="result file stem (default published)")
+    ap.add_argument("--speed", metavar="MATERIAL", help="only the timing section on MATERIAL")
     args = ap.parse_args()
     if not ARCHIVE.exists():
         print(f"no {ARCHIVE}: skipped")
+        return
+    if args.speed:
+        load = os.getloadavg()[0]
+        rows = speed(args.speed)
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        _write_csv(rows, RESULTS / f"{args.out}_speed.csv")
+        print(f"{args.speed}, {os.cpu_count()} CPUs, load {load:.1f} at start")
+        for r in rows:
+            print(f"  {r['what']}: {r['seconds']:.4g}")
         return
     from gonio.io.nbrdf import list_materials
 
