@@ -224,7 +224,21 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", default="published", help="result file stem (default published)")
     ap.add_argument("--speed", metavar="MATERIAL", help="only the timing section on MATERIAL")
+    ap.add_argument("--combine", metavar="STEM,STEM",
+                    help="fit nothing: merge results/STEM.csv of earlier runs (on disjoint "
+                    "materials) into results/OUT.csv, .png and _summary.csv")  # fmt: skip
     args = ap.parse_args()
+    if args.combine:
+        rows = []
+        for stem in args.combine.split(","):
+            with open(RESULTS / f"{stem}.csv", newline="") as fh:
+                for r in csv.DictReader(fh):
+                    for k in ("published", "gonio", "ratio", "fit_s"):
+                        r[k] = float(r[k])
+                    r["win"] = r["win"] == "True"
+                    rows.append(r)
+        _report(rows, args.out, f"combined from {args.combine}")
+        return
     if not ARCHIVE.exists():
         print(f"no {ARCHIVE}: skipped")
         return
@@ -253,13 +267,18 @@ def main() -> None:
     else:
         rows = [r for n in names for r in run_material(n)]
     wall = time.perf_counter() - t0
+    _report(rows, args.out, f"{len(names)} materials, {args.jobs} jobs, {wall:.0f} s wall "
+            f"({os.cpu_count()} CPUs, load {load:.1f} at start)")  # fmt: skip
+
+
+def _report(rows: list[dict[str, Any]], out: str, note: str) -> None:
     RESULTS.mkdir(parents=True, exist_ok=True)
-    _write_csv(rows, RESULTS / f"{args.out}.csv")
-    _plot(rows, RESULTS / f"{args.out}.png")
+    _write_csv(rows, RESULTS / f"{out}.csv")
+    _plot(rows, RESULTS / f"{out}.png")
     summ = summary(rows)
-    _write_csv(summ, RESULTS / f"{args.out}_summary.csv")
-    print(f"\n{len(names)} materials, {args.jobs} jobs, {wall:.0f} s wall "
-          f"({os.cpu_count()} CPUs, load {load:.1f} at start)\n")  # fmt: skip
+    _write_csv(summ, RESULTS / f"{out}_summary.csv")
+    n = len({r["material"] for r in rows})
+    print(f"\n{n} materials; {note}\n")
     print("| family | metric (= loss) | gonio wins | median gonio/published | worst (material) |")
     print("|---|---|---|---|---|")
     for s in summ:
