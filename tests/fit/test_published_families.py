@@ -246,3 +246,18 @@ def test_default_intervals_cover_best_in_family_parameters_of_a_wrong_model():
         for k in keys:
             covered[k] += float(iv[k][0]) <= best[k] <= float(iv[k][1])
     assert all(c >= 52 for c in covered.values()), covered
+
+
+def test_fit_cli_says_which_loss_without_sigma_and_scores_fits(tmp_path, capsys):
+    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.io import save
+
+    rng = np.random.default_rng(2)
+    wi, wo = cosine_directions(300, rng), cosine_directions(300, rng)
+    p = tmp_path / "grey.brdf.h5"
+    save(MeasuredSamples(wi, wo, np.full((300, 1), 0.1), meta={"name": "grey"}), p)
+    args = ["fit", str(p), "-m", "lambert", "--score", "--no-plots", "-o", str(tmp_path / "o")]
+    assert main(args) == 0
+    cap = capsys.readouterr()
+    assert "has no sigma: fitting with low-e1" in cap.err
+    assert "score lambert: ngan" in cap.out and "low-e2" in cap.out

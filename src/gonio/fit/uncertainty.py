@@ -19,8 +19,9 @@ Laplace
     thousands. Default (``"auto"``): ``"residual"`` for a ``wls`` fit with measured sigma whose
     reduced chi-square is at most 2 (the model reaches the noise), ``"cluster"`` otherwise (data
     without sigma, other losses, or misfit beyond the noise); the choice is recorded in
-    ``diagnostics["covariance"]``. ``benchmarks/bench_fit.py`` and ``tests/fit`` check the
-    cluster intervals' coverage of the best-in-family parameters with a deliberately wrong model.
+    ``diagnostics["covariance"]``. ``tests/fit/test_published_families.py`` (``-m slow``) checks
+    the default intervals' coverage of the best-in-family parameters with a deliberately wrong
+    model on simulated data.
     Intervals are symmetric in ``u`` and mapped through the (monotone) reparameterization, so
     they respect physical bounds (a log-scale roughness gets a multiplicative interval).
     Standard deviations and correlations in physical units use the delta method.
