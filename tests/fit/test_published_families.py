@@ -245,6 +245,7 @@ def test_default_intervals_cover_best_in_family_parameters_of_a_wrong_model():
         iv = res.intervals(95)
         for k in keys:
             covered[k] += float(iv[k][0]) <= best[k] <= float(iv[k][1])
+    print("covered of 60:", covered)
     assert all(c >= 52 for c in covered.values()), covered
 
 

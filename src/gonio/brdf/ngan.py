@@ -6,7 +6,10 @@ line::
     blue-acrylic = Aggregate(Lambertian(albedo = [r, g, b]), NganWard(albedo = [..], roughness = a))
 
 :func:`parse_ngan_fits` parses that text (never evaluates it) and :func:`to_model` turns one
-entry into a gonio model that evaluates to the same BRDF. This module does no I/O: callers pass
+entry into a gonio model that evaluates to the same BRDF; :func:`to_family` gives the same BRDF
+as a model of the matching fit preset (``lambert+cook-torrance``, ``lambert+ward``,
+``lambert+ngan-blinn-phong``), so that gonio's fits and the published ones are scored and
+refitted by the same code. This module does no I/O: callers pass
 the text (``gonio.brdf`` stays free of files).
 
 Conventions (bbm's model definitions; ``cos_i``, ``cos_o`` the cosines of ``wi``, ``wo``; ``h``
