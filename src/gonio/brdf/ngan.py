@@ -31,7 +31,7 @@ the unit half vector; all diffuse terms are ``Lambertian(albedo) = albedo / pi``
     :func:`to_model` follows bbm (the stated source of the parameter meanings);
     :func:`to_family` defaults to the half-vector lobe ``albedo (n + 2) / (2 pi) cos^n theta_h``
     (:class:`~gonio.brdf.models.NganBlinnPhong`), which scores closer to the neural MERL
-    tables than the mirror-direction reading in 101 of 108 (material, metric) pairs
+    tables than the mirror-direction reading in 107 of 114 (material, metric) pairs
     (``benchmarks/bench_published.py``, column ``published_bbm``).
     Five published sharpness values (up to 121000) exceed gonio's exponent range (1e5):
     converting those materials raises ParameterError.
