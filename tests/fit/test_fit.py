@@ -76,11 +76,17 @@ def test_laplace_matches_analytic_linear_gaussian_albedo():
         assert (hi - lo) / (2 * 1.959964 * k * sd) == pytest.approx(1.0, rel=1e-3)
     # without sigma the scale comes from the residuals: sd = pi sqrt(RSS/(N-1)) / sqrt(N)
     data2 = from_arrays(wi, wo, y, theta_max_deg=90)
-    res2 = gf.fit(data2, model=models.Lambert(), uncertainty="laplace", theta_max_deg=90)
+    opts = dict(model=models.Lambert(), loss="wls", uncertainty="laplace", theta_max_deg=90)
+    res2 = gf.fit(data2, covariance="residual", **opts)
     rss = np.sum((y - np.mean(y)) ** 2)
     assert res2.uncertainty.std[0] == pytest.approx(
         np.pi * np.sqrt(rss / (n - 1)) / np.sqrt(n), rel=1e-6
     )
+    # the default without sigma is the cluster sandwich; with independent errors it estimates
+    # the same spread (to the sampling error of ~200 clusters)
+    res3 = gf.fit(data2, **opts)
+    assert res3.uncertainty.diagnostics["covariance"] == "cluster"
+    assert res3.uncertainty.std[0] == pytest.approx(res2.uncertainty.std[0], rel=0.15)
 
 
 def test_mcmc_agrees_with_laplace_on_linear_case():
@@ -267,5 +273,7 @@ def test_fixed_parameters_and_jnp_values():
     data, _ = synthetic(TRUTH, n=500, seed=5)
     res = gf.fit(data, model=models.Lambert() + TestLobe(), fixed={"testlobe.n": 50.0})
     assert res.params["testlobe.n"] == 50.0 and "testlobe.n" in res.fixed
-    assert res.intervals()["testlobe.n"] == [50.0, 50.0]
+    # fixed, not "known to be in [50, 50]": no interval, listed as fixed
+    assert "testlobe.n" not in res.intervals() and "testlobe.n" not in res.to_json()["intervals"]
+    assert "testlobe.n" in res.to_json()["fixed"]
     assert isinstance(res.model.params()["testlobe.n"], jnp.ndarray)

@@ -6,6 +6,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,28 @@ def information_criteria(
     return base + 2 * n_par, base + n_par * math.log(m)
 
 
+#: Lobe-shape parameters and the bound at which the lobe becomes a needle between the cells.
+_NEEDLE_AT = {"alpha": "lower", "alpha_x": "lower", "alpha_y": "lower", "n": "upper",
+              "nu": "upper", "nv": "upper", "B": "upper"}  # fmt: skip
+
+
+def _degenerate(layout: Layout, u: np.ndarray) -> list[str]:
+    """Lobe-shape parameters (roughness, exponents) on the search bound where the lobe becomes
+    a needle (roughness at its lower bound, an exponent at its upper bound)."""
+    lo, hi = layout.box()
+    out = []
+    for e in layout.entries:
+        side = _NEEDLE_AT.get(e.key.rpartition(".")[2])
+        if side is None:
+            continue
+        sl = slice(e.offset, e.offset + e.size)
+        tol = 1e-4 * (hi[sl] - lo[sl])
+        hit = u[sl] <= lo[sl] + tol if side == "lower" else u[sl] >= hi[sl] - tol
+        if np.any(hit):
+            out.append(e.key)
+    return out
+
+
 def _resolve_model(
     model: str | BRDFModel,
 ) -> tuple[str, BRDFModel, dict[str, Any], dict[str, str]]:
@@ -52,53 +75,102 @@ def _resolve_model(
     raise FitError(f"model must be a name or a gonio model, got {type(model).__name__}")
 
 
-def fit(
-    data: Any,
-    model: str | BRDFModel | Sequence[str | BRDFModel] = "lambert+ward",
-    loss: str = "wls",
-    uncertainty: str | None = None,
-    *,
-    theta_max_deg: float = DEFAULT_THETA_MAX_DEG,
-    fixed: Mapping[str, Any] | None = None,
-    tie: bool = True,
-    channels: str = "shared",
-    optimizer: str = "lm",
-    global_method: str | None = None,
-    n_starts: int = 8,
-    seed: int = 0,
-    subsample: int = 4000,
-    max_iter: int = 200,
-    laplace_method: str = "gauss-newton",
-    mcmc_steps: int = 2000,
-    mcmc_samples: int = 3000,
-    name: str | None = None,
-    progress: Callable[[str], None] | None = None,
-) -> FitResult | list[FitResult]:
-    """Fit an analytic BRDF model to measured data.
+#: Loss used when ``loss="auto"`` and the data has no sigma (see :class:`FitOptions`).
+AUTO_LOSS_WITHOUT_SIGMA = "low-e1"
 
-    Parameters
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Every setting of :func:`fit` other than the data and the model, in one documented object.
+
+    ``fit(data, model, options=FitOptions(loss="ngan", n_starts=16))``; keyword arguments of
+    :func:`fit` with the same names override the object's fields.
+
+    Attributes
     ----------
-    data : a TabulatedBRDF, MeasuredSamples, :class:`~gonio.fit.data.FitData` or a file path.
-    model : a model name (see :func:`gonio.fit.presets.available`, e.g. ``"lambert+ward"``), a
-        gonio model used as template (its values are the starting point), or a list of either
-        (then a list of results, one per model, is returned).
-    loss : ``"wls"``, ``"ngan"``, ``"low-e1"``, ``"low-e2"`` or ``"cube-root"`` (see
-        :mod:`gonio.fit.losses`).
+    loss : ``"auto"`` (default), ``"wls"``, ``"ngan"``, ``"low-e1"``, ``"low-e2"`` or
+        ``"cube-root"`` (see :mod:`gonio.fit.losses`). ``"auto"`` is ``wls`` (chi-square) when the
+        data has sigma, and otherwise :data:`AUTO_LOSS_WITHOUT_SIGMA` (``low-e1``, Löw et al.'s
+        log metric): without sigma the errors of published tables are closer to relative than
+        to absolute, and ``wls`` with sigma = 1 lets the specular peak's absolute errors decide
+        the whole fit (diffuse albedos end on their bounds). The logarithm ``ln(1 + f cos_i)``
+        weighs errors relatively above about 1 sr^-1 and absolutely (cosine-weighted) below.
     uncertainty : None, ``"laplace"`` or ``"mcmc"`` (see :mod:`gonio.fit.uncertainty`).
     theta_max_deg : polar-angle cutoff for both directions, degrees (applied also to data that
         was already prepared with another cutoff).
     fixed : parameter keys held at given values (``{"ward.rho_d": 0.0}``).
     tie : apply the named model's ties (isotropic Ward: ``alpha_y = alpha_x``); False fits
         every parameter of the preset separately.
+    grey_fresnel : fit a Schlick ``f0`` (keys ending in ``fresnel.f0``) as one value for every
+        channel. None (default): True for spectral data (more than 3 channels), where 31 free
+        reflectances at normal incidence are not identifiable, False otherwise.
     channels : ``"shared"`` (lobe shapes shared, per-channel albedos) or ``"separate"`` (each
         channel fitted on its own; returns one result per channel).
     optimizer : local method ``"lm"``, ``"lbfgs"`` or ``"slsqp"``.
     global_method : None, ``"crs2"``, ``"mlsl"`` or ``"direct"`` before the local stage.
     n_starts, seed, subsample, max_iter : multi-start settings (see :func:`~.optimize.optimize`).
     laplace_method : ``"gauss-newton"`` or ``"hessian"``.
+    covariance : Laplace covariance: ``"auto"`` (default), ``"residual"`` (residual-scaled
+        inverse Hessian) or ``"cluster"`` (cluster-robust sandwich, which includes the model's
+        discrepancy); ``"auto"`` is ``"residual"`` only for a ``wls`` fit with measured sigma
+        that reaches the noise (chi2/dof <= 2). See :mod:`gonio.fit.uncertainty`.
     mcmc_steps, mcmc_samples : chain length per walker and data subsample size for MCMC.
     name : material name for the record.
     progress : called with a short text before each stage (for progress displays).
+    """
+
+    loss: str = "auto"
+    uncertainty: str | None = None
+    theta_max_deg: float = DEFAULT_THETA_MAX_DEG
+    fixed: Mapping[str, Any] | None = None
+    tie: bool = True
+    grey_fresnel: bool | None = None
+    channels: str = "shared"
+    optimizer: str = "lm"
+    global_method: str | None = None
+    n_starts: int = 8
+    seed: int = 0
+    subsample: int = 4000
+    max_iter: int = 200
+    laplace_method: str = "gauss-newton"
+    covariance: str = "auto"
+    mcmc_steps: int = 2000
+    mcmc_samples: int = 3000
+    name: str | None = None
+    progress: Callable[[str], None] | None = None
+
+    def resolved_loss(self, has_sigma: bool) -> str:
+        """The loss actually used on data with (or without) sigma."""
+        if self.loss != "auto":
+            return self.loss
+        return "wls" if has_sigma else AUTO_LOSS_WITHOUT_SIGMA
+
+
+_OPTION_NAMES = frozenset(f.name for f in dataclasses.fields(FitOptions))
+
+
+def fit(
+    data: Any,
+    model: str | BRDFModel | Sequence[str | BRDFModel] = "lambert+ward",
+    loss: str | None = None,
+    uncertainty: str | None = None,
+    *,
+    options: FitOptions | None = None,
+    **overrides: Any,
+) -> FitResult | list[FitResult]:
+    """Fit an analytic BRDF model to measured data.
+
+    Parameters
+    ----------
+    data : a TabulatedBRDF, MeasuredSamples, :class:`~gonio.fit.data.FitData` or a file path.
+    model : a model name (see :func:`gonio.fit.presets.available`, e.g. ``"lambert+ward"``;
+        :data:`gonio.fit.presets.FAMILIES` lists the literature's families), a gonio model used
+        as template (its values are the starting point), or a list of either (then a list of
+        results, one per model, is returned).
+    loss, uncertainty : as in :class:`FitOptions` (positional for convenience).
+    options : a :class:`FitOptions`; default ``FitOptions()``.
+    **overrides : any :class:`FitOptions` field by name (``n_starts=16``), overriding
+        ``options``.
 
     Returns
     -------
@@ -108,13 +180,24 @@ def fit(
     ------
     FitError
         When the data cannot be fitted (no valid samples, fewer values than parameters, all
-        values zero, unknown names).
+        values zero, unknown names or options).
     """
-    if uncertainty not in UNCERTAINTY_METHODS:
-        raise FitError(f"unknown uncertainty method {uncertainty!r}; valid: laplace, mcmc")
-    if channels not in ("shared", "separate"):
-        raise FitError(f"channels must be 'shared' or 'separate', got {channels!r}")
-    get_loss(loss)
+    unknown = sorted(set(overrides) - _OPTION_NAMES)
+    if unknown:
+        raise FitError(f"unknown fit option(s) {', '.join(unknown)}; valid: "
+                       f"{', '.join(sorted(_OPTION_NAMES))}")  # fmt: skip
+    if loss is not None:
+        overrides["loss"] = loss
+    if uncertainty is not None:
+        overrides["uncertainty"] = uncertainty
+    opts = dataclasses.replace(options or FitOptions(), **overrides)
+    if opts.uncertainty not in UNCERTAINTY_METHODS:
+        raise FitError(f"unknown uncertainty method {opts.uncertainty!r}; valid: laplace, mcmc")
+    if opts.channels not in ("shared", "separate"):
+        raise FitError(f"channels must be 'shared' or 'separate', got {opts.channels!r}")
+    if opts.loss != "auto":
+        get_loss(opts.loss)
+    theta_max_deg, name = opts.theta_max_deg, opts.name
     if isinstance(data, FitData) and data.source.get("theta_max_deg") == float(theta_max_deg):
         fd = data  # already validated with this cutoff
         if name is not None:
@@ -123,63 +206,41 @@ def fit(
         fd = prepare(data, theta_max_deg, name=name)
     if not np.any(fd.values > 0):
         raise FitError(f"all {fd.values.size} measured values are <= 0: nothing to fit")
-    kwargs = dict(
-        tie=tie,
-        loss=loss,
-        uncertainty=uncertainty,
-        fixed=fixed,
-        optimizer=optimizer,
-        global_method=global_method,
-        n_starts=n_starts,
-        seed=seed,
-        subsample=subsample,
-        max_iter=max_iter,
-        laplace_method=laplace_method,
-        mcmc_steps=mcmc_steps,
-        mcmc_samples=mcmc_samples,
-        progress=progress,
-    )
     many = not isinstance(model, (str, BRDFModel))
     model_list = list(model) if many else [model]  # type: ignore[arg-type]
     if not model_list:
         raise FitError("no model given")
     results: list[FitResult] = []
     for m in model_list:
-        if channels == "separate" and fd.channels > 1:
+        if opts.channels == "separate" and fd.channels > 1:
             for c in range(fd.channels):
-                results.append(_fit_one(fd.channel(c), m, channel=fd.channel_names[c], **kwargs))
+                results.append(_fit_one(fd.channel(c), m, opts, channel=fd.channel_names[c]))
         else:
-            results.append(_fit_one(fd, m, **kwargs))
+            results.append(_fit_one(fd, m, opts))
     return results if (many or len(results) > 1) else results[0]
 
 
 def _fit_one(
     fd: FitData,
     model: str | BRDFModel,
-    *,
-    loss: str,
-    uncertainty: str | None,
-    fixed: Mapping[str, Any] | None,
-    tie: bool,
-    optimizer: str,
-    global_method: str | None,
-    n_starts: int,
-    seed: int,
-    subsample: int,
-    max_iter: int,
-    laplace_method: str,
-    mcmc_steps: int,
-    mcmc_samples: int,
-    progress: Callable[[str], None] | None,
+    opts: FitOptions,
     channel: str | None = None,
 ) -> FitResult:
+    loss = opts.resolved_loss(fd.sigma is not None)
+    fixed, tie, progress = opts.fixed, opts.tie, opts.progress
+    optimizer, global_method, seed = opts.optimizer, opts.global_method, opts.seed
+    n_starts, subsample, max_iter = opts.n_starts, opts.subsample, opts.max_iter
+    uncertainty, laplace_method = opts.uncertainty, opts.laplace_method
+    mcmc_steps, mcmc_samples = opts.mcmc_steps, opts.mcmc_samples
     t0 = time.perf_counter()
     say = progress or (lambda s: None)
     name, tmpl, preset_fixed, preset_tied = _resolve_model(model)
     all_fixed = {**preset_fixed, **dict(fixed or {})}
     tied = {t: s for t, s in (preset_tied if tie else {}).items() if t not in all_fixed}
     try:
-        layout = Layout(tmpl, fd.channels, fixed=all_fixed, tied=tied)
+        grey = opts.grey_fresnel if opts.grey_fresnel is not None else fd.channels > 3
+        shared = [k for k in tmpl.param_specs() if grey and k.endswith("fresnel.f0")]
+        layout = Layout(tmpl, fd.channels, fixed=all_fixed, tied=tied, shared=shared)
     except ParameterError as exc:
         raise FitError(f"{name}: {exc}") from None
     n_res = fd.n * fd.channels
@@ -200,6 +261,18 @@ def _fit_one(
         subsample=subsample,
         max_iter=max_iter,
     )
+    spikes = _degenerate(layout, opt.u)
+    restarted = None
+    if spikes:
+        # A lobe shape on its lower bound (roughness -> 0, a needle between the cells): not an
+        # optimum worth reporting. Restart from twice as many other points once.
+        say(f"{name}: degenerate optimum ({', '.join(spikes)} on a bound); restarting")
+        again = optimize(problem, method=optimizer, global_method=global_method,
+                         n_starts=max(2 * n_starts, 16), seed=seed + 1, subsample=subsample,
+                         max_iter=max_iter)  # fmt: skip
+        restarted = not _degenerate(layout, again.u)
+        if restarted:
+            opt = again
     fitted = layout.model(opt.u)
     f = problem.predict(opt.u)
     if not np.all(np.isfinite(f)):
@@ -216,15 +289,22 @@ def _fit_one(
         idx = {n: i for i, n in enumerate(layout.flat_names())}
         shown = [flat[idx[n]] for n in opt.on_bounds]
         warnings_.append("parameters ended on their search bound: " + ", ".join(shown))
-    if not opt.converged:
+    if restarted is False:
+        opt.converged = False
+        opt.message = "degenerate optimum: " + ", ".join(_degenerate(layout, opt.u))
+        opt.message += " on the bound of a needle lobe, also after a restart"
+        warnings_.append(opt.message + "; not a usable fit")
+    elif restarted:
+        warnings_.append(f"restarted after a degenerate optimum ({', '.join(spikes)} on bound)")
+    if not opt.converged and restarted is not False:
         warnings_.append(f"optimizer did not converge: {opt.message}")
     unc = None
     if uncertainty == "laplace":
         say(f"{name}: Laplace approximation")
-        unc = laplace(problem, opt.u, method=laplace_method)
+        unc = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
     elif uncertainty == "mcmc":
         say(f"{name}: Laplace approximation")
-        init = laplace(problem, opt.u, method=laplace_method)
+        init = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
         say(f"{name}: MCMC ({mcmc_steps} steps)")
         unc = mcmc(
             problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed, init=init

@@ -67,6 +67,8 @@ def expand_inputs(inputs: Sequence[str | Path]) -> list[Path]:
             found = sorted(Path(q) for q in glob.glob(s) if Path(q).is_file())
         elif p.is_file():
             found = [p]
+        elif "::" in s and Path(s.rpartition("::")[0]).is_file():
+            found = [p]  # ARCHIVE.zip::NAME (gonio.io.nbrdf)
         else:
             raise ParameterError(f"{s}: no such file or directory")
         if not found:

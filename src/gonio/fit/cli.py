@@ -49,10 +49,23 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--loss",
-        default="wls",
-        choices=sorted(LOSSES),
-        help="metric to minimize (default wls: chi-square with the data's sigma; "
-        "ngan: cosine-weighted L2; low-e1/low-e2: log metrics; cube-root)",
+        default="auto",
+        choices=["auto", *sorted(LOSSES)],
+        help="metric to minimize. Default auto: wls (chi-square) when the data has sigma; "
+        "without sigma (published tables: MERL, RGL, Cornell, ALTA) low-e1, Low et al.'s log "
+        "metric ln(1 + f cos_i), because their errors are closer to relative than absolute and "
+        "an unweighted fit lets the specular peak decide everything (diffuse albedos end on "
+        "their bounds). Others: ngan (cosine-weighted L2), low-e2 (log metric without the "
+        "cosine), cube-root",
+    )
+    p.add_argument(
+        "--score",
+        nargs="*",
+        metavar="MODEL_FILE",
+        help="print Ngan's cosine-weighted L2 and Low's log metric E2 on the data's own cells "
+        "(theta <= --theta-max, exact cell solid angles). Without files: of the fitted models. "
+        "With files, score those instead of fitting: fit results (.json) or published fits "
+        "(ngan_*.fit, the input's material; or FILE.fit::MATERIAL)",
     )
     p.add_argument(
         "--uncertainty",
@@ -182,6 +195,8 @@ def run(args: argparse.Namespace) -> int:
     from gonio.fit.batch import expand_inputs
 
     paths = expand_inputs(args.inputs)
+    if args.score:
+        return _run_score(paths, args)
     fit_opts: dict[str, Any] = {
         "loss": args.loss,
         "uncertainty": None if args.uncertainty == "none" else args.uncertainty,
@@ -194,7 +209,8 @@ def run(args: argparse.Namespace) -> int:
         "mcmc_steps": args.mcmc_steps,
         "fixed": _parse_fix(args.fix) or None,
     }
-    options = {"models": models, "fit": fit_opts, "plots": not args.no_plots}
+    options = {"models": models, "fit": fit_opts, "plots": not args.no_plots,
+               "score": args.score is not None}  # fmt: skip
     out = Path(args.out)
     single = len(paths) == 1 and not Path(args.inputs[0]).is_dir() and len(args.inputs) == 1
     if single:
@@ -225,6 +241,13 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     ) as bar:
         task = bar.add_task(f"reading {path.name}")
         data = prepare(path, opts["theta_max_deg"])
+        if opts.get("loss") == "auto" and data.sigma is None and not as_json:
+            from gonio.fit.api import AUTO_LOSS_WITHOUT_SIGMA
+
+            console.print(
+                f"{path.name} has no sigma: fitting with {AUTO_LOSS_WITHOUT_SIGMA} (relative "
+                "errors; see --help of --loss), not an unweighted chi-square"
+            )
         for m in options["models"]:
             r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
             results += r if isinstance(r, list) else [r]
@@ -263,6 +286,40 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         if not out_console.is_terminal:  # piped: do not squeeze the table into 80 columns
             out_console = Console(width=120)
         _print_table(out_console, summary, data.source.get("name") or path.name, results)
+        if options.get("score"):
+            for r in results:
+                _print_score(out_console, r.name, r.metrics, data)
+    return 0
+
+
+def _print_score(console: Any, label: str, metrics: dict[str, float], data: Any) -> None:
+    th = data.source.get("theta_max_deg", 80.0)
+    console.print(
+        f"score {label}: ngan {metrics['ngan']:.5g} 1/sr, low-e2 {metrics['low-e2']:.5g} "
+        f"({data.n} cells, theta <= {th:g} deg)"
+    )
+
+
+def _run_score(paths: list[Path], args: argparse.Namespace) -> int:
+    """``gonio fit FILE --score MODEL_FILE...``: score given models, fit nothing."""
+    from rich.console import Console
+
+    from gonio.fit.data import prepare
+    from gonio.fit.score import load_scored_model, score
+
+    rows = []
+    console = Console() if Console().is_terminal else Console(width=120)
+    for path in paths:
+        data = prepare(path, args.theta_max)
+        for spec in args.score:
+            label, model = load_scored_model(spec, data.source.get("name"))
+            s = score(model, data)
+            rows.append({"file": str(path), "model": spec, "label": label, **s})
+            if not args.json:
+                _print_score(console, f"{label} ({Path(spec).name})", s, data)
+    if args.json:
+        json.dump(rows, sys.stdout, indent=2)
+        sys.stdout.write("\n")
     return 0
 
 

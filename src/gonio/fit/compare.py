@@ -6,6 +6,11 @@ number of parameters, AIC and BIC (:func:`gonio.fit.api.information_criteria`, c
 fitted metric so that they compare models fitted under the same metric). The recommendation is
 the model with the lowest BIC, except that a model with fewer parameters whose BIC is within 2
 of the best is preferred (a BIC difference below 2 is not evidence; Kass & Raftery 1995).
+
+A fit is not recommended while another is free of these flags: parameters on their search
+bounds, an optimizer that did not converge (degenerate optima included), or intervals that span
+the whole search box. When every model is flagged the best is named with its flags in the
+reason.
 """
 
 from __future__ import annotations
@@ -45,11 +50,27 @@ class Comparison:
         return to_jsonable(d)
 
 
+def flags(r: FitResult) -> list[str]:
+    """Why a fit should not be used as it is (empty when nothing is wrong)."""
+    out = []
+    if r.optimizer.get("on_bounds"):
+        out.append("parameters on their bounds")
+    if not r.optimizer.get("converged"):
+        out.append("not converged")
+    unc = r.uncertainty
+    if unc is not None and any("span the search box" in w for w in unc.warnings):
+        out.append("intervals spanning the search box")
+    return out
+
+
 def summarize(results: Sequence[FitResult]) -> Comparison:
     """Build the comparison table and recommendation from finished fits."""
     if not results:
         raise ValueError("no results to compare")
+    clean = [r for r in results if not flags(r)]
+    pool = clean or list(results)
     best_bic = min(r.bic for r in results)
+    pool_bic = min(r.bic for r in pool)
     rows = []
     for r in results:
         rows.append(
@@ -64,10 +85,11 @@ def summarize(results: Sequence[FitResult]) -> Comparison:
                 "delta_bic": r.bic - best_bic,
                 "metrics": r.metrics,
                 "converged": bool(r.optimizer.get("converged")),
+                "flags": flags(r),
             }
         )
-    best = min(results, key=lambda r: r.bic)
-    near = [r for r in results if r.bic - best_bic < 2.0 and r.n_params < best.n_params]
+    best = min(pool, key=lambda r: r.bic)
+    near = [r for r in pool if r.bic - pool_bic < 2.0 and r.n_params < best.n_params]
     if near:
         simple = min(near, key=lambda r: (r.n_params, r.bic))
         choice = simple
@@ -77,11 +99,17 @@ def summarize(results: Sequence[FitResult]) -> Comparison:
         )
     else:
         choice = best
-        others = sorted((r.bic - best_bic, r.name) for r in results if r is not best)
+        others = sorted((r.bic - pool_bic, r.name) for r in pool if r is not best)
         if others:
             reason = f"{best.name} has the lowest BIC (next: {others[0][1]}, +{others[0][0]:.1f})"
         else:
-            reason = f"{best.name} is the only model fitted"
+            reason = f"{best.name} is the only model fitted" if len(results) == 1 else (
+                f"{best.name} is the only model without flags")  # fmt: skip
+    skipped = [f"{r.name} ({', '.join(flags(r))})" for r in results if clean and flags(r)]
+    if skipped:
+        reason += f"; not considered: {'; '.join(skipped)}"
+    if not clean:
+        reason += f"; but every fit is flagged ({best.name}: {', '.join(flags(best))})"
     if choice.reduced_chi2 > 3.0 and choice.data.get("has_sigma"):
         reason += (
             f"; chi2/dof = {choice.reduced_chi2:.3g}: model error dominates the measurement "

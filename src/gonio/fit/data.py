@@ -155,7 +155,8 @@ def prepare(
     source: dict[str, Any] = {}
     if isinstance(data, (str, Path)):
         source["path"] = str(data)
-        source["name"] = Path(data).name.split(".")[0]
+        member = str(data).rpartition("::")[2] if "::" in str(data) else ""  # ARCHIVE.zip::NAME
+        source["name"] = member or Path(data).name.split(".")[0]
         data = load_data(data)
     kind = type(data).__name__
     meta = dict(getattr(data, "meta", None) or {})

@@ -113,6 +113,19 @@ class Problem:
         f = f.reshape(-1, f.shape[-1])[: self.data.n]
         return np.broadcast_to(f, (self.data.n, self.data.channels))
 
+    def cluster_scores(self, u: np.ndarray, ids: np.ndarray, n_clusters: int) -> np.ndarray:
+        """``J_g^T r_g`` per cluster, ``(G, P)``, for sample cluster indices ``ids`` ``(N,)`` in
+        ``[0, G)`` (the meat of a cluster-robust sandwich covariance)."""
+        k, size = self.n_chunks, self.chunk_rows
+        ids = np.asarray(ids, dtype=np.int32)
+        pad = k * size - ids.size
+        ids = np.concatenate([ids, np.zeros(pad, np.int32)]).reshape(k, size)  # mask zeroes pads
+        out = self.fns.cluster_scores(
+            jnp.asarray(u, jnp.float64), self.arrays, self.layout.template, jnp.asarray(ids),
+            int(n_clusters),
+        )  # fmt: skip
+        return np.asarray(out)
+
     def with_data(self, data: FitData) -> Problem:
         """The same layout and loss on other data (e.g. a subsample)."""
         return Problem(self.layout, self.loss, data, self.chunk)
@@ -169,6 +182,22 @@ class Compiled:
             (s, g, a), _ = jax.lax.scan(step, init, arrays)
             return s, g, a
 
+        def cluster_scores(
+            u: Array, arrays: dict[str, Any], tmpl: Any, ids: Array, n_clusters: int
+        ) -> Array:
+            p = u.shape[0]
+            n_ch = arrays["k"]["y"].shape[-1]
+
+            def step(acc: Array, xs: tuple[dict[str, Any], Array]) -> tuple[Array, None]:
+                c, idc = xs
+                jac = jax.jacfwd(lambda v: chunk_res(v, c, tmpl))(u)
+                r = chunk_res(u, c, tmpl)
+                rows = jnp.repeat(idc, n_ch)  # residual rows are (sample, channel) in C order
+                return acc + jax.ops.segment_sum(jac * r[:, None], rows, n_clusters), None
+
+            total, _ = jax.lax.scan(step, jnp.zeros((n_clusters, p), u.dtype), (arrays, ids))
+            return total
+
         def residuals(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
             return jax.vmap(lambda c: chunk_res(u, c, tmpl))(arrays).reshape(-1)
 
@@ -186,6 +215,7 @@ class Compiled:
         self.residuals = jax.jit(residuals)
         self.predict = jax.jit(predict)
         self.hessian = jax.jit(jax.hessian(cost))
+        self.cluster_scores = jax.jit(cluster_scores, static_argnums=4)
 
 
 _CACHE: dict[Any, Compiled] = {}

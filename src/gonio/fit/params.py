@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -115,6 +115,8 @@ class Layout:
     fixed : keys (as in ``model.params()``) held at the given value (None: the template's).
     tied : ``{target: source}``: the target parameter always equals the source (e.g. an
         isotropic Ward fit ties ``alpha_y`` to ``alpha_x``); the target is not fitted.
+    shared : per-channel keys fitted as one value for every channel (a grey Fresnel ``f0`` on
+        spectral data); the template's value is replaced by its channel mean.
     """
 
     def __init__(
@@ -123,8 +125,14 @@ class Layout:
         channels: int,
         fixed: Mapping[str, Any] | None = None,
         tied: Mapping[str, str] | None = None,
+        shared: Sequence[str] = (),
     ):
         specs = model.param_specs()
+        shared = tuple(k for k in shared if k in specs and specs[k].per_channel)
+        specs = {
+            k: dataclasses.replace(v, per_channel=False) if k in shared else v
+            for k, v in specs.items()
+        }
         fixed = dict(fixed or {})
         tied = dict(tied or {})
         for target, source in tied.items():
@@ -145,6 +153,9 @@ class Layout:
             )
         if fixed:
             model = model.replace(**{k: v for k, v in fixed.items() if v is not None})
+        grey = {k: float(np.mean(model.params()[k])) for k in shared if k not in fixed}
+        if grey:
+            model = model.replace(**grey)
         self.channels = int(channels)
         current = model.params()
         # Lobe count of each node with per-lobe parameters (Lafortune): the length of its
@@ -191,6 +202,8 @@ class Layout:
         self.size = offset
         self.fixed = tuple(sorted(fixed))
         self.tied = dict(sorted(tied.items()))
+        self.shared = tuple(k for k in shared if k in grey)
+        self._specs = specs
 
     # -- names ----------------------------------------------------------------------------------
     @property

@@ -66,10 +66,44 @@ def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
             rho_s=[0.5, 0.1],
         ),
         "ashikhmin-shirley": _make("AshikhminShirley"),
+        # the literature's families as published (see FAMILIES)
+        "cook-torrance": _make("CookTorrance"),
+        "ngan-blinn-phong": _make("NganBlinnPhong"),
+        "low": _make("LowMicrofacet"),
     }
 
 
-_COMBOS = ("lambert+ward", "lambert+ts", "lambert+ts+ts", "lambert+ts-ggx-smith")
+_COMBOS = (
+    "lambert+ward",
+    "lambert+ts",
+    "lambert+ts+ts",
+    "lambert+ts-ggx-smith",
+    "lambert+cook-torrance",
+    "lambert+cook-torrance+cook-torrance",
+    "lambert+ngan-blinn-phong",
+    "lambert+ward+ward",
+    "lambert+low",
+    "lambert+low+low",
+)
+
+#: The literature's model families, parameterized as published, by preset name. Each lobe's
+#: docstring (gonio.brdf.models) gives its formula and citation; per-channel parameters follow
+#: the source (albedos per channel, lobe shapes and the Fresnel term shared).
+FAMILIES: dict[str, str] = {
+    "lambert+cook-torrance": "Cook & Torrance 1982 as fitted by Ngan et al. 2005: Lambert + "
+    "rho_s D_Beckmann G_vcavity F_Schlick(f0) / (pi cos_i cos_o), rho_s per channel, one f0",
+    "lambert+ward": "Ward 1992 (isotropic, original normalization) as fitted by Ngan et al. "
+    "2005: Lambert + rho_s exp(-tan^2 theta_h / a^2) / (4 pi a^2 sqrt(cos_i cos_o))",
+    "lambert+ngan-blinn-phong": "Blinn 1977 with the half vector as fitted by Ngan et al. 2005: "
+    "Lambert + rho_s (n + 2) / (2 pi) cos^n theta_h",
+    "ashikhmin-shirley": "Ashikhmin & Shirley 2000 (isotropic): coupled diffuse + Schlick-"
+    "Fresnel Phong lobe of the half vector",
+    "lambert+low": "Low et al. 2012 microfacet model: Lambert + A F_dielectric(eta) G / "
+    "(pi (1 + B (1 - cos theta_h))^C cos_i cos_o)",
+    "lambert+cook-torrance+cook-torrance": "two Cook-Torrance lobes (Ngan et al. 2005, section 6)",
+    "lambert+ward+ward": "two Ward lobes",
+    "lambert+low+low": "two Low et al. 2012 lobes",
+}
 
 
 def available() -> list[str]:

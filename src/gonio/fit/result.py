@@ -75,7 +75,8 @@ SCHEMA: dict[str, Any] = {
         "intervals": {
             "type": "object",
             "additionalProperties": _pair,
-            "description": "95% interval [lo, hi] per parameter key (null bounds: unknown)",
+            "description": "95% interval [lo, hi] per fitted parameter key (null bounds: "
+            "unknown); fixed parameters have none (see fixed)",
         },
         "intervals68": {"type": "object", "additionalProperties": _pair},
         "std": {"type": "object", "additionalProperties": _value},
@@ -203,8 +204,10 @@ class FitResult:
         return self._by_key(None if self.uncertainty is None else self.uncertainty.std)
 
     def intervals(self, level: int = 95) -> dict[str, list[Any]]:
-        """``{key: [lo, hi]}`` at 95 (or 68) percent; fixed parameters get ``[v, v]``."""
-        out: dict[str, list[Any]] = {k: [v, v] for k, v in self.params.items() if k in self.fixed}
+        """``{key: [lo, hi]}`` at 95 (or 68) percent of the fitted parameters (and of those tied
+        to them). Fixed parameters have none: they are listed in ``fixed`` (shown as "fixed"),
+        not given a zero-width interval that would read as a measured certainty."""
+        out: dict[str, list[Any]] = {}
         if self.uncertainty is None:
             return out
         arr = self.uncertainty.interval95 if level == 95 else self.uncertainty.interval68

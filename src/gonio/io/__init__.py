@@ -31,7 +31,8 @@ def load(
     ----------
     path : path-like
         A native ``*.brdf.h5`` file, MERL ``.binary``, RGL ``.bsdf``, Cornell ``.brdf`` or ALTA
-        text file.
+        text file, or ``"ARCHIVE.zip::NAME"``: material ``NAME`` of a neural-BRDF archive
+        (:mod:`gonio.io.nbrdf`), evaluated on MERL's grid.
     color : {"rgb", "spectral", "keep"}, optional
         For spectral sources (Cornell, spectral RGL files): ``"rgb"`` converts to linear sRGB
         through CIE 1931 XYZ under ``illuminant``; default keeps the spectrum. For
@@ -59,6 +60,10 @@ def load(
         Malformed, truncated, unknown-version or unrecognized files; one line naming the file.
     """
     fmt = detect_format(path)
+    if fmt == "nbrdf":
+        from gonio.io.nbrdf import load_nbrdf_table
+
+        return load_nbrdf_table(path)
     if fmt == "native":
         from gonio.io.native import read_native
 

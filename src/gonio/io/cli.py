@@ -209,7 +209,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
             io.save(obj, args.output, lossy=lossy)
         progress.update(wtask, total=1, completed=1)
     if not args.quiet:
-        size_in, size_out = os.path.getsize(args.input), os.path.getsize(args.output)
+        archive = args.input.rpartition("::")[0] or args.input  # ARCHIVE.zip::NAME
+        size_in, size_out = os.path.getsize(archive), os.path.getsize(args.output)
         print(
             f"wrote {args.output} ({_fmt_bytes(size_out)}; input {_fmt_bytes(size_in)})",
             file=sys.stderr,

@@ -8,7 +8,7 @@ import numpy as np
 
 from gonio.io._common import PathLike, check_input_file, fail
 
-FORMATS = ("native", "merl", "rgl", "alta", "cornell", "exr")
+FORMATS = ("native", "merl", "rgl", "alta", "cornell", "exr", "nbrdf")
 _EXR_MAGIC = b"\x76\x2f\x31\x01"
 _BY_EXTENSION = {
     ".h5": "native",
@@ -61,11 +61,18 @@ def detect_format(path: PathLike) -> str:
     Cornell wavelength-count line. Only if the content is not recognized does the extension
     decide (so a truncated file still reaches its own parser, which reports what is wrong).
 
+    ``"ARCHIVE.zip::NAME"`` (a material of a neural-BRDF zip) and a bare zip archive are
+    ``"nbrdf"``.
+
     Raises
     ------
     FormatError
         A directory, a missing file, or content and extension both unrecognized.
     """
+    text = os.fspath(path)
+    if "::" in text:
+        check_input_file(text.rpartition("::")[0])
+        return "nbrdf"
     p = check_input_file(path)
     size = p.stat().st_size
     if size == 0:
@@ -78,6 +85,8 @@ def detect_format(path: PathLike) -> str:
         return "rgl"
     if head.startswith(_EXR_MAGIC):
         return "exr"
+    if head.startswith(b"PK\x03\x04"):
+        return "nbrdf"
     if _looks_merl(head, size):
         return "merl"
     kind = _text_kind(head)

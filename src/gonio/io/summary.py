@@ -120,7 +120,7 @@ def summarize(path: PathLike) -> dict[str, Any]:
     """Describe a BRDF file: format, kind, grid, channels, valid fraction, value range,
     provenance, size on disk and compression ratio (float32 in memory / bytes on disk)."""
     fmt = detect_format(path)
-    size = os.path.getsize(path)
+    size = os.path.getsize(os.fspath(path).rpartition("::")[0] or path)  # ARCHIVE.zip::NAME
     out: dict[str, Any] = {"file": os.fspath(path), "format": fmt, "size_bytes": size}
     if fmt == "rgl":
         from gonio.io.rgl import read_rgl

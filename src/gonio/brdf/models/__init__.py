@@ -8,10 +8,13 @@ from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.ashikhmin_shirley import AshikhminShirley
 from gonio.brdf.models.blinn_phong import BlinnPhong
+from gonio.brdf.models.cook_torrance import CookTorrance
 from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
 from gonio.brdf.models.htsg import HTSG
 from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
+from gonio.brdf.models.low_microfacet import LowMicrofacet
+from gonio.brdf.models.ngan_blinn_phong import NganBlinnPhong
 from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
 from gonio.brdf.models.scaled import Scaled
@@ -26,10 +29,13 @@ __all__ = [
     "BRDFSample",
     "BlinnPhong",
     "Conductor",
+    "CookTorrance",
     "Dielectric",
     "Fresnel",
     "Lafortune",
     "Lambert",
+    "LowMicrofacet",
+    "NganBlinnPhong",
     "NoFresnel",
     "Node",
     "OrenNayar",

@@ -1,0 +1,77 @@
+"""Scores of any model (fitted or published) on a measured table, by the literature's metrics.
+
+Both scores are computed on the data's own samples, as :func:`gonio.fit.data.prepare` gives
+them: for a table, its valid cells with both polar angles at most ``theta_max`` (80 degrees by
+default), each weighted by its exact measure in direction-pair space
+(:meth:`~gonio.brdf.tabulated.TabulatedBRDF.cell_measure`, sr^2), so that a sum over cells is a
+quadrature of the integral over the hemisphere pair. The formulas are the losses of
+:mod:`gonio.fit.losses` (the same code a fit minimizes):
+
+``ngan``   Ngan, Durand & Matusik 2005: ``sqrt(sum w ((f - y) cos_i)^2 / (C W))`` (sr^-1).
+``low-e2`` Löw, Kronander, Ynnerman & Unger 2012, log metric: ``sqrt(sum w (ln(1 + f) -
+           ln(1 + y))^2 / (C W))``.
+
+A published fit of the Ngan et al. files (``ngan_*.fit``) is scored through
+:func:`gonio.brdf.ngan.to_family`, so that it is evaluated by the same model code as gonio's fit
+of the same family.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gonio.brdf.models import BRDFModel
+from gonio.errors import FitError, FormatError
+from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
+from gonio.fit.losses import evaluate
+
+#: The metrics reported by :func:`score` (keys of :data:`gonio.fit.losses.LOSSES`).
+SCORES = ("ngan", "low-e2")
+
+
+def model_values(model: Any, data: FitData, chunk: int = 1 << 18) -> np.ndarray:
+    """``model.f`` at the data's direction pairs, ``(N, C)`` float64 (chunked, no jit needed)."""
+    out = []
+    for s in range(0, data.n, chunk):
+        f = np.asarray(model.f(data.wi[s : s + chunk], data.wo[s : s + chunk]), dtype=np.float64)
+        out.append(np.broadcast_to(f, (f.shape[0], data.channels)))
+    return np.concatenate(out)
+
+
+def score(model: Any, data: Any, theta_max_deg: float = DEFAULT_THETA_MAX_DEG) -> dict[str, float]:
+    """``{"ngan": ..., "low-e2": ...}`` of ``model`` (anything with ``f(wi, wo)``) on ``data``
+    (a table, samples, FitData or a path)."""
+    fd = data if isinstance(data, FitData) else prepare(data, theta_max_deg)
+    f = model_values(model, fd)
+    if not np.all(np.isfinite(f)):
+        raise FitError("the model is not finite on the data")
+    return {k: evaluate(k, f, fd) for k in SCORES}
+
+
+def load_scored_model(spec: str, material: str | None) -> tuple[str, BRDFModel]:
+    """``(label, model)`` for a model file named on the command line.
+
+    ``FIT.json`` (a gonio fit result), ``ngan_FAMILY.fit`` (the published fit of ``material``:
+    the data's name) or ``ngan_FAMILY.fit::MATERIAL``.
+    """
+    from gonio.brdf import ngan
+    from gonio.fit.result import load_model
+
+    path, _, mat = spec.partition("::")
+    if path.endswith(".json"):
+        return Path(path).stem, load_model(path)
+    if not path.endswith(".fit"):
+        raise FitError(f"{spec}: expected a fit result (.json) or a published fit file (.fit)")
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise FormatError(f"{path}: cannot read ({exc.strerror})") from None
+    fits = ngan.parse_ngan_fits(text)
+    mat = mat or material or ""
+    if mat not in fits:
+        raise FitError(f"{path}: no published fit for material {mat!r} ({len(fits)} materials)")
+    preset, model = ngan.to_family(fits[mat])
+    return f"published {preset}", model

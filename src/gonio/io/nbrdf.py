@@ -1,0 +1,342 @@
+"""Neural BRDFs (Sztrajman et al. 2021): small Keras MLPs fitted to MERL materials, read from a zip.
+
+An archive such as ``merl_nbrdf.zip`` (the Neural-BRDF repository's ``data/merl_nbrdf.zip``)
+holds, per material ``NAME``, ``.../NAME.json`` (the Keras ``Sequential`` model description) and
+``.../NAME.h5`` (its weights). Address one material as ``"ARCHIVE.zip::NAME"``:
+
+>>> from gonio import io
+>>> table = io.load("merl_nbrdf.zip::gold-paint")     # MERL-grid TabulatedBRDF, RGB, 1/sr
+>>> net = read_nbrdf("merl_nbrdf.zip", "gold-paint")  # the network itself: net.f(wi, wo)
+
+Nothing in the archive is executed: the zip is read with :mod:`zipfile`, the model description
+with :mod:`json` and the weights with :mod:`h5py`. The description's final ``Lambda`` layer is
+stored as marshalled Python bytecode; it is not run. Its meaning comes from the repository's
+documentation (``shared/data/nbrdf/README.md``): ``f_r = expm1(dense output)``.
+
+Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
+
+* **Input**, per direction pair: six numbers ``[sin θh, 0, cos θh, sin θd cos φd, sin θd sin φd,
+  cos θd]``: the half vector in the local frame with ``φh`` set to 0, followed by the
+  Rusinkiewicz (1998) difference vector (``wi`` in the frame whose pole is the half vector, as in
+  :func:`gonio.brdf.frames.half_diff`).
+* **Layers**: ``Dense`` after ``Dense``, kernels stored ``(in, out)`` (``y = x @ K + b``), ReLU
+  between layers, none after the last; evaluated in float32 as Keras does.
+* **Output**: three numbers whose ``expm1`` is ``f_r`` in sr⁻¹ (RGB, no cosine factor) with
+  MERL's channel scales ``(1, 1.15, 1.66) / 1500`` already applied. Values are returned as the
+  network gives them (a network can dip slightly below 0 in dark cells; nothing is clamped).
+* **MERL grid**: the networks were trained with MERL cell ``i`` placed at the cell's start,
+  ``θh = (i/90)² π/2``, ``θd = i/90 · π/2``, ``φd = i/180 · π``, which are exactly the nodes of
+  :func:`gonio.io.merl.merl_axes`; :meth:`NBRDF.to_table` evaluates there, so the result is read
+  like a MERL ``.binary`` (cells with a direction at or below the horizon are invalid).
+"""
+
+from __future__ import annotations
+
+import io as _pyio
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from gonio.errors import FormatError
+from gonio.io._common import PathLike, check_input_file, fail
+from gonio.io.merl import MERL_DIMS, merl_axes
+
+if TYPE_CHECKING:
+    from gonio.brdf.tabulated import TabulatedBRDF
+
+#: Separator between the archive path and the material name in ``io.load`` paths.
+MEMBER_SEP = "::"
+_MAX_UNITS = 4096  # guards against absurd layer sizes before allocating
+
+
+def split_member(path: PathLike) -> tuple[str, str] | None:
+    """``(archive, name)`` for a path of the form ``"ARCHIVE.zip::NAME"``, else None."""
+    text = os.fspath(path)
+    if MEMBER_SEP not in text:
+        return None
+    archive, _, name = text.rpartition(MEMBER_SEP)
+    return archive, name
+
+
+@dataclass(frozen=True)
+class NBRDF:
+    """One neural BRDF: a ReLU MLP from the six input features to ``log1p(f_r)`` per channel.
+
+    Attributes
+    ----------
+    name : material name.
+    kernels : per layer a float32 ``(n_in, n_out)`` kernel; the first takes 6 inputs, the last
+        gives 3 outputs.
+    biases : per layer a float32 ``(n_out,)`` bias.
+    source : archive path and member names, for provenance.
+    """
+
+    name: str
+    kernels: tuple[np.ndarray, ...]
+    biases: tuple[np.ndarray, ...]
+    source: dict[str, Any] = field(default_factory=dict)
+
+    @staticmethod
+    def features(wi: Any, wo: Any) -> np.ndarray:
+        """The network input ``(..., 6)`` float32 for direction pairs ``(..., 3)`` each.
+
+        ``[sin θh, 0, cos θh, d_x, d_y, d_z]`` with ``d`` the difference vector (unit).
+        """
+        wi = np.asarray(wi, dtype=np.float64)
+        wo = np.asarray(wo, dtype=np.float64)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        h = wi + wo
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        cos_h = np.clip(h[..., 2], -1.0, 1.0)
+        sin_h = np.sqrt(np.maximum(1.0 - cos_h * cos_h, 0.0))
+        phi_h = np.arctan2(h[..., 1], h[..., 0])
+        cp, sp = np.cos(phi_h), np.sin(phi_h)
+        # wi rotated by -phi_h about z, then by -theta_h about y
+        x = cp * wi[..., 0] + sp * wi[..., 1]
+        y = -sp * wi[..., 0] + cp * wi[..., 1]
+        z = wi[..., 2]
+        dx = cos_h * x - sin_h * z
+        dz = sin_h * x + cos_h * z
+        out = np.stack([sin_h, np.zeros_like(sin_h), cos_h, dx, y, dz], axis=-1)
+        return out.astype(np.float32)
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        """Dense layers on the features ``x`` ``(..., 6)`` -> ``(..., 3)`` (float32 ``log1p f``)."""
+        a = np.asarray(x, dtype=np.float32)
+        shape = a.shape[:-1]
+        a = a.reshape(-1, a.shape[-1])
+        last = len(self.kernels) - 1
+        for i, (k, b) in enumerate(zip(self.kernels, self.biases, strict=True)):
+            a = a @ k + b
+            if i < last:
+                np.maximum(a, 0.0, out=a)
+        return a.reshape(*shape, a.shape[-1])
+
+    def f(self, wi: Any, wo: Any, chunk: int = 1 << 18) -> np.ndarray:
+        """``f_r(wi, wo)`` in sr⁻¹, ``(..., 3)`` float64, for unit directions in the local frame.
+
+        Pairs with a direction at or below the horizon give 0 (gonio's convention for every BRDF).
+        """
+        wi = np.asarray(wi, dtype=np.float64)
+        wo = np.asarray(wo, dtype=np.float64)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        out = np.empty((wi.shape[0], 3), dtype=np.float64)
+        for s in range(0, wi.shape[0], chunk):
+            sl = slice(s, s + chunk)
+            out[sl] = np.expm1(self.forward(self.features(wi[sl], wo[sl])))
+        ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        out[~ok] = 0.0
+        return out.reshape(*shape, 3)
+
+    def to_table(self, dims: tuple[int, int, int] = MERL_DIMS) -> TabulatedBRDF:
+        """The network on the nodes of a MERL-like ``(θh, θd, φd)`` grid, as a ``half_diff_iso``
+        :class:`~gonio.brdf.tabulated.TabulatedBRDF` (RGB, sr⁻¹, nearest-cell lookup like a MERL
+        file); cells with a direction at or below the horizon are invalid."""
+        from gonio.brdf.tabulated import Channels, TabulatedBRDF
+
+        axes = merl_axes(dims)
+        th, td, pd = (np.asarray(a.nodes(), dtype=np.float64) for a in axes)
+        th, td, pd = np.meshgrid(th, td, pd, indexing="ij")
+        # directions of the nodes (phi_h = 0), as in gonio.brdf.frames.half_diff_to_directions
+        st, ct = np.sin(td), np.cos(td)
+        d = np.stack([st * np.cos(pd), st * np.sin(pd), ct], axis=-1)
+        sh, ch = np.sin(th)[..., None], np.cos(th)[..., None]
+
+        def rot_y(v: np.ndarray) -> np.ndarray:
+            return np.stack(
+                [
+                    ch[..., 0] * v[..., 0] + sh[..., 0] * v[..., 2],
+                    v[..., 1],
+                    -sh[..., 0] * v[..., 0] + ch[..., 0] * v[..., 2],
+                ],
+                axis=-1,
+            )
+
+        wi = rot_y(d)
+        wo = rot_y(d * np.array([-1.0, -1.0, 1.0]))
+        mask = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        # the features of a node are known in closed form: no need to recover them from wi, wo
+        feats = np.concatenate([sh, np.zeros_like(sh), ch, d], axis=-1, dtype=np.float32).reshape(
+            -1, 6
+        )
+        vals = np.empty((feats.shape[0], 3), dtype=np.float32)
+        step = 1 << 18
+        for s in range(0, feats.shape[0], step):
+            vals[s : s + step] = np.expm1(self.forward(feats[s : s + step]))
+        vals = vals.reshape(*mask.shape, 3)
+        vals[~mask] = 0.0
+        return TabulatedBRDF(
+            values=vals,
+            axes=axes,
+            parameterization="half_diff_iso",
+            mask=mask,
+            channels=Channels.rgb(),
+            meta={"name": self.name, "source": {"format": "nbrdf", **self.source}},
+            interpolation="nearest",
+        )
+
+
+class NBRDFArchive:
+    """A zip of neural BRDFs; see the module docstring.
+
+    Parameters
+    ----------
+    path : the ``.zip`` file.
+
+    Raises
+    ------
+    FormatError
+        Missing or unreadable file, not a zip archive, or no material in it.
+    """
+
+    def __init__(self, path: PathLike) -> None:
+        self.path = check_input_file(path)
+        try:
+            with zipfile.ZipFile(self.path) as zf:
+                members = zf.namelist()
+        except (zipfile.BadZipFile, OSError) as exc:
+            raise fail(self.path, f"not a readable zip archive ({exc})") from None
+        found: dict[str, dict[str, str]] = {}
+        for m in members:
+            base = m.rsplit("/", 1)[-1]
+            stem, dot, ext = base.rpartition(".")
+            if dot and ext in ("json", "h5") and stem:
+                found.setdefault(stem, {})[ext] = m
+        self._members = found
+        self.names = sorted(k for k, v in found.items() if len(v) == 2)
+        if not self.names:
+            raise fail(self.path, "no neural BRDF (NAME.json + NAME.h5) in this zip archive")
+
+    def read(self, name: str) -> NBRDF:
+        """The network of material ``name``; FormatError (one line) when absent or malformed."""
+        entry = self._members.get(name)
+        if entry is None or len(entry) != 2:
+            near = [n for n in self.names if name.lower() in n.lower()][:5]
+            hint = (
+                f"; similar: {', '.join(near)}" if near else f"; e.g. {', '.join(self.names[:3])}"
+            )
+            what = "lacks its .json or .h5 file" if entry else "is not in the archive"
+            raise fail(self.path, f"material {name!r} {what} ({len(self.names)} materials{hint})")
+        try:
+            with zipfile.ZipFile(self.path) as zf:
+                desc = zf.read(entry["json"])
+                weights = zf.read(entry["h5"])
+        except (zipfile.BadZipFile, OSError, KeyError) as exc:
+            raise fail(self.path, f"{name}: cannot read its members ({exc})") from None
+        units = _parse_description(desc, self.path, name)
+        kernels, biases = _read_weights(weights, units, self.path, name)
+        return NBRDF(
+            name,
+            kernels,
+            biases,
+            {"archive": str(self.path), "json": entry["json"], "h5": entry["h5"]},
+        )
+
+
+def _parse_description(text: bytes, path: Path, name: str) -> list[tuple[str, int]]:
+    """``[(layer name, units)]`` of the Dense layers; checks the architecture is the known one."""
+    where = f"{name}.json"
+    try:
+        desc = json.loads(text)
+        layers = desc["config"]["layers"] if isinstance(desc["config"], dict) else desc["config"]
+        if desc.get("class_name") != "Sequential" or not isinstance(layers, list):
+            raise ValueError("not a Keras Sequential model")
+    except (ValueError, KeyError, TypeError) as exc:
+        raise fail(path, f"{where}: not a Keras model description ({exc})") from None
+    dense: list[tuple[str, int]] = []
+    for i, layer in enumerate(layers):
+        cls = layer.get("class_name") if isinstance(layer, dict) else None
+        cfg = layer.get("config", {}) if isinstance(layer, dict) else {}
+        if cls == "Dense":
+            units = cfg.get("units")
+            if not isinstance(units, int) or not 0 < units <= _MAX_UNITS:
+                raise fail(path, f"{where}: layer {i} has impossible units {units!r}")
+            act = cfg.get("activation")
+            dense.append((str(cfg.get("name")), units))
+            if act not in ("relu", "linear"):
+                raise fail(path, f"{where}: layer {i} has unsupported activation {act!r}")
+        elif cls == "Lambda" and i == len(layers) - 1:
+            continue  # expm1 of the output (not executed; see the module docstring)
+        else:
+            raise fail(path, f"{where}: unsupported layer {cls!r} at position {i}")
+    if not dense or dense[-1][1] != 3:
+        raise fail(path, f"{where}: expected Dense layers ending in 3 outputs")
+    return dense
+
+
+def _read_weights(
+    data: bytes, units: list[tuple[str, int]], path: Path, name: str
+) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    import h5py
+
+    where = f"{name}.h5"
+    kernels, biases = [], []
+    try:
+        with h5py.File(_pyio.BytesIO(data), "r") as h5:
+            root = h5["model_weights"] if "model_weights" in h5 else h5
+            n_in = 6
+            for layer, n_out in units:
+                if layer not in root:
+                    raise fail(path, f"{where}: no weights for layer {layer!r}")
+                group = root[layer]
+                k = b = None
+                for wname in group.attrs.get("weight_names", []):
+                    wname = wname.decode() if isinstance(wname, bytes) else str(wname)
+                    ds = group[wname] if wname in group else group[wname.split("/", 1)[-1]]
+                    if wname.endswith("kernel:0"):
+                        k = np.asarray(ds, dtype=np.float32)
+                    elif wname.endswith("bias:0"):
+                        b = np.asarray(ds, dtype=np.float32)
+                if k is None or b is None:
+                    raise fail(path, f"{where}: layer {layer!r} lacks its kernel or bias")
+                if k.shape != (n_in, n_out) or b.shape != (n_out,):
+                    raise fail(
+                        path,
+                        f"{where}: layer {layer!r} has kernel {k.shape} and bias {b.shape}, "
+                        f"expected ({n_in}, {n_out}) and ({n_out},)",
+                    )
+                if not (np.all(np.isfinite(k)) and np.all(np.isfinite(b))):
+                    raise fail(path, f"{where}: non-finite weights in layer {layer!r}")
+                kernels.append(k)
+                biases.append(b)
+                n_in = n_out
+    except FormatError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise fail(path, f"{where}: not a readable Keras weights file ({exc})") from None
+    return tuple(kernels), tuple(biases)
+
+
+def read_nbrdf(path: PathLike, name: str | None = None) -> NBRDF:
+    """The network of one material: ``read_nbrdf("merl_nbrdf.zip", "gold-paint")`` or
+    ``read_nbrdf("merl_nbrdf.zip::gold-paint")``."""
+    if name is None:
+        parts = split_member(path)
+        if parts is None:
+            names = NBRDFArchive(path).names
+            raise fail(
+                path,
+                f"name one of its {len(names)} materials as ARCHIVE.zip{MEMBER_SEP}NAME "
+                f"(e.g. {', '.join(names[:3])})",
+            )
+        path, name = parts
+    if not name:
+        raise fail(path, f"empty material name after {MEMBER_SEP!r}")
+    return NBRDFArchive(path).read(name)
+
+
+def load_nbrdf_table(path: PathLike) -> TabulatedBRDF:
+    """``io.load`` of ``"ARCHIVE.zip::NAME"``: the network tabulated on MERL's grid."""
+    return read_nbrdf(path).to_table()
+
+
+def list_materials(path: PathLike) -> list[str]:
+    """Names of the materials in an archive (both files present), sorted."""
+    return list(NBRDFArchive(path).names)
