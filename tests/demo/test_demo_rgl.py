@@ -58,8 +58,8 @@ def test_mitsuba_reads_the_written_acquisition_and_agrees_over_its_coverage(conv
 @pytest.mark.xfail(
     strict=True,
     reason="known gap: the written file's 32 x 32 colour grid smooths the step at the gridded "
-    "table's coverage edge (f falls to 0 there); 95th percentile about 44 % over the coverage, "
-    "about 9 % more than 4 deg inside it; median 0.6 %",
+    "table's coverage edge (f falls to 0 there): 95th percentile 38 % over the coverage, 6 % "
+    "about 2 deg inside it, 3 % about 4 deg inside it; median 0.5 %",
 )
 def test_written_acquisition_meets_the_95th_percentile_target_over_its_coverage(converted):
     table, bsdf = converted
@@ -68,6 +68,24 @@ def test_written_acquisition_meets_the_95th_percentile_target_over_its_coverage(
     # gonio's reader stands for Mitsuba here (the test above shows they agree to 1e-4)
     r = rel(np.asarray(io.load(bsdf).f(wi, wo))[cov], src[cov])
     assert np.percentile(r, 95) <= 0.10, np.percentile(r, 95)
+
+
+def test_written_acquisition_meets_the_targets_inside_its_coverage(converted):
+    """Away from the coverage edge (every one of 12 random neighbours, each direction moved by
+    about 4 deg, is covered too) the file meets the 2 % median and 10 % 95th percentile."""
+    table, bsdf = converted
+    wi, wo = pairs(4000, seed=6)
+    src, inner = _covered(table, wi, wo)
+    rng = np.random.default_rng(7)
+    for _ in range(12):
+        near = [w + rng.normal(scale=np.radians(4.0), size=w.shape) for w in (wi, wo)]
+        near = [w / np.linalg.norm(w, axis=-1, keepdims=True) for w in near]
+        for w in near:
+            w[:, 2] = np.abs(w[:, 2])
+        inner &= _covered(table, *near)[1]
+    assert inner.mean() > 0.25, inner.mean()
+    r = rel(np.asarray(io.load(bsdf).f(wi, wo))[inner], src[inner])
+    assert np.median(r) <= 0.02 and np.percentile(r, 95) <= 0.10, np.percentile(r, [50, 95])
 
 
 def test_convert_refuses_the_scattered_run_table(demo, tmp_path, capsys):
