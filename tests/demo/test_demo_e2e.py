@@ -1,7 +1,8 @@
 """End-to-end: a reduced ``gonio demo`` on the simulated rig, checked against its ground truth.
 
-One reduced run (plan ``demo-quick``, built-in analytic material, small renders) is shared by
-the tests of this module; they run in one xdist worker (``xdist_group``), which builds it once.
+One reduced run (plan ``demo-quick``, built-in analytic material, small renders; the ``demo``
+fixture of ``conftest.py``) is shared by the tests of this folder; they run in one xdist worker
+(``xdist_group``), which builds it once.
 """
 
 from __future__ import annotations
@@ -14,22 +15,12 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 import pytest
 
-from gonio.demo import DemoSettings, builtin_material, run_demo
+from gonio.demo import builtin_material
 
 pytestmark = pytest.mark.xdist_group("demo-e2e")
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
-
-
-# session scope: xdist may run another module's tests between these in the same worker, which
-# would tear a module-scoped fixture down and run the demo twice
-@pytest.fixture(scope="session")
-def demo(tmp_path_factory):
-    out = tmp_path_factory.mktemp("demo") / "gonio-demo"
-    material = builtin_material()
-    summary = run_demo(out, material, DemoSettings.quick(resolution=64, spp=8), progress=False)
-    return out, material, summary
 
 
 def test_true_model_recovers_ground_truth_within_intervals(demo):

@@ -14,8 +14,7 @@ from gonio.brdf.tabulated import Axis, TabulatedBRDF
 from gonio.errors import ParameterError
 from gonio.io import rgl, rgl_write
 from tests.conftest import shared_file
-
-COS_80 = math.cos(math.radians(80.0))
+from tests.io.rgl_compare import mitsuba_f, pairs, rel
 
 
 def _sources():
@@ -30,23 +29,6 @@ def _sources():
             alpha=0.05, distribution="ggx", shadowing="smith", fresnel=models.Schlick(f0=0.5)
         ),
     }
-
-
-def _pairs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-
-    def hemi():
-        u = rng.random((n, 2))
-        z = COS_80 + (1 - COS_80) * u[:, 0]
-        r = np.sqrt(1 - z * z)
-        p = 2 * math.pi * u[:, 1]
-        return np.stack([r * np.cos(p), r * np.sin(p), z], -1)
-
-    return hemi(), hemi()
-
-
-def _rel(a, b):
-    return np.abs(a - b) / np.maximum(np.abs(b), 1e-6)
 
 
 @pytest.fixture(scope="module")
@@ -64,36 +46,27 @@ def written(tmp_path_factory):
 def test_gonio_reads_the_written_file_close_to_the_source(written, name):
     src, path = written[name]
     m = io.load(path)
-    wi, wo = _pairs(4000, seed=1)
+    wi, wo = pairs(4000, seed=1)
     a = np.asarray(m.f(wi, wo))
     b = np.broadcast_to(np.asarray(src.f(wi, wo)), a.shape)
-    rel = _rel(a, b)
-    assert np.median(rel) <= 0.02 and np.percentile(rel, 95) <= 0.10, (
-        np.median(rel),
-        np.percentile(rel, 95),
+    r = rel(a, b)
+    assert np.median(r) <= 0.02 and np.percentile(r, 95) <= 0.10, (
+        np.median(r),
+        np.percentile(r, 95),
     )
 
 
 @pytest.mark.parametrize("name", list(_sources()))
 def test_mitsuba_measured_loads_the_written_file_and_agrees(written, name):
-    mi = pytest.importorskip("mitsuba")
-    mi.set_variant("scalar_rgb")
     src, path = written[name]
-    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
-    wi, wo = _pairs(300, seed=2)
-    ctx = mi.BSDFContext()
-    ref = np.zeros((len(wi), 3))
-    for k in range(len(wi)):
-        si = mi.SurfaceInteraction3f()
-        si.wi = mi.Vector3f(*wo[k])
-        v = bsdf.eval(ctx, si, mi.Vector3f(*wi[k]))
-        ref[k] = np.array([v[0], v[1], v[2]]) / wi[k, 2]
+    wi, wo = pairs(300, seed=2)
+    ref = mitsuba_f(path, wi, wo)
     b = np.broadcast_to(np.asarray(src.f(wi, wo)), ref.shape)
-    rel = _rel(ref, b)
-    assert np.median(rel) <= 0.02 and np.percentile(rel, 95) <= 0.10
+    r = rel(ref, b)
+    assert np.median(r) <= 0.02 and np.percentile(r, 95) <= 0.10
     # and gonio reads the file as Mitsuba does
     ours = np.asarray(io.load(path).f(wi, wo))
-    assert np.median(_rel(ours, ref)) <= 1e-4
+    assert np.median(rel(ours, ref)) <= 1e-4
 
 
 def test_write_read_round_trip_is_lossless(tmp_path):
@@ -131,15 +104,15 @@ def test_convert_a_gridded_table_to_bsdf(tmp_path):
     out = tmp_path / "t.bsdf"
     assert main(["convert", str(h5), str(out), "--quiet"]) == 0
     m = io.load(out)
-    wi, wo = _pairs(3000, seed=3)
-    rel = _rel(np.asarray(m.f(wi, wo))[:, 0], np.asarray(table.f(wi, wo))[:, 0])
-    assert np.median(rel) <= 0.02 and np.percentile(rel, 95) <= 0.10
+    wi, wo = pairs(3000, seed=3)
+    r = rel(np.asarray(m.f(wi, wo))[:, 0], np.asarray(table.f(wi, wo))[:, 0])
+    assert np.median(r) <= 0.02 and np.percentile(r, 95) <= 0.10
 
 
 def test_unwritable_sources_are_refused_and_nothing_is_written(tmp_path):
     from gonio.brdf.tabulated import MeasuredSamples
 
-    wi, wo = _pairs(10, seed=4)
+    wi, wo = pairs(10, seed=4)
     samples = MeasuredSamples(wi, wo, np.ones((10, 1)))
     p = tmp_path / "x.bsdf"
     with pytest.raises(ParameterError, match="scattered"):
