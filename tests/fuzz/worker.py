@@ -151,13 +151,35 @@ def c_alta(path: str) -> str:
     return check_table(_load(path))
 
 
-def c_rgl(path: str) -> str:
-    from gonio.io.rgl import read_rgl
+#: Fixed outgoing directions and unit-square points for the RGL evaluator's ``sample``.
+_U = np.array([[0.5, 0.5], [0.1, 0.9], [0.99, 0.01], [0.3, 0.7], [0.0, 0.0], [0.999, 0.999]])
 
-    b = read_rgl(path)
+
+def c_rgl(path: str) -> str:
+    """An RGL ``.bsdf`` through :func:`gonio.io.load` (an exact evaluator, RGLMeasured): ``f``
+    finite and bounded (the file's colour table may be negative and is kept, as the reference
+    reader keeps it: see :mod:`gonio.io.rgl_measured`), ``pdf`` finite and >= 0, ``sample``
+    with finite weights and pdf and unit ``wi`` where the sample succeeded (pdf > 0)."""
+    b = _load(path)
+    if type(b).__name__ != "RGLMeasured":
+        raise Lie(f"load returned a {type(b).__name__}")
     wi, wo = _dirs(16, 1)
-    _check_values("RGL f", b.f(wi, wo), None, nonneg=False)  # real RGL data dip below 0
-    return f"RGL BSDF, {b.n_channels} channels"
+    _check_values("RGL f", np.asarray(b.f(wi, wo)), None, nonneg=False)
+    pdf = np.asarray(b.pdf(wi, wo))
+    _check_values("RGL pdf", pdf, None, nonneg=True)
+    if np.min(pdf) < 0:
+        raise Lie(f"RGL pdf: negative density {float(np.min(pdf)):.3g}")
+    wo6 = wo[: len(_U)]
+    s = b.sample(wo6, _U)
+    spdf, w, swi = np.asarray(s.pdf), np.asarray(s.weight), np.asarray(s.wi)
+    _check_values("RGL sample pdf", spdf, None, nonneg=True)
+    if np.min(spdf) < 0:
+        raise Lie(f"RGL sample pdf: negative density {float(np.min(spdf)):.3g}")
+    _check_values("RGL sample weight", w, None, nonneg=False)
+    ok = spdf > 0
+    if np.any(ok):
+        _check_dirs("RGL sampled wi", swi[ok])
+    return f"RGL BSDF, {b.n_channels} channels, {int(np.count_nonzero(ok))}/{len(ok)} samples"
 
 
 def c_exr(path: str) -> str:
