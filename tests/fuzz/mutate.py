@@ -616,8 +616,9 @@ STRUCTURED: dict[str, Callable[[bytes, Rng], tuple[bytes, str]]] = {
     "fit": m_json,
 }
 TEXT_KINDS = ("cornell", "alta", "rig", "plan", "fit")
-#: Native files get three shares of the cases: HDF5 has by far the most structure to corrupt.
-KIND_WEIGHTS = {"native": 3}
+#: Native files get three shares of the cases (HDF5 has by far the most structure to corrupt),
+#: RGL two (a reader and an evaluator with its own warps).
+KIND_WEIGHTS = {"native": 3, "rgl": 2}
 
 
 def make_case(master: int, index: int, seeds: list[Seed]) -> Case:
