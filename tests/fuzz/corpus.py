@@ -21,7 +21,17 @@ import numpy as np
 from tests.conftest import ROOT, SHARED_DATA
 
 #: Kinds of check, one per reader family (the worker's ``CHECKS``).
-KINDS = ("native", "merl", "rgl", "cornell", "alta", "exr", "exr_slices", "rig", "plan", "fit")
+KINDS = ("native", "merl", "rgl", "nbrdf", "cornell", "alta", "exr", "exr_slices", "rig", "plan",
+         "fit")  # fmt: skip
+
+
+def has_nbrdf_reader() -> bool:
+    """Whether this gonio reads neural-BRDF archives (``gonio.io.nbrdf``); without it the
+    corpus has no ``nbrdf`` seeds."""
+    import importlib.util
+
+    return importlib.util.find_spec("gonio.io.nbrdf") is not None
+
 
 #: Real files per kind (relative to ../shared/data); the big ALTA file is left out (1 MB of text
 #: per case would dominate the run time; its header and format are those of the small one).
@@ -227,6 +237,10 @@ def build_corpus(out: Path, real: bool = True) -> list[Seed]:
     seeds += _plans(out)
     seeds += _fit_json(out)
     seeds += _rgl_written(out)
+    if has_nbrdf_reader():
+        from tests.fuzz.nbrdf import seed_archives
+
+        seeds += [Seed(f"nbrdf:{n}", "nbrdf", p) for n, p in seed_archives(out, real)]
     if real:
         for kind, files in REAL_FILES.items():
             for rel in files:

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from tests.fuzz.corpus import Seed
+from tests.fuzz.nbrdf import m_nbrdf
 
 Rng = np.random.Generator
 
@@ -607,6 +608,7 @@ STRUCTURED: dict[str, Callable[[bytes, Rng], tuple[bytes, str]]] = {
     "native": m_hdf5,
     "merl": m_merl,
     "rgl": m_rgl,
+    "nbrdf": m_nbrdf,
     "cornell": m_text,
     "alta": m_text,
     "exr": m_exr,

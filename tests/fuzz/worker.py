@@ -11,8 +11,8 @@ A case passes when it gives
 * ``error``: a :class:`gonio.errors.GonioError` whose message is one line and names the file; or
 * ``load``: an object that passes its kind's check below (finite values, non-negative where the
   format promises it, directions in the upper hemisphere, a sane shape), after evaluating it
-  where the format is an evaluator (RGL: a few directions; fit results: the model's ``f``; rig
-  files: a dry-run plan; plan files: a dry run on the simulated rig).
+  where the format is an evaluator (RGL: f, pdf and sample; neural BRDFs: f; fit results: the
+  model's ``f``; rig files: a dry-run plan; plan files: a dry run on the simulated rig).
 
 Anything else (another exception type, a multi-line or anonymous message, a silent load of data
 that cannot be right) is a ``fail`` whose detail names the problem and the innermost frames.
@@ -192,6 +192,36 @@ def c_rgl(path: str) -> str:
     return f"RGL BSDF, {b.n_channels} channels, {int(np.count_nonzero(ok))}/{len(ok)} samples"
 
 
+#: A network's ``f`` may dip below 0 in dark cells (nothing is clamped, gonio.io.nbrdf);
+#: this fraction of its peak over the checked directions is the most a check accepts.
+NBRDF_NEGATIVE_TOLERANCE = 0.1
+
+
+def c_nbrdf(path: str) -> str:
+    """A neural-BRDF archive: each material it names (and those the corpus put in it, see
+    :data:`tests.fuzz.nbrdf.NAMES`, so that a removed member is noticed) through
+    ``gonio.io.nbrdf.read_nbrdf("ARCHIVE.zip::NAME")``, ``f`` on fixed directions finite,
+    bounded and non-negative, and the network on a small MERL-like grid (the code path of
+    ``io.load``, which evaluates MERL's full grid) likewise."""
+    import zipfile
+
+    from gonio.io.nbrdf import list_materials, read_nbrdf
+
+    from tests.fuzz.nbrdf import NAMES
+
+    listed = list_materials(path)
+    with zipfile.ZipFile(path) as zf:
+        stems = {n.rsplit("/", 1)[-1].rpartition(".")[0] for n in zf.namelist()}
+    names = sorted(set(listed[:3]) | (set(NAMES) & stems))
+    wi, wo = _dirs(16, 3)
+    for name in names:
+        net = read_nbrdf(f"{path}::{name}")
+        _check_values(f"{name} f", net.f(wi, wo), None, True, NBRDF_NEGATIVE_TOLERANCE)
+        t = net.to_table((4, 4, 8))
+        _check_values(f"{name} table", t.values, t.mask, True, NBRDF_NEGATIVE_TOLERANCE)
+    return f"nbrdf archive: {len(listed)} materials, read {names}"
+
+
 def c_exr(path: str) -> str:
     from gonio.io.exr import read_exr
 
@@ -312,6 +342,7 @@ CHECKS = {
     "native": c_native,
     "merl": c_merl,
     "rgl": c_rgl,
+    "nbrdf": c_nbrdf,
     "cornell": c_cornell,
     "alta": c_alta,
     "exr": c_exr,
