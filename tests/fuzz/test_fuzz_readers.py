@@ -3,6 +3,12 @@ readers (see :mod:`tests.fuzz.mutate` for the mutations, :mod:`tests.fuzz.worker
 passes). The default run judges :data:`DEFAULT_CASES` cases; ``-m slow`` judges
 :data:`SLOW_CASES` more with another seed. A failure lists every failing case with its seed,
 mutation and source file, and the command that replays it.
+
+Counts of the default run (seed 23, 2,000 cases; cases / typed errors / loads / failures): alta
+160 / 108 / 52 / 0, cornell 152 / 100 / 52 / 0, exr 142 / 89 / 53 / 0, exr_slices 127 / 111 /
+16 / 0, fit 157 / 113 / 44 / 0, merl 164 / 126 / 38 / 0, native 434 / 356 / 78 / 0, plan 145 /
+125 / 20 / 0, rgl 336 / 268 / 68 / 0, rig 183 / 156 / 27 / 0 (``nbrdf`` joins where
+``gonio.io.nbrdf`` exists).
 """
 
 from __future__ import annotations
