@@ -4,7 +4,7 @@ Every entry is a :class:`Seed` (a source file and the *kind* of check its mutant
 :mod:`tests.fuzz.worker`). Generated files are deterministic (fixed random seeds, a fixed
 creation time), so a case ``(master seed, index)`` replays to the same bytes on the same
 platform. Real files are used where ``../shared/data`` has them; without that folder the corpus
-is the generated part only (RGL then has no seeds: gonio has no RGL writer yet).
+is the generated part only (RGL then has the files gonio's RGL writer produced).
 """
 
 from __future__ import annotations
@@ -21,7 +21,17 @@ import numpy as np
 from tests.conftest import ROOT, SHARED_DATA
 
 #: Kinds of check, one per reader family (the worker's ``CHECKS``).
-KINDS = ("native", "merl", "rgl", "cornell", "alta", "exr", "exr_slices", "rig", "plan", "fit")
+KINDS = ("native", "merl", "rgl", "nbrdf", "cornell", "alta", "exr", "exr_slices", "rig", "plan",
+         "fit")  # fmt: skip
+
+
+def has_nbrdf_reader() -> bool:
+    """Whether this gonio reads neural-BRDF archives (``gonio.io.nbrdf``); without it the
+    corpus has no ``nbrdf`` seeds."""
+    import importlib.util
+
+    return importlib.util.find_spec("gonio.io.nbrdf") is not None
+
 
 #: Real files per kind (relative to ../shared/data); the big ALTA file is left out (1 MB of text
 #: per case would dominate the run time; its header and format are those of the small one).
@@ -160,6 +170,21 @@ def _fit_json(out: Path) -> list[Seed]:
     return seeds
 
 
+def _rgl_written(out: Path) -> list[Seed]:
+    """RGL tensor files written by gonio's writer (:mod:`gonio.io.rgl_write`) from two analytic
+    models: a Lambert + rough Torrance-Sparrow (RGB) and a grey Lambert (one colour channel)."""
+    from gonio import io
+    from gonio.brdf import models
+
+    seeds = []
+    rgb = models.Lambert(albedo=[0.5, 0.35, 0.2]) + models.TorranceSparrow(alpha=0.3, rho_d=0.0)
+    for name, model in (("lambert_ts", rgb), ("lambert_grey", models.Lambert(albedo=0.6))):
+        p = out / f"{name}.bsdf"
+        io.save(model, p)
+        seeds.append(Seed(f"rgl:written-{name}", "rgl", p))
+    return seeds
+
+
 def build_corpus(out: Path, real: bool = True) -> list[Seed]:
     """Write the generated corpus into ``out`` and return it with the available real files."""
     from gonio import io
@@ -211,6 +236,11 @@ def build_corpus(out: Path, real: bool = True) -> list[Seed]:
         seeds.append(Seed(f"rig:{name}", "rig", rigs / name))
     seeds += _plans(out)
     seeds += _fit_json(out)
+    seeds += _rgl_written(out)
+    if has_nbrdf_reader():
+        from tests.fuzz.nbrdf import seed_archives
+
+        seeds += [Seed(f"nbrdf:{n}", "nbrdf", p) for n, p in seed_archives(out, real)]
     if real:
         for kind, files in REAL_FILES.items():
             for rel in files:

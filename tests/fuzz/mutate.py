@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from tests.fuzz.corpus import Seed
+from tests.fuzz.nbrdf import m_nbrdf
 
 Rng = np.random.Generator
 
@@ -607,6 +608,7 @@ STRUCTURED: dict[str, Callable[[bytes, Rng], tuple[bytes, str]]] = {
     "native": m_hdf5,
     "merl": m_merl,
     "rgl": m_rgl,
+    "nbrdf": m_nbrdf,
     "cornell": m_text,
     "alta": m_text,
     "exr": m_exr,
@@ -616,8 +618,9 @@ STRUCTURED: dict[str, Callable[[bytes, Rng], tuple[bytes, str]]] = {
     "fit": m_json,
 }
 TEXT_KINDS = ("cornell", "alta", "rig", "plan", "fit")
-#: Native files get three shares of the cases: HDF5 has by far the most structure to corrupt.
-KIND_WEIGHTS = {"native": 3}
+#: Native files get three shares of the cases (HDF5 has by far the most structure to corrupt),
+#: RGL two (a reader and an evaluator with its own warps).
+KIND_WEIGHTS = {"native": 3, "rgl": 2}
 
 
 def make_case(master: int, index: int, seeds: list[Seed]) -> Case:

@@ -261,6 +261,35 @@ def test_rgl_field_of_shape_zero_by_two_to_the_63_is_refused(tmp_path):
     assert str(p) in str(info.value)
 
 
+@pytest.fixture(scope="module")
+def rgl_fields(tmp_path_factory):
+    """Fields of a small RGL file written by gonio's writer (Lambert + rough Torrance-Sparrow)."""
+    from gonio.brdf import models
+    from gonio.io.rgl import read_rgl
+
+    p = tmp_path_factory.mktemp("rgl") / "written.bsdf"
+    io.save(models.Lambert(albedo=[0.5, 0.35, 0.2]) + models.TorranceSparrow(alpha=0.3), p)
+    return dict(read_rgl(p).fields)
+
+
+def test_rgl_sign_flipped_colour_table_is_refused(tmp_path, rgl_fields):
+    """A colour payload with every value negated (fuzz "payload negate") loaded as a BSDF whose
+    ``f`` is negative everywhere; gamut-noise negatives of a few % of the peak still load."""
+    from gonio.io.rgl import tensor_file_bytes
+
+    fields = dict(rgl_fields)
+    fields["rgb"] = -np.abs(fields["rgb"])
+    p = tmp_path / "negated.bsdf"
+    p.write_bytes(tensor_file_bytes(fields))
+    _refused(p, "field 'rgb' is clearly negative")
+    rgb = fields["rgb"] = np.abs(rgl_fields["rgb"]).copy()
+    rgb.reshape(-1)[::7] = -0.03 * float(rgb.max())  # as the vinyl films of the database
+    p.write_bytes(tensor_file_bytes(fields))
+    b = io.load(p)
+    w = np.array([[0.3, 0.0, 0.954]]) / np.linalg.norm([0.3, 0.0, 0.954])
+    assert np.all(np.isfinite(np.asarray(b.f(w, w))))
+
+
 # ------------------------------------------------------------------------------- fit results
 @pytest.fixture(scope="module")
 def fit_json(tmp_path_factory):

@@ -3,6 +3,12 @@ readers (see :mod:`tests.fuzz.mutate` for the mutations, :mod:`tests.fuzz.worker
 passes). The default run judges :data:`DEFAULT_CASES` cases; ``-m slow`` judges
 :data:`SLOW_CASES` more with another seed. A failure lists every failing case with its seed,
 mutation and source file, and the command that replays it.
+
+Counts of the default run (seed 23, 2,000 cases; cases / typed errors / loads / failures): alta
+160 / 108 / 52 / 0, cornell 152 / 100 / 52 / 0, exr 142 / 89 / 53 / 0, exr_slices 127 / 111 /
+16 / 0, fit 157 / 113 / 44 / 0, merl 164 / 126 / 38 / 0, native 434 / 356 / 78 / 0, plan 145 /
+125 / 20 / 0, rgl 336 / 268 / 68 / 0, rig 183 / 156 / 27 / 0 (``nbrdf`` joins where
+``gonio.io.nbrdf`` exists).
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ import os
 import numpy as np
 import pytest
 
-from tests.fuzz.corpus import KINDS, build_corpus
+from tests.fuzz.corpus import KINDS, build_corpus, has_nbrdf_reader
 from tests.fuzz.pool import Worker
 from tests.fuzz.run import run_cases, summary
 from tests.fuzz.worker import Lie, check_table, judge
@@ -45,7 +51,8 @@ def _assert_clean(results, capsys=None) -> None:
 def test_every_corpus_file_loads_cleanly(corpus):
     """The unmutated corpus loads and passes its check (else the oracle proves nothing)."""
     kinds = {s.kind for s in corpus}
-    assert kinds >= set(KINDS) - {"rgl"}  # RGL seeds are real files only
+    # RGL: files written by gonio's writer, plus real ones; nbrdf: where gonio reads it
+    assert kinds >= set(KINDS) - (set() if has_nbrdf_reader() else {"nbrdf"})
     for s in corpus:
         v = judge(s.kind, str(s.path))
         assert v["outcome"] == "load", f"{s.name}: {v}"

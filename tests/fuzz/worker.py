@@ -11,8 +11,8 @@ A case passes when it gives
 * ``error``: a :class:`gonio.errors.GonioError` whose message is one line and names the file; or
 * ``load``: an object that passes its kind's check below (finite values, non-negative where the
   format promises it, directions in the upper hemisphere, a sane shape), after evaluating it
-  where the format is an evaluator (RGL: a few directions; fit results: the model's ``f``; rig
-  files: a dry-run plan; plan files: a dry run on the simulated rig).
+  where the format is an evaluator (RGL: f, pdf and sample; neural BRDFs: f; fit results: the
+  model's ``f``; rig files: a dry-run plan; plan files: a dry run on the simulated rig).
 
 Anything else (another exception type, a multi-line or anonymous message, a silent load of data
 that cannot be right) is a ``fail`` whose detail names the problem and the innermost frames.
@@ -38,6 +38,9 @@ NEGATIVE_TOLERANCE = 0.01
 DRY_RUN_TARGETS = 1000
 #: Largest table a check accepts (cells x channels), far above any real measurement.
 MAX_VALUES = 1 << 27
+#: An RGL colour table may dip this far below 0 (fraction of its peak; gonio.io.rgl documents
+#: -1.4 % in the database's files): ``f`` itself is kept as signed as the file is.
+RGL_COLOUR_TOLERANCE = 0.1
 
 
 class Lie(Exception):
@@ -55,7 +58,9 @@ def _dirs(n: int = 24, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return one(), one()
 
 
-def _check_values(what: str, v: Any, valid: Any = None, nonneg: bool = True) -> None:
+def _check_values(
+    what: str, v: Any, valid: Any = None, nonneg: bool = True, tol: float = NEGATIVE_TOLERANCE
+) -> None:
     v = np.asarray(v)
     if v.dtype.kind not in "fiu":
         raise Lie(f"{what} has dtype {v.dtype}")
@@ -71,7 +76,7 @@ def _check_values(what: str, v: Any, valid: Any = None, nonneg: bool = True) -> 
         raise Lie(f"{what}: absurd value {float(np.max(np.abs(v))):.3g}")
     # "non-negative" as gonio.io._sanity documents it: noise and out-of-gamut colour
     # conversion dip below zero by at most NEGATIVE_TOLERANCE of the peak
-    if nonneg and v.size and np.min(v) < -NEGATIVE_TOLERANCE * np.max(np.abs(v)):
+    if nonneg and v.size and np.min(v) < -tol * np.max(np.abs(v)):
         raise Lie(f"{what}: negative value {float(np.min(v)):.3g}")
 
 
@@ -151,13 +156,70 @@ def c_alta(path: str) -> str:
     return check_table(_load(path))
 
 
+#: Fixed outgoing directions and unit-square points for the RGL evaluator's ``sample``.
+_U = np.array([[0.5, 0.5], [0.1, 0.9], [0.99, 0.01], [0.3, 0.7], [0.0, 0.0], [0.999, 0.999]])
+
+
 def c_rgl(path: str) -> str:
+    """An RGL ``.bsdf`` through :func:`gonio.io.load` (an exact evaluator, RGLMeasured): the
+    colour table not clearly negative (slightly negative values are kept, as the reference reader
+    keeps them: :mod:`gonio.io.rgl_measured`); ``f`` finite and bounded; ``pdf`` finite and >= 0;
+    ``sample`` with finite pdf and weights and unit ``wi`` where the sample succeeded (pdf > 0)."""
+    b = _load(path)
+    if type(b).__name__ != "RGLMeasured":
+        raise Lie(f"load returned a {type(b).__name__}")
     from gonio.io.rgl import read_rgl
 
-    b = read_rgl(path)
+    fields = read_rgl(path).fields
+    colour = fields["spectra"] if "spectra" in fields else fields["rgb"]
+    _check_values("RGL colour table", colour, None, nonneg=True, tol=RGL_COLOUR_TOLERANCE)
     wi, wo = _dirs(16, 1)
-    _check_values("RGL f", b.f(wi, wo), None, nonneg=False)  # real RGL data dip below 0
-    return f"RGL BSDF, {b.n_channels} channels"
+    _check_values("RGL f", np.asarray(b.f(wi, wo)), None, nonneg=False)
+    pdf = np.asarray(b.pdf(wi, wo))
+    _check_values("RGL pdf", pdf, None, nonneg=True)
+    if np.min(pdf) < 0:
+        raise Lie(f"RGL pdf: negative density {float(np.min(pdf)):.3g}")
+    wo6 = wo[: len(_U)]
+    s = b.sample(wo6, _U)
+    spdf, w, swi = np.asarray(s.pdf), np.asarray(s.weight), np.asarray(s.wi)
+    _check_values("RGL sample pdf", spdf, None, nonneg=True)
+    if np.min(spdf) < 0:
+        raise Lie(f"RGL sample pdf: negative density {float(np.min(spdf)):.3g}")
+    _check_values("RGL sample weight", w, None, nonneg=False)
+    ok = spdf > 0
+    if np.any(ok):
+        _check_dirs("RGL sampled wi", swi[ok])
+    return f"RGL BSDF, {b.n_channels} channels, {int(np.count_nonzero(ok))}/{len(ok)} samples"
+
+
+#: A network's ``f`` may dip below 0 in dark cells (nothing is clamped, gonio.io.nbrdf);
+#: this fraction of its peak over the checked directions is the most a check accepts.
+NBRDF_NEGATIVE_TOLERANCE = 0.1
+
+
+def c_nbrdf(path: str) -> str:
+    """A neural-BRDF archive: each material it names (and those the corpus put in it, see
+    :data:`tests.fuzz.nbrdf.NAMES`, so that a removed member is noticed) through
+    ``gonio.io.nbrdf.read_nbrdf("ARCHIVE.zip::NAME")``, ``f`` on fixed directions finite,
+    bounded and non-negative, and the network on a small MERL-like grid (the code path of
+    ``io.load``, which evaluates MERL's full grid) likewise."""
+    import zipfile
+
+    from gonio.io.nbrdf import list_materials, read_nbrdf
+
+    from tests.fuzz.nbrdf import NAMES
+
+    listed = list_materials(path)
+    with zipfile.ZipFile(path) as zf:
+        stems = {n.rsplit("/", 1)[-1].rpartition(".")[0] for n in zf.namelist()}
+    names = sorted(set(listed[:3]) | (set(NAMES) & stems))
+    wi, wo = _dirs(16, 3)
+    for name in names:
+        net = read_nbrdf(f"{path}::{name}")
+        _check_values(f"{name} f", net.f(wi, wo), None, True, NBRDF_NEGATIVE_TOLERANCE)
+        t = net.to_table((4, 4, 8))
+        _check_values(f"{name} table", t.values, t.mask, True, NBRDF_NEGATIVE_TOLERANCE)
+    return f"nbrdf archive: {len(listed)} materials, read {names}"
 
 
 def c_exr(path: str) -> str:
@@ -280,6 +342,7 @@ CHECKS = {
     "native": c_native,
     "merl": c_merl,
     "rgl": c_rgl,
+    "nbrdf": c_nbrdf,
     "cornell": c_cornell,
     "alta": c_alta,
     "exr": c_exr,

@@ -60,6 +60,10 @@ _MAX_FIELDS = 4096
 #: Default horizon cut of :meth:`RGLBSDF.to_table`: cos(89 degrees).
 HORIZON_MIN_COS = math.cos(math.radians(89.0))
 _MAX_NDIM = 16
+#: The colour table may dip below 0 (colours outside the sRGB gamut, noise in dark cells: the
+#: database's files reach -1.4 % of their peak); below this fraction of its largest magnitude
+#: it cannot come from a measurement and the file is refused.
+COLOUR_NEGATIVE_TOLERANCE = 0.1
 
 
 def parse_tensor_file(data: bytes, path: PathLike = "<bytes>") -> dict[str, np.ndarray]:
@@ -382,6 +386,13 @@ class RGLBSDF:
                 raise fail(path, f"field {name!r} has negative values (min {float(arr.min()):g})")
         if np.any(sigma <= 0):
             raise fail(path, "field 'sigma' has non-positive values (projected areas are > 0)")
+        top = float(np.max(np.abs(colour))) if colour.size else 0.0
+        if colour.size and float(np.min(colour)) < -COLOUR_NEGATIVE_TOLERANCE * top:
+            raise fail(
+                path,
+                f"field {colour_name!r} is clearly negative (min {float(np.min(colour)):g}, "
+                f"below -{COLOUR_NEGATIVE_TOLERANCE:g} x its peak {top:g})",
+            )
         for name, arr in (("vndf", vndf), ("luminance", luminance)):
             sums = arr.reshape(np_ * nt, -1).sum(axis=1)
             if np.any(sums <= 0):

@@ -39,6 +39,9 @@ does, so evaluations and renders equal Mitsuba's; sampling is unaffected (the ``
 ``vndf`` warps are non-negative) and a render's pixels can be slightly negative only where the
 file itself is. ``negative="clamp"`` clamps the colour table at 0 when the file is loaded: then
 ``f >= 0`` everywhere, at the cost of no longer matching the reference reader there.
+A colour table whose minimum is below ``-0.1`` times its largest magnitude
+(:data:`gonio.io.rgl.COLOUR_NEGATIVE_TOLERANCE`) is refused when the file is read: no
+measurement gives that (a sign-flipped or corrupted payload does).
 
 Colour
 ------
