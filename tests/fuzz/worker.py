@@ -206,7 +206,6 @@ def c_nbrdf(path: str) -> str:
     import zipfile
 
     from gonio.io.nbrdf import list_materials, read_nbrdf
-
     from tests.fuzz.nbrdf import NAMES
 
     listed = list_materials(path)

@@ -25,23 +25,26 @@ Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
   MERL's channel scales ``(1, 1.15, 1.66) / 1500`` already applied. Values are returned as the
   network gives them (a network can dip slightly below 0 in dark cells; nothing is clamped).
 * **MERL grid**: the networks were trained with MERL cell ``i`` placed at the cell's start,
-  ``θh = (i/90)² π/2``, ``θd = i/90 · π/2``, ``φd = i/180 · π``, which are exactly the nodes of
-  :func:`gonio.io.merl.merl_axes`; :meth:`NBRDF.to_table` evaluates there, so the result is read
-  like a MERL ``.binary`` (cells with a direction at or below the horizon are invalid).
+  ``θh = (i/90)² π/2``, ``θd = i/90 · π/2``, ``φd = i/180 · π`` (``merl_axes(cells="start")``);
+  :meth:`NBRDF.to_table` evaluates there and stores the values on MERL's own nodes
+  (:func:`gonio.io.merl.merl_axes`, cell centres), so the result is read like the MERL
+  ``.binary`` the network stands for (cells with a direction at or below the horizon are
+  invalid).
 """
 
 from __future__ import annotations
 
 import io as _pyio
-import json
 import os
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gonio._bounded import loads_json
 from gonio.errors import FormatError
 from gonio.io._common import PathLike, check_input_file, fail
 from gonio.io.merl import MERL_DIMS, merl_axes
@@ -52,6 +55,14 @@ if TYPE_CHECKING:
 #: Separator between the archive path and the material name in ``io.load`` paths.
 MEMBER_SEP = "::"
 _MAX_UNITS = 4096  # guards against absurd layer sizes before allocating
+#: Largest member read from an archive (a real network's files are under 20 kB): bounds what a
+#: highly compressible member can make the reader allocate.
+MAX_MEMBER_BYTES = 16 << 20
+#: What reading a corrupted member raises (bad deflate data, an unknown or encrypted method).
+_ZIP_ERRORS = (zipfile.BadZipFile, OSError, KeyError, EOFError, zlib.error,
+               NotImplementedError, RuntimeError, ValueError)  # fmt: skip
+#: Grid on which :meth:`NBRDFArchive.read` probes a network (as :meth:`NBRDF.to_table`).
+_PROBE_DIMS = (16, 16, 32)
 
 
 def split_member(path: PathLike) -> tuple[str, str] | None:
@@ -141,8 +152,13 @@ class NBRDF:
         file); cells with a direction at or below the horizon are invalid."""
         from gonio.brdf.tabulated import Channels, TabulatedBRDF
 
+        # the network was trained with MERL cell i at the cell's start: its value for cell i is
+        # the network there; the table's nodes are MERL's (cell centres, gonio.io.merl), so it
+        # is looked up like the MERL file the network stands for
         axes = merl_axes(dims)
-        th, td, pd = (np.asarray(a.nodes(), dtype=np.float64) for a in axes)
+        th, td, pd = (
+            np.asarray(a.nodes(), dtype=np.float64) for a in merl_axes(dims, cells="start")
+        )
         th, td, pd = np.meshgrid(th, td, pd, indexing="ij")
         # directions of the nodes (phi_h = 0), as in gonio.brdf.frames.half_diff_to_directions
         st, ct = np.sin(td), np.cos(td)
@@ -172,6 +188,10 @@ class NBRDF:
             vals[s : s + step] = np.expm1(self.forward(feats[s : s + step]))
         vals = vals.reshape(*mask.shape, 3)
         vals[~mask] = 0.0
+        from gonio.io._sanity import check_brdf_values
+
+        where = self.source.get("archive", self.name)
+        check_brdf_values(where, f"{self.name}: network output", vals, mask)
         return TabulatedBRDF(
             values=vals,
             axes=axes,
@@ -201,7 +221,7 @@ class NBRDFArchive:
         try:
             with zipfile.ZipFile(self.path) as zf:
                 members = zf.namelist()
-        except (zipfile.BadZipFile, OSError) as exc:
+        except _ZIP_ERRORS as exc:
             raise fail(self.path, f"not a readable zip archive ({exc})") from None
         found: dict[str, dict[str, str]] = {}
         for m in members:
@@ -226,25 +246,53 @@ class NBRDFArchive:
             raise fail(self.path, f"material {name!r} {what} ({len(self.names)} materials{hint})")
         try:
             with zipfile.ZipFile(self.path) as zf:
-                desc = zf.read(entry["json"])
-                weights = zf.read(entry["h5"])
-        except (zipfile.BadZipFile, OSError, KeyError) as exc:
+                desc = _read_member(zf, entry["json"], self.path)
+                weights = _read_member(zf, entry["h5"], self.path)
+        except FormatError:
+            raise
+        except _ZIP_ERRORS as exc:
             raise fail(self.path, f"{name}: cannot read its members ({exc})") from None
         units = _parse_description(desc, self.path, name)
         kernels, biases = _read_weights(weights, units, self.path, name)
-        return NBRDF(
+        net = NBRDF(
             name,
             kernels,
             biases,
             {"archive": str(self.path), "json": entry["json"], "h5": entry["h5"]},
         )
+        _probe(net, self.path)
+        return net
+
+
+def _read_member(zf: zipfile.ZipFile, member: str, path: Path) -> bytes:
+    """A member's bytes, refusing more than :data:`MAX_MEMBER_BYTES` (declared or actual)."""
+    info = zf.getinfo(member)
+    if info.file_size > MAX_MEMBER_BYTES:
+        raise fail(path, f"member {member} declares {info.file_size} bytes (at most "
+                         f"{MAX_MEMBER_BYTES})")  # fmt: skip
+    with zf.open(info) as fh:
+        data = fh.read(MAX_MEMBER_BYTES + 1)
+    if len(data) > MAX_MEMBER_BYTES:
+        raise fail(path, f"member {member} holds more than {MAX_MEMBER_BYTES} bytes")
+    return data
+
+
+def _probe(net: NBRDF, path: Path) -> None:
+    """Refuse a network whose output on a MERL-like grid is non-finite, beyond 1e10 1/sr or
+    clearly negative (finite weights can still overflow float32: corruption, not a material)."""
+    net.to_table(_PROBE_DIMS)  # checks its values (NBRDF.to_table)
 
 
 def _parse_description(text: bytes, path: Path, name: str) -> list[tuple[str, int]]:
     """``[(layer name, units)]`` of the Dense layers; checks the architecture is the known one."""
     where = f"{name}.json"
     try:
-        desc = json.loads(text)
+        desc = loads_json(text, where)  # size, UTF-8 and nesting bounds
+    except FormatError as exc:
+        raise fail(path, f"not a Keras model description ({exc})") from None
+    try:
+        if not isinstance(desc, dict):
+            raise TypeError("not a JSON object")
         layers = desc["config"]["layers"] if isinstance(desc["config"], dict) else desc["config"]
         if desc.get("class_name") != "Sequential" or not isinstance(layers, list):
             raise ValueError("not a Keras Sequential model")
@@ -254,9 +302,11 @@ def _parse_description(text: bytes, path: Path, name: str) -> list[tuple[str, in
     for i, layer in enumerate(layers):
         cls = layer.get("class_name") if isinstance(layer, dict) else None
         cfg = layer.get("config", {}) if isinstance(layer, dict) else {}
+        if not isinstance(cfg, dict):
+            raise fail(path, f"{where}: layer {i} config is not an object")
         if cls == "Dense":
             units = cfg.get("units")
-            if not isinstance(units, int) or not 0 < units <= _MAX_UNITS:
+            if type(units) is not int or not 0 < units <= _MAX_UNITS:
                 raise fail(path, f"{where}: layer {i} has impossible units {units!r}")
             act = cfg.get("activation")
             dense.append((str(cfg.get("name")), units))
@@ -290,6 +340,10 @@ def _read_weights(
                 for wname in group.attrs.get("weight_names", []):
                     wname = wname.decode() if isinstance(wname, bytes) else str(wname)
                     ds = group[wname] if wname in group else group[wname.split("/", 1)[-1]]
+                    want = (n_in, n_out) if wname.endswith("kernel:0") else (n_out,)
+                    if not isinstance(ds, h5py.Dataset) or ds.shape != want:
+                        shape = getattr(ds, "shape", None)
+                        raise fail(path, f"{where}: {wname} has shape {shape}, expected {want}")
                     if wname.endswith("kernel:0"):
                         k = np.asarray(ds, dtype=np.float32)
                     elif wname.endswith("bias:0"):
@@ -309,7 +363,7 @@ def _read_weights(
                 n_in = n_out
     except FormatError:
         raise
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
         raise fail(path, f"{where}: not a readable Keras weights file ({exc})") from None
     return tuple(kernels), tuple(biases)
 
