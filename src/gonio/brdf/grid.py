@@ -122,6 +122,20 @@ class Channels:
             return cls.rgb()
         raise ParameterError(f"{n} channels need an explicit Channels description (spectral?)")
 
+    @classmethod
+    def describe(cls, channels: Channels | None, n: int) -> Channels:
+        """``channels`` checked against ``n`` value channels, or the default for ``n`` (None)."""
+        if channels is None:
+            try:
+                return cls.for_count(n)
+            except ParameterError as e:
+                raise ParameterError(f"values have {n} channels: {e}") from None
+        if not isinstance(channels, Channels):
+            raise ParameterError("channels must be a Channels object")
+        if len(channels) != n:
+            raise FormatError(f"values have {n} channels but channels describes {len(channels)}")
+        return channels
+
     @property
     def names(self) -> tuple[str, ...]:
         return self._names

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from gonio.brdf.grid import Channels
-from gonio.errors import FormatError, ParameterError
+from gonio.errors import FormatError
 
 
 class MeasuredSamples:
@@ -88,15 +88,7 @@ class MeasuredSamples:
         if w is not None and (not np.all(np.isfinite(w)) or np.any(w < 0)):
             raise FormatError("weights must be finite and >= 0")
         C = vals.shape[1]
-        if channels is None:
-            try:
-                channels = Channels.for_count(C)
-            except ParameterError as e:
-                raise ParameterError(f"values have {C} channels: {e}") from None
-        if not isinstance(channels, Channels):
-            raise ParameterError("channels must be a Channels object")
-        if len(channels) != C:
-            raise FormatError(f"values have {C} channels but channels describes {len(channels)}")
+        channels = Channels.describe(channels, C)
         for arr in (wi, wo, vals, sig, w):
             if arr is not None:
                 arr.setflags(write=False)

@@ -230,15 +230,7 @@ class TabulatedBRDF:
                 raise FormatError(f"counts have shape {cnt.shape}, expected {grid}")
             if np.any(cnt < 0):
                 raise FormatError("counts must be >= 0")
-        if channels is None:
-            try:
-                channels = Channels.for_count(C)
-            except ParameterError as e:
-                raise ParameterError(f"values have {C} channels: {e}") from None
-        if not isinstance(channels, Channels):
-            raise ParameterError("channels must be a Channels object")
-        if len(channels) != C:
-            raise FormatError(f"values have {C} channels but channels describes {len(channels)}")
+        channels = Channels.describe(channels, C)
         try:
             res = tuple(int(r) for r in sampling_res)
         except (TypeError, ValueError):

@@ -189,3 +189,15 @@ def uniform(v: np.ndarray | None) -> float | None:
         return None
     v = np.asarray(v, dtype=np.float64).reshape(-1)
     return float(v[0]) if np.allclose(v, v[0], rtol=1e-9, atol=1e-12) else None
+
+
+def mix_amount(lobes: Lobes) -> float | None:
+    """``a`` when the diffuse term is scaled by ``1 - a`` and the lobe by ``a``, else None."""
+    sp = lobes.specular
+    if sp is None or lobes.diffuse is None:
+        return None
+    d = uniform(lobes.diffuse_scale) if lobes.diffuse_scale is not None else None
+    s = uniform(sp.scale) if sp.scale is not None else None
+    if d is None or s is None or not (0 < s < 1) or abs(d + s - 1) > 1e-9:
+        return None
+    return s

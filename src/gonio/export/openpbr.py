@@ -19,7 +19,7 @@ import xml.etree.ElementTree as ET
 from typing import Any
 
 from gonio.brdf import models
-from gonio.export._common import Export, family_name, fmt, rgb, template, uniform
+from gonio.export._common import Export, family_name, fmt, mix_amount, rgb, template
 from gonio.export._lobes import Lobes
 
 TARGET = "openpbr"
@@ -27,17 +27,6 @@ SUFFIXES = (".mtlx",)
 FAMILY = "Lambert, TorranceSparrow(ggx, smith, Schlick), or (1 - m) Lambert + m TS"
 MIX = 0.5
 MTLX_VERSION = "1.39"
-
-
-def _mix(lobes: Lobes) -> float | None:
-    sp = lobes.specular
-    if sp is None or lobes.diffuse is None:
-        return None
-    d = uniform(lobes.diffuse_scale) if lobes.diffuse_scale is not None else None
-    s = uniform(sp.scale) if sp.scale is not None else None
-    if d is None or s is None or not (0 < s < 1) or abs(d + s - 1) > 1e-9:
-        return None
-    return s
 
 
 def check(lobes: Lobes) -> str | None:
@@ -55,7 +44,7 @@ def check(lobes: Lobes) -> str | None:
         return f"{sp.fresnel} Fresnel (an OpenPBR metal is F82-tint Schlick)"
     if lobes.diffuse is None:
         return None if sp.scale is None else "a scaled microfacet lobe"
-    if _mix(lobes) is None:
+    if mix_amount(lobes) is None:
         return "a diffuse + specular sum not of the form (1 - m) Lambert + m TS"
     return None
 
@@ -108,7 +97,7 @@ def build(name: str, lobes: Lobes) -> Export:
         params[sname] = p
     top = shaders[0][0]
     if len(shaders) == 2:
-        m = _mix(lobes)
+        m = mix_amount(lobes)
         assert m is not None
         mix = ET.SubElement(doc, "mix", {"name": f"{name}_mix", "type": "surfaceshader"})
         ET.SubElement(

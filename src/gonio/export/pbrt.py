@@ -23,25 +23,13 @@ from typing import Any
 import numpy as np
 
 from gonio.brdf import models
-from gonio.export._common import Export, family_name, fmt, rgb, template, uniform
+from gonio.export._common import Export, family_name, fmt, mix_amount, rgb, template
 from gonio.export._lobes import Lobes
 
 TARGET = "pbrt"
 SUFFIXES = (".pbrt",)
 FAMILY = "Lambert, TorranceSparrow(ggx, smith, Conductor), or (1 - a) Lambert + a TS of them"
 MIX_AMOUNT = 0.5
-
-
-def _mix_amount(lobes: Lobes) -> float | None:
-    """``a`` when the diffuse term is scaled by ``1 - a`` and the lobe by ``a``, else None."""
-    sp = lobes.specular
-    if sp is None or lobes.diffuse is None:
-        return None
-    d = uniform(lobes.diffuse_scale) if lobes.diffuse_scale is not None else None
-    s = uniform(sp.scale) if sp.scale is not None else None
-    if d is None or s is None or not (0 < s < 1) or abs(d + s - 1) > 1e-9:
-        return None
-    return s
 
 
 def check(lobes: Lobes) -> str | None:
@@ -61,7 +49,7 @@ def check(lobes: Lobes) -> str | None:
         return f"{sp.fresnel} Fresnel (pbrt's conductor takes a complex index eta, k)"
     if lobes.diffuse is None:
         return None if sp.scale is None else "a scaled conductor lobe (pbrt has no factor)"
-    a = _mix_amount(lobes)
+    a = mix_amount(lobes)
     if a is None:
         return "a sum of diffuse and conductor lobes not of the form (1 - a) Lambert + a TS"
     if np.any(lobes.diffuse > 1):
@@ -113,7 +101,7 @@ def build(name: str, lobes: Lobes) -> Export:
         )
         params.update(eta=eta, k=k, roughness=float(sp.alpha), remaproughness=False)
     if diff_name and cond_name:
-        a = _mix_amount(lobes)
+        a = mix_amount(lobes)
         assert a is not None
         lines.append(
             f'MakeNamedMaterial "{name}"\n    "string type" "mix"\n'
