@@ -22,8 +22,9 @@ th, td { border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: left; vertica
 th { background: #f3f3f3; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }
 figure { display: inline-block; margin: 0.5em; text-align: center; }
-figure img { max-width: 100%; }
-.spheres img { max-width: none; }
+/* plots wider than the page scroll inside their figure: every image at its native size */
+figure { max-width: 100%; overflow-x: auto; }
+figure img { max-width: none; }
 .warn { color: #a40; font-size: 90%; }
 .ok { color: #070; }
 .bad { color: #a00; }
