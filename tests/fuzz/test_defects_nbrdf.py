@@ -91,5 +91,15 @@ def test_huge_declared_kernel_is_refused_before_it_is_read(tmp_path):
 def test_finite_weights_whose_output_overflows_are_refused(tmp_path):
     ks, bs = _network([4], 1)
     ks[0] = ks[0].copy()
-    ks[0][2, :] = 3e38  # cos(theta_h) times 3e38: the output overflows float32
+    ks[0][2, :] = 900.0  # within the weight bound, but exp of the output overflows float32
     _refused(_archive(tmp_path, h5=weights_h5(ks, bs)), "network output")
+
+
+@pytest.mark.parametrize("w", [-1e20, 3e38])
+def test_absurd_weights_are_refused(tmp_path, w):
+    """Fuzz cases 2023:2225 and 2023:4526: a layer's weights set to -1e20 passed the probe grid
+    and gave non-finite f at other directions."""
+    ks, bs = _network([4], 1)
+    ks[1] = ks[1].copy()
+    ks[1][0, 0] = w
+    _refused(_archive(tmp_path, h5=weights_h5(ks, bs)), "weights beyond 1000")

@@ -277,6 +277,10 @@ def _read_member(zf: zipfile.ZipFile, member: str, path: Path) -> bytes:
     return data
 
 
+#: Largest weight magnitude accepted (the published networks reach 11.1).
+MAX_WEIGHT = 1e3
+
+
 def _probe(net: NBRDF, path: Path) -> None:
     """Refuse a network whose output on a MERL-like grid is non-finite, beyond 1e10 1/sr or
     clearly negative (finite weights can still overflow float32: corruption, not a material)."""
@@ -358,6 +362,10 @@ def _read_weights(
                     )
                 if not (np.all(np.isfinite(k)) and np.all(np.isfinite(b))):
                     raise fail(path, f"{where}: non-finite weights in layer {layer!r}")
+                # the 88 published networks stay below 12 in magnitude; weights far beyond that
+                # overflow float32 away from the probe grid: corruption, not a material
+                if max(np.abs(k).max(initial=0.0), np.abs(b).max(initial=0.0)) > MAX_WEIGHT:
+                    raise fail(path, f"{where}: layer {layer!r} has weights beyond {MAX_WEIGHT:g}")
                 kernels.append(k)
                 biases.append(b)
                 n_in = n_out
