@@ -380,6 +380,17 @@ def node_directions(axes: Sequence[Axis], parameterization: str) -> tuple[np.nda
     return np.asarray(wi, np.float64), np.asarray(wo, np.float64)
 
 
+def numeric_array(x: Any, what: str, dtype: Any) -> np.ndarray:
+    """``x`` as a new array of ``dtype``; FormatError naming ``what`` unless it is numeric."""
+    try:
+        arr = np.asarray(x)
+    except (TypeError, ValueError):
+        raise FormatError(f"{what} is not an array") from None
+    if arr.dtype.kind not in "fiu":
+        raise FormatError(f"{what} must be numeric, got dtype {arr.dtype}")
+    return np.array(arr, dtype=dtype)
+
+
 __all__ = [
     "INTERPOLATIONS",
     "PARAMETERIZATIONS",
@@ -388,4 +399,5 @@ __all__ = [
     "default_axes",
     "merl_axes",
     "node_directions",
+    "numeric_array",
 ]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from gonio.brdf.grid import Channels
+from gonio.brdf.grid import Channels, numeric_array
 from gonio.errors import FormatError
 
 
@@ -44,9 +44,9 @@ class MeasuredSamples:
         *,
         mask: Any = None,
     ) -> None:
-        wi = _f64(wi, "wi")
-        wo = _f64(wo, "wo")
-        vals = _f64(values, "values")
+        wi = numeric_array(wi, "wi", np.float64)
+        wo = numeric_array(wo, "wo", np.float64)
+        vals = numeric_array(values, "values", np.float64)
         if wi.ndim != 2 or wi.shape[1] != 3 or wo.shape != wi.shape:
             raise FormatError(f"wi and wo must both be (N, 3), got {wi.shape} and {wo.shape}")
         n = wi.shape[0]
@@ -56,14 +56,14 @@ class MeasuredSamples:
             raise FormatError(f"values must be ({n}, C), got {vals.shape}")
         sig = None
         if sigma is not None:
-            sig = _f64(sigma, "sigma")
+            sig = numeric_array(sigma, "sigma", np.float64)
             if sig.ndim == 1:
                 sig = sig[:, None]
             if sig.shape != vals.shape:
                 raise FormatError(f"sigma has shape {sig.shape}, expected {vals.shape}")
         w = None
         if weights is not None:
-            w = _f64(weights, "weights")
+            w = numeric_array(weights, "weights", np.float64)
             if w.shape != (n,):
                 raise FormatError(f"weights must be ({n},), got {w.shape}")
         keep = np.ones(n, dtype=bool)
@@ -105,16 +105,6 @@ class MeasuredSamples:
 
     def __repr__(self) -> str:
         return f"MeasuredSamples(N={len(self)}, {self.channels!r})"
-
-
-def _f64(x: Any, what: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except (TypeError, ValueError):
-        raise FormatError(f"{what} is not an array") from None
-    if arr.dtype.kind not in "fiu":
-        raise FormatError(f"{what} must be numeric, got dtype {arr.dtype}")
-    return np.array(arr, dtype=np.float64)
 
 
 __all__ = ["MeasuredSamples"]

@@ -53,6 +53,7 @@ from gonio.brdf.grid import (
     default_axes,
     merl_axes,
     node_directions,
+    numeric_array,
 )
 from gonio.brdf.lookup import LookupSpec, corner_bits, eval_kernel, interpolate
 from gonio.brdf.measured import MeasuredSamples
@@ -187,7 +188,7 @@ class TabulatedBRDF:
                 f"{parameterization} needs axes {PARAMETERIZATIONS[parameterization]}, got {names}"
             )
         grid = tuple(a.size for a in axes)
-        vals = _float_array(values, "values")
+        vals = numeric_array(values, "values", np.float32)
         if vals.ndim != len(axes) + 1 or vals.shape[:-1] != grid:
             raise FormatError(f"values have shape {vals.shape}, expected {(*grid, 'C')}")
         C = vals.shape[-1]
@@ -212,7 +213,7 @@ class TabulatedBRDF:
             )
         sig = None
         if sigma is not None:
-            sig = _float_array(sigma, "sigma")
+            sig = numeric_array(sigma, "sigma", np.float32)
             if sig.shape != vals.shape:
                 raise FormatError(f"sigma has shape {sig.shape}, expected {vals.shape}")
             sv = sig[m]
@@ -552,16 +553,6 @@ class _Ref:
 jax.tree_util.register_pytree_node(
     TabulatedBRDF, TabulatedBRDF._tree_flatten, TabulatedBRDF._tree_unflatten
 )
-
-
-def _float_array(x: Any, what: str) -> np.ndarray:
-    try:
-        arr = np.asarray(x)
-    except (TypeError, ValueError):
-        raise FormatError(f"{what} is not an array") from None
-    if arr.dtype.kind not in "fiu":
-        raise FormatError(f"{what} must be numeric, got dtype {arr.dtype}")
-    return np.array(arr, dtype=np.float32)
 
 
 def _describe(model: Any) -> Any:
