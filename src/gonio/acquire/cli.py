@@ -45,6 +45,10 @@ def register(sub) -> None:
             " (virtual camera 'sim': 2.99 s per configuration, 0.043 s per move, on a busy 2-core"
             " machine; 'sim-sample': 1 ms), and for a real camera only the exposure time is"
             " counted, which the output says."
+            "\n\nThe rig file is checked as 'gonio acquire' checks it, except that a"
+            " [sim.sample] model description is checked by 'gonio acquire' only (before any"
+            " motion): building the model loads the model code (JAX), which a dry run does not."
+            " The text output wraps to the terminal's width (COLUMNS when set, 80 when piped)."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -143,7 +147,7 @@ def _plan(args: argparse.Namespace) -> int:
     from gonio.acquire.timing import costs_from_run, default_costs
     from gonio.rigs.config import load_rig
 
-    rig = load_rig(args.rig)
+    rig = load_rig(args.rig, check_sample_model=False)  # no model code (JAX) for a dry run
     plan, _ = load_plan(args.plan)
     costs = costs_from_run(args.timing_from) if args.timing_from else default_costs(rig)
     stages = dry_run(rig, plan)
@@ -193,25 +197,63 @@ def _plan(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
-    print(f"plan {plan.name} ({plan.kind}) on rig {rig.name}: {out['targets']} targets")
-    print(f"  accepted {accepted}, refused {len(refused)}")
-    sim = f", {motion / scale:.1f} s at time scale {scale:g}" if scale != 1.0 else ""
-    print(f"  predicted motion {motion:.1f} s rig time (plan order: {lex:.1f} s){sim}")
-    print(
-        f"  total {total:.1f} s wall: motion + {accepted} x ({capture:.3f} s capture"
-        f" + {costs.move_overhead_s:.3f} s per move + {costs.book_s:.3f} s bookkeeping)"
-    )
-    print(f"  costs: {costs.source}")
-    if "note" in out:
-        print(f"  note: {out['note']}")
-    for r in out["refusals"][: args.list_refused]:
-        print(
-            f"  refused #{r['index']}: theta_i {r['theta_i_deg']:.1f} phi_i {r['phi_i_deg']:.1f}"
-            f" theta_o {r['theta_o_deg']:.1f} phi_o {r['phi_o_deg']:.1f}: {r['reason']}"
-        )
-    if len(refused) > args.list_refused:
-        print(f"  ... and {len(refused) - args.list_refused} more (--json lists all)")
+    _print_plan(out, plan, rig, costs, args.list_refused)
     return 0
+
+
+def _print_plan(out: dict, plan, rig, costs, list_refused: int) -> None:
+    """The text form of ``gonio plan``, wrapped to the terminal's width (``COLUMNS`` when set,
+    80 when piped): summary lines wrap at words, refused poses are a table whose reason
+    column wraps (never cut)."""
+    import textwrap
+
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(markup=False, highlight=False, emoji=False)
+    width = max(console.width, 40)
+
+    def line(text: str, indent: str = "  ") -> None:
+        print(textwrap.fill(text, width, initial_indent=indent, subsequent_indent=indent + "    "))
+
+    accepted, refused, scale = out["accepted"], out["refusals"], out["time_scale"]
+    motion, cfg = out["predicted_motion_s"], out["per_configuration_s"]
+    line(f"plan {plan.name} ({plan.kind}) on rig {rig.name}: {out['targets']} targets", "")
+    line(f"accepted {accepted}, refused {len(refused)}")
+    sim = f", {motion / scale:.1f} s at time scale {scale:g}" if scale != 1.0 else ""
+    line(
+        f"predicted motion {motion:.1f} s rig time"
+        f" (plan order: {out['plan_order_motion_s']:.1f} s){sim}"
+    )
+    line(
+        f"total {out['predicted_total_s']:.1f} s wall = motion + {accepted} configurations"
+        f" x {sum(cfg.values()):.3f} s"
+    )
+    line(
+        f"per configuration: {cfg['capture']:.3f} s capture + {cfg['move_overhead']:.3f} s per"
+        f" move + {cfg['bookkeeping']:.3f} s bookkeeping"
+    )
+    line(f"costs: {costs.source}")
+    if "note" in out:
+        line(f"note: {out['note']}")
+    shown = refused[: max(list_refused, 0)]
+    if shown:
+        first = "" if len(shown) == len(refused) else f", the first {len(shown)}"
+        line(f"refused poses (angles in deg{first}):")
+        t = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False, collapse_padding=True)
+        for col in ("#", "theta_i", "phi_i", "theta_o", "phi_o"):
+            t.add_column(col, justify="right", no_wrap=True)
+        t.add_column("reason", overflow="fold")
+        for r in shown:
+            angles = (r[k] for k in ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg"))
+            t.add_row(str(r["index"]), *(f"{a:.1f}" for a in angles), r["reason"])
+        with console.capture() as cap:
+            console.print(t, width=width - 2)
+        for row in cap.get().rstrip("\n").splitlines():
+            print(("  " + row).rstrip())
+    if len(refused) > len(shown):
+        line(f"... and {len(refused) - len(shown)} more refused (--list-refused N, --json)")
 
 
 def _acquire(args: argparse.Namespace) -> int:

@@ -482,14 +482,21 @@ def shipped_rigs() -> list[str]:
     )
 
 
-def load_rig(name_or_path: str | Path) -> RigConfig:
-    """Load and validate a rig file (a shipped rig name or a path); raise RigConfigError."""
+def load_rig(name_or_path: str | Path, check_sample_model: bool = True) -> RigConfig:
+    """Load and validate a rig file (a shipped rig name or a path); raise RigConfigError.
+
+    ``check_sample_model=False`` leaves out one check: that a ``[sim.sample]`` model
+    description builds a gonio model, which imports the model code (JAX, about a second). A
+    sample ``file`` is still checked to exist. ``gonio plan`` uses it; ``gonio acquire`` checks
+    the model before any motion.
+    """
     text, source = _find(name_or_path)
-    return parse_rig(text, source)
+    return parse_rig(text, source, check_sample_model)
 
 
-def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
-    """Parse and validate rig-file ``text``; ``source`` names it in error messages."""
+def parse_rig(text: str, source: str = "<rig>", check_sample_model: bool = True) -> RigConfig:
+    """Parse and validate rig-file ``text``; ``source`` names it in error messages
+    (``check_sample_model``: see :func:`load_rig`)."""
     data = loads_toml(text, source, RigConfigError)  # size and nesting bounds
     # jsonschema's minimum/maximum accept NaN (every comparison with it is false), and TOML
     # spells nan and inf: refuse every non-finite number before anything else looks at it
@@ -499,7 +506,8 @@ def parse_rig(text: str, source: str = "<rig>") -> RigConfig:
     errors = sorted(validator.iter_errors(data), key=lambda e: (len(e.absolute_path), str(e.path)))
     if errors:
         raise RigConfigError(_schema_error_message(errors[0], source, text))
-    rig = _build(data, text, source)  # its consistency checks name the file line and quantity
+    # its consistency checks name the file line and quantity
+    rig = _build(data, text, source, check_sample_model)
     # no rig quantity comes near 1e12 in its unit, nor below 1e-9 unless it is 0 (a denormal
     # acceleration made every move take forever): a last bound on what the checks above let by
     bad = bad_number_path(data, limit=1e12, tiny=1e-9)
@@ -562,7 +570,7 @@ def _outside_keepout(angle: float, k: Keepout) -> bool:
     return angle < k.min_deg or angle > k.max_deg
 
 
-def _build(data: dict, text: str, source: str) -> RigConfig:
+def _build(data: dict, text: str, source: str, check_sample_model: bool = True) -> RigConfig:
     def fail(path: tuple, msg: str) -> RigConfigError:
         return RigConfigError(f"{where(source, text, path)}: {msg}")
 
@@ -638,14 +646,14 @@ def _build(data: dict, text: str, source: str) -> RigConfig:
             path = truth_file(sim.sample, source)
         except ValueError as exc:
             raise fail(("sim", "sample"), str(exc)) from None
-        if path is None:
+        if path is None and check_sample_model:
             from gonio.brdf import models
 
             try:
                 models.Node.from_dict(sim.sample)
             except Exception as exc:
                 raise fail(("sim", "sample"), f"not a gonio model: {exc}") from None
-        elif not path.is_file():
+        elif path is not None and not path.is_file():
             # the table itself is read when the camera opens, before any motion
             raise fail(("sim", "sample", "file"), f"no such file: {path}")
     return RigConfig(
