@@ -283,8 +283,6 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         sys.stdout.write("\n")
     else:
         out_console = Console()
-        if not out_console.is_terminal:  # piped: do not squeeze the table into 80 columns
-            out_console = Console(width=120)
         _print_table(out_console, summary, data.source.get("name") or path.name, results)
         if options.get("score"):
             for r in results:
@@ -324,28 +322,21 @@ def _run_score(paths: list[Path], args: argparse.Namespace) -> int:
 
 
 def _print_table(console: Any, summary: dict[str, Any], title: str, results: list[Any]) -> None:
-    from rich.table import Table
+    from rich.markup import escape
 
-    t = Table(title=f"{title}: {summary['table'][0]['metric']} fit")
-    for col in ("model", "params", "loss", "chi2/dof", "BIC", "dBIC", "ngan", "low-e1", "ok"):
-        t.add_column(col, justify="left" if col == "model" else "right", no_wrap=True)
-    for row in summary["table"]:
-        t.add_row(
-            row["model"],
-            str(row["n_params"]),
-            f"{row['loss']:.4g}",
-            f"{row['chi2_dof']:.3g}",
-            f"{row['bic']:.5g}",
-            f"{row['delta_bic']:.1f}",
-            f"{row['metrics']['ngan']:.3g}",
-            f"{row['metrics']['low-e1']:.3g}",
-            "yes" if row["converged"] else "NO",
-        )
-    console.print(t)
+    from gonio.fit.table_text import fit_table_lines
+
+    # plain text at the console's width (COLUMNS when set, 80 when piped): no name is cut
+    console.print(escape(f"{title}: {summary['table'][0]['metric']} fit"), highlight=False)
+    for line in fit_table_lines(summary["table"], console.width):
+        console.print(escape(line), highlight=False, soft_wrap=True)
     for r in results:
         if r.warnings:
-            console.print(f"[yellow]{r.name}:[/yellow] " + "; ".join(r.warnings))
-    console.print(f"recommended: [bold]{summary['recommended']}[/bold] ({summary['reason']})")
+            console.print(f"[yellow]{escape(r.name)}:[/yellow] " + escape("; ".join(r.warnings)))
+    console.print(
+        f"recommended: [bold]{escape(str(summary['recommended']))}[/bold]"
+        f" ({escape(str(summary['reason']))})"
+    )
 
 
 def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any) -> int:
