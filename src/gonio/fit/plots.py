@@ -7,7 +7,15 @@
                    measurement for a few incident angles, with the fitted model as lines; and
                    fitted-vs-measured values for all samples.
 ``corner_plot``    the posterior's 1-D and 2-D marginals (``corner``), from MCMC samples or
-                   from draws of the Laplace Gaussian.
+                   from draws of the Laplace Gaussian; with the true values marked (lines and a
+                   legend) when they are known, as for a simulated sample.
+
+Readable at native size: PNGs are written at :data:`DPI` and no text is smaller than
+:data:`MIN_FONT_PT` points, i.e. at least 13.75 px at the image's native resolution (the demo
+report shows every image at that size); only the exponents of log-axis tick labels are
+smaller (matplotlib draws them at 70 % of the 10 pt tick labels: 10.7 px). The ``*_figure``
+functions return the matplotlib figure (for tests and callers that add to it); the others
+write the PNG.
 """
 
 from __future__ import annotations
@@ -27,12 +35,19 @@ from gonio.io.atomic import atomic_output
 
 _EPS = 1e-3
 
+#: Resolution of the PNGs (dots per inch): a font of ``s`` points is ``s * DPI / 72`` px tall.
+DPI = 110
+#: Smallest font used, in points (9 pt at 110 dpi: 13.75 px).
+MIN_FONT_PT = 9.0
+#: Colour of the true-value lines on corner plots (corner's own default).
+TRUTH_COLOR = "#4682b4"
+
 
 def _save(fig: Any, path: str | Path) -> Path:
     path = Path(path)
     try:
         with atomic_output(path, ".png", make_parents=True) as tmp:
-            fig.savefig(tmp, dpi=110, bbox_inches="tight")
+            fig.savefig(tmp, dpi=DPI, bbox_inches="tight")
     finally:
         plt.close(fig)
     return path
@@ -40,6 +55,11 @@ def _save(fig: Any, path: str | Path) -> Path:
 
 def residual_map(data: FitData, f: np.ndarray, path: str | Path, title: str = "") -> Path:
     """Plot the binned log-ratio residual over (theta_h, theta_d) in degrees; returns the path."""
+    return _save(residual_figure(data, f, title), path)
+
+
+def residual_figure(data: FitData, f: np.ndarray, title: str = "") -> Any:
+    """The figure of :func:`residual_map`."""
     th, td, _ = data.half_diff()
     ratio = np.mean(np.log((np.maximum(f, 0) + _EPS) / (np.maximum(data.values, 0) + _EPS)), -1)
     stat, xe, ye, _ = binned_statistic_2d(
@@ -58,13 +78,18 @@ def residual_map(data: FitData, f: np.ndarray, path: str | Path, title: str = ""
     ax.set_xlabel("theta_d (deg)")
     ax.set_ylabel("theta_h (deg)")
     ax.set_title(title or "residuals (fitted vs measured)")
-    return _save(fig, path)
+    return fig
 
 
 def polar_slices(
     data: FitData, model: Any, path: str | Path, title: str = "", f: np.ndarray | None = None
 ) -> Path:
     """In-plane slices measured (dots) vs fitted (lines), plus fitted-vs-measured scatter."""
+    return _save(slices_figure(data, model, title, f), path)
+
+
+def slices_figure(data: FitData, model: Any, title: str = "", f: np.ndarray | None = None) -> Any:
+    """The figure of :func:`polar_slices`."""
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10.5, 4.2))
     theta_i = np.degrees(np.arccos(np.clip(data.wi[:, 2], -1, 1)))
     phi_i = np.arctan2(data.wi[:, 1], data.wi[:, 0])
@@ -94,7 +119,7 @@ def polar_slices(
     ax.set_ylabel("BRDF (1/sr), channel mean")
     ax.set_title("in-plane slices" if shown else "no in-plane samples")
     if shown:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=MIN_FONT_PT)
     if f is None:
         f = np.asarray(model.f(data.wi, data.wo))
     f = np.broadcast_to(f, data.values.shape)
@@ -114,36 +139,121 @@ def polar_slices(
     ax2.set_xlabel("measured (1/sr)")
     ax2.set_ylabel("fitted (1/sr)")
     if data.channels <= 4:
-        ax2.legend(fontsize=8, markerscale=4)
+        ax2.legend(fontsize=MIN_FONT_PT, markerscale=4)
     fig.suptitle(title)
-    return _save(fig, path)
+    return fig
 
 
 def corner_plot(
     samples: np.ndarray, names: list[str], path: str | Path, truths: Any = None, title: str = ""
 ) -> Path:
-    """Corner plot of posterior samples (S, P) in physical units."""
+    """Corner plot of posterior samples (S, P) in physical units; see :func:`corner_figure`."""
+    return _save(corner_figure(samples, names, truths, title), path)
+
+
+def short_labels(names: list[str]) -> list[str]:
+    """Each dotted parameter name cut to its shortest tail that no other name shares:
+    ``torrancesparrow.fresnel.f0[R]`` -> ``f0[R]``, ``lambert.albedo[G]`` -> ``albedo[G]``."""
+    parts = [n.split(".") for n in names]
+    out = []
+    for p in parts:
+        for k in range(1, len(p) + 1):
+            tail = p[-k:]
+            if sum(q[-k:] == tail for q in parts) == 1:
+                out.append(".".join(tail))
+                break
+        else:
+            out.append(".".join(p))
+    return out
+
+
+def truth_values(names: list[str], truth: dict[str, Any] | None) -> list[float | None]:
+    """The true value of each flat parameter name (``"lambert.albedo[R]"``) from a
+    ``{key: value}`` dict of model parameters (per-channel values in channel order, a scalar
+    shared by every channel), None where the dict has no value for it."""
+    truth = truth or {}
+    seen: dict[str, int] = {}
+    out: list[float | None] = []
+    for n in names:
+        key = n.split("[", 1)[0]
+        if key not in truth:
+            out.append(None)
+            continue
+        v = np.ravel(np.asarray(truth[key], dtype=float))
+        i = seen.get(key, 0)
+        seen[key] = i + 1
+        out.append(float(v[i] if v.size > 1 else v[0]))
+    return out
+
+
+def corner_figure(
+    samples: np.ndarray, names: list[str], truths: Any = None, title: str = ""
+) -> Any:
+    """The posterior's marginals with the 2.5, 50 and 97.5 % quantiles dashed.
+
+    Parameters
+    ----------
+    samples : (S, P) samples in physical units; parameters that do not vary are left out.
+    names : P flat parameter names; the axes show each cut to its shortest unique tail.
+    truths : P true values (None where unknown), or a ``{key: value}`` dict of model parameters
+        (:func:`truth_values`), or None. Known values are drawn as lines in
+        :data:`TRUTH_COLOR`, inside every axis range, with a legend.
+    title : figure title.
+    """
     import corner
+    from matplotlib.lines import Line2D
 
-    samples = np.asarray(samples)
-    keep = np.ptp(samples, axis=0) > 0
+    samples = np.asarray(samples, dtype=float)
+    if isinstance(truths, dict):
+        truths = truth_values(names, truths)
+    keep = np.flatnonzero(np.ptp(samples, axis=0) > 0)
+    x = samples[:, keep]
+    labels = short_labels([names[i] for i in keep])
+    tv = None if truths is None else [truths[i] for i in keep]
+    if tv is not None and all(t is None for t in tv):
+        tv = None
+    ranges = []
+    for j in range(x.shape[1]):
+        lo, hi = float(x[:, j].min()), float(x[:, j].max())
+        if tv is not None and tv[j] is not None:
+            lo, hi = min(lo, tv[j]), max(hi, tv[j])  # the truth stays in view
+        pad = 0.05 * (hi - lo)
+        ranges.append((lo - pad, hi + pad))
     fig = corner.corner(
-        samples[:, keep],
-        labels=[n for n, k in zip(names, keep, strict=True) if k],
-        truths=None if truths is None else np.asarray(truths)[keep],
+        x,
+        labels=labels,
+        range=ranges,
+        truths=tv,
+        truth_color=TRUTH_COLOR,
         quantiles=[0.025, 0.5, 0.975],
-        show_titles=True,
-        title_fmt=".3g",
-        title_kwargs={"fontsize": 8},
-        label_kwargs={"fontsize": 8},
+        max_n_ticks=4,
+        label_kwargs={"fontsize": 11},
     )
+    k = x.shape[1]
+    axes = np.asarray(fig.axes).reshape(k, k)
+    for j in range(k):
+        q = np.percentile(x[:, j], [2.5, 50, 97.5])
+        axes[j, j].set_title(
+            f"{labels[j]}\n{q[1]:.3g} [{q[0]:.3g}, {q[2]:.3g}]", fontsize=10, loc="center"
+        )
+    for ax in fig.axes:
+        ax.tick_params(labelsize=MIN_FONT_PT)
+    handles = [Line2D([], [], color="k", ls="--", label="2.5, 50, 97.5 % quantiles")]
+    if tv is not None:
+        handles.insert(0, Line2D([], [], color=TRUTH_COLOR, lw=2, label="true value"))
+    fig.legend(handles=handles, loc="upper right", fontsize=12, frameon=False)
     if title:
-        fig.suptitle(title)
-    return _save(fig, path)
+        fig.suptitle(title, fontsize=14)
+    return fig
 
 
-def plot_result(result: Any, data: FitData, out_dir: str | Path, stem: str) -> list[Path]:
-    """Every plot of one result into ``out_dir`` as ``<stem>-*.png``; returns the paths."""
+def plot_result(
+    result: Any, data: FitData, out_dir: str | Path, stem: str, truth: dict | None = None
+) -> list[Path]:
+    """Every plot of one result into ``out_dir`` as ``<stem>-*.png``; returns the paths.
+
+    ``truth``: the true parameters (``{key: value}``, as the result's ``params``) when known,
+    marked on the corner plot."""
     out_dir = Path(out_dir)
     f = np.asarray(result.model.f(data.wi, data.wo))
     paths = [
@@ -157,6 +267,7 @@ def plot_result(result: Any, data: FitData, out_dir: str | Path, stem: str) -> l
                 unc.samples,
                 unc.names,
                 out_dir / f"{stem}-corner.png",
+                truths=truth_values(unc.names, truth) if truth else None,
                 title=f"{result.name} ({unc.method})",
             )
         )
