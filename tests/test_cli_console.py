@@ -8,7 +8,9 @@ import json
 import re
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests import console_script as cs
@@ -40,6 +42,25 @@ def test_output_into_a_closed_pipe_is_silent(args):
     assert err == ""
     # as a program killed by SIGPIPE (128 + 13); argparse's --help ignores the closed pipe
     assert proc.returncode == (0 if "--help" in args else 141)
+
+
+def test_info_into_a_closed_pipe_is_silent(tmp_path):
+    from gonio import io
+    from gonio.brdf.tabulated import MeasuredSamples
+
+    w = np.random.default_rng(0).normal(size=(50, 3))
+    w[:, 2] = np.abs(w[:, 2]) + 0.1
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    path = tmp_path / "t.brdf.h5"
+    io.save(MeasuredSamples(w, w[::-1], np.full((50, 3), 0.1)), path)
+    proc = subprocess.Popen(
+        [cs.script(), "info", path], env=cs.env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=300)
+    # rich (which prints the description) exits 1 on a closed pipe, without a message
+    assert err == "" and proc.returncode == 1
 
 
 def test_list_models_piped_into_head_gives_the_first_line():
@@ -116,3 +137,38 @@ def test_a_bad_sample_model_passes_plan_and_is_refused_by_acquire(tmp_path):
     assert acq.returncode != 0 and "Traceback" not in acq.stderr
     assert acq.stderr.count("\n") == 1 and "sim.sample" in acq.stderr, acq.stderr
     assert "not a gonio model" in acq.stderr and not run.exists()
+
+
+def test_fit_out_an_existing_file_is_one_line_before_any_work(tmp_path):
+    data = tmp_path / "x.brdf"
+    data.write_text("")  # never read: --out is checked first
+    taken = tmp_path / "taken.json"
+    taken.write_text("{}")
+    proc = cs.run("fit", data, "-m", "lambert", "--out", taken)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr == f"gonio: --out {taken}: exists and is not a folder\n"
+    assert taken.read_text() == "{}"
+
+
+def test_a_missing_file_exits_2_in_info_and_in_fit(tmp_path):
+    missing = tmp_path / "nope.brdf"
+    for args in (("info", missing), ("fit", missing, "-m", "lambert")):
+        proc = cs.run(*args)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stderr.startswith("gonio: ") and proc.stderr.count("\n") == 1, proc.stderr
+        assert "no such file" in proc.stderr and proc.stdout == ""
+
+
+def test_demo_times_are_stated_with_the_machine_state():
+    # the quick demo took 7 minutes on a busy machine where the help said "about 1"
+    proc = cs.run("demo", "--help", columns=300)
+    cs.assert_clean(proc)
+    text = " ".join(proc.stdout.split())
+    assert "About 2.3 minutes on an idle 2-core machine (--quick: about 45 s;" in text
+    assert "several times as long on a machine busy with other work" in text
+    readme = (Path(cs.SRC).parent / "README.md").read_text(encoding="utf-8")
+    sentences = re.split(r"(?<=[.;])\s", " ".join(readme.split()))
+    timed = [s for s in sentences if "demo" in s and re.search(r"\d\s*(minutes?|s)\b", s)]
+    assert len(timed) >= 2
+    for s in timed:
+        assert re.search(r"idle|load|busy", s), s

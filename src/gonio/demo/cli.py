@@ -18,8 +18,10 @@ def register(sub: Any) -> None:
             " fit Lambert, Oren-Nayar, Lambert + Ward and Lambert + Torrance-Sparrow with 95%"
             " intervals, render measured and fitted spheres and write OUT/index.html. The"
             " material is an RGL-EPFL measurement found in $GONIO_DATA/rgl or ../shared/data/rgl"
-            " (the simulated sample's ground truth), else a built-in analytic paint. About 4"
-            " minutes on 2 cores (--quick: about 1)."
+            " (the simulated sample's ground truth), else a built-in analytic paint. About 2.3"
+            " minutes on an idle 2-core machine (--quick: about 45 s; benchmarks/bench_demo.py),"
+            " several times as long on a machine busy with other work (the simulated camera is"
+            " CPU-bound)."
         ),
     )
     p.add_argument("--out", default="gonio-demo", help="output folder (default gonio-demo)")
@@ -85,16 +87,26 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(summary: Any) -> None:
-    """The final summary on the terminal: one table of fit quality, one of parameters."""
+    """The final summary on the terminal: one table of fit quality, one of parameters.
+
+    Both fit 80 columns (``COLUMNS`` when set, 80 when piped): cells wrap at words and a word
+    is never cut (``overflow="fold"``: it continues on the next line)."""
+    from rich import box
     from rich.console import Console
     from rich.table import Table
 
-    quality = Table(title=f"gonio demo: {summary.material['name']}")
-    for col in ("model", "red. chi2", "BIC", "render RMSE", "SSIM", "truth: max |z|"):
-        quality.add_column(col, justify="left" if col == "model" else "right")
-    params = Table(title="fitted parameters (95% intervals)")
+    quality = Table(
+        title=f"gonio demo: {summary.material['name']}", box=box.SIMPLE_HEAD, pad_edge=False
+    )
+    quality.add_column("model", overflow="fold")
+    for col in ("red.\nchi2", "BIC", "render\nRMSE", "SSIM"):
+        quality.add_column(col, justify="right", no_wrap=True)
+    quality.add_column("truth\nmax |z|", justify="right", overflow="fold")
+    params = Table(title="fitted parameters (95% intervals)", box=box.SIMPLE_HEAD, pad_edge=False)
     for col in ("model", "parameter", "value", "interval"):
-        params.add_column(col, justify="left" if col in ("model", "parameter") else "right")
+        params.add_column(
+            col, justify="left" if col in ("model", "parameter") else "right", overflow="fold"
+        )
     for m in summary.models:
         chk = "-"
         if m.truth_check is not None:
@@ -113,7 +125,7 @@ def print_summary(summary: Any) -> None:
             params.add_row(
                 m.label if i == 0 else "", name, value, interval, end_section=i == len(rows) - 1
             )
-    console = Console()
+    console = Console(markup=False, highlight=False, emoji=False)  # names like "f0[B]"
     console.print(quality)
     console.print(params)
     t = summary.timings_s
