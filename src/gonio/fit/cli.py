@@ -306,7 +306,7 @@ def _run_score(paths: list[Path], args: argparse.Namespace) -> int:
     from gonio.fit.score import load_scored_model, score
 
     rows = []
-    console = Console() if Console().is_terminal else Console(width=120)
+    console = Console()  # COLUMNS when set, else the terminal's width, 80 when piped
     for path in paths:
         data = prepare(path, args.theta_max)
         for spec in args.score:
