@@ -6,10 +6,13 @@ table is gridded with ``gonio grid --method interp`` (16 x 15 x 12 half/diff nod
 of them inside the samples' convex hull) and written with ``gonio convert ... x.bsdf``.
 
 What is compared is the writer's fidelity to the gridded table: Mitsuba 3's ``measured`` eval of
-the written file against the gridded table's ``f`` on the same direction pairs (up to 80 deg),
-not the acquisition's fidelity to the material's truth (the demo's fit tests check that). The
-gridded table is 0 where none of a lookup's corner nodes is covered; relative errors are taken
-over the directions where it is not (its coverage).
+the written file against the gridded table's ``f`` as gonio evaluates it (the table loaded from
+its native file, mask applied), on the same direction pairs (up to 80 deg), not the
+acquisition's fidelity to the material's truth (the demo's fit tests check that). That ``f`` is 0
+where none of a lookup's corner nodes is covered; relative errors are taken over every direction
+pair where it is not (its coverage), the cells at the coverage edge included. The gridded table
+is *filled* (its uncovered nodes hold the nearest sample, kept in the native file): the writer
+evaluates it from every node, so the file has no step to 0 at the coverage edge.
 """
 
 from __future__ import annotations
@@ -55,37 +58,29 @@ def test_mitsuba_reads_the_written_acquisition_and_agrees_over_its_coverage(conv
     assert np.median(d) <= 1e-4 and np.percentile(d, 99) <= 1e-3, np.percentile(d, [50, 99])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known gap: the written file's 32 x 32 colour grid smooths the step at the gridded "
-    "table's coverage edge (f falls to 0 there): 95th percentile 38 % over the coverage, 6 % "
-    "about 2 deg inside it, 3 % about 4 deg inside it; median 0.5 %",
-)
-def test_written_acquisition_meets_the_95th_percentile_target_over_its_coverage(converted):
+def test_written_acquisition_meets_the_targets_over_its_coverage(converted):
+    """The issue's targets over the whole coverage: 2 % median, 10 % 95th percentile
+    (measured: 0.4 % and 6.8 % on 4000 pairs, seed 6)."""
     table, bsdf = converted
+    assert table.filled and not table.mask.all()  # the extrapolation survived the native file
     wi, wo = pairs(4000, seed=6)
     src, cov = _covered(table, wi, wo)
-    # gonio's reader stands for Mitsuba here (the test above shows they agree to 1e-4)
-    r = rel(np.asarray(io.load(bsdf).f(wi, wo))[cov], src[cov])
-    assert np.percentile(r, 95) <= 0.10, np.percentile(r, 95)
-
-
-def test_written_acquisition_meets_the_targets_inside_its_coverage(converted):
-    """Away from the coverage edge (every one of 12 random neighbours, each direction moved by
-    about 4 deg, is covered too) the file meets the 2 % median and 10 % 95th percentile."""
-    table, bsdf = converted
-    wi, wo = pairs(4000, seed=6)
-    src, inner = _covered(table, wi, wo)
-    rng = np.random.default_rng(7)
-    for _ in range(12):
-        near = [w + rng.normal(scale=np.radians(4.0), size=w.shape) for w in (wi, wo)]
-        near = [w / np.linalg.norm(w, axis=-1, keepdims=True) for w in near]
-        for w in near:
-            w[:, 2] = np.abs(w[:, 2])
-        inner &= _covered(table, *near)[1]
-    assert inner.mean() > 0.25, inner.mean()
-    r = rel(np.asarray(io.load(bsdf).f(wi, wo))[inner], src[inner])
+    assert cov.mean() > 0.4, cov.mean()
+    r = rel(mitsuba_f(bsdf, wi, wo)[cov], src[cov])
     assert np.median(r) <= 0.02 and np.percentile(r, 95) <= 0.10, np.percentile(r, [50, 95])
+
+
+def test_the_written_coverage_edge_needs_the_extrapolation(converted, tmp_path):
+    """Written from the table with zeros beyond its coverage (what the native file held before
+    it kept the extrapolation), the file misses the 95th-percentile target: the 32 x 32 colour
+    grid smooths the step to 0 into the cells at the coverage edge."""
+    table, _ = converted
+    bsdf = tmp_path / "zeros.bsdf"
+    io.save(table.replace(filled=False), bsdf)
+    wi, wo = pairs(4000, seed=6)
+    src, cov = _covered(table, wi, wo)
+    r = rel(np.asarray(io.load(bsdf).f(wi, wo))[cov], src[cov])
+    assert np.percentile(r, 95) > 0.2, np.percentile(r, 95)
 
 
 def test_convert_refuses_the_scattered_run_table(demo, tmp_path, capsys):

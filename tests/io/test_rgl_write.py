@@ -144,3 +144,40 @@ def test_a_clamped_rgl_file_is_written_as_loaded(tmp_path):
     assert back["rgb"].min() >= 0 and orig["rgb"].min() < 0
     np.testing.assert_array_equal(back["rgb"], np.maximum(orig["rgb"], 0))
     assert np.array_equal(back["vndf"], orig["vndf"])
+
+
+def test_a_filled_table_is_written_without_a_step_at_its_coverage_edge(tmp_path):
+    """Scattered samples of a glossy model (300 pairs, both directions within 60 deg), gridded
+    by the Delaunay interpolant (``gonio grid --method interp``), through the native file, then
+    written as ``.bsdf``: over the table's coverage (directions up to 80 deg where its ``f`` is
+    not 0) the file meets 2 % median and 10 % 95th percentile (measured 0.3 % and 4 %). Written
+    with zeros beyond the coverage instead, the colour grid smooths the step into the edge
+    cells (measured 95th percentile 41 %)."""
+    from gonio.brdf import gridding
+    from gonio.brdf.tabulated import MeasuredSamples
+
+    model = _sources()["lambert+beckmann-0.3"]
+    rng = np.random.default_rng(0)
+
+    def hemi(n):
+        c = 1 - (1 - math.cos(math.radians(60))) * rng.random(n)
+        r, p = np.sqrt(1 - c * c), 2 * math.pi * rng.random(n)
+        return np.stack([r * np.cos(p), r * np.sin(p), c], -1)
+
+    wi, wo = hemi(300), hemi(300)
+    samples = MeasuredSamples(wi, wo, np.asarray(model.f(wi, wo)))
+    h5 = tmp_path / "grid.brdf.h5"
+    io.save(gridding.interpolate_samples(samples, gridding.default_grid(16, 15, 12)), h5)
+    table = io.load(h5)
+    assert table.filled and 0.2 < table.mask.mean() < 0.6
+    qi, qo = pairs(4000, seed=6)
+    src = np.asarray(table.f(qi, qo))
+    cov = np.all(src > 0, axis=-1)
+    assert 0.3 < cov.mean() < 0.9, cov.mean()
+    for obj, name in ((table, "filled"), (table.replace(filled=False), "zeros")):
+        io.save(obj, tmp_path / f"{name}.bsdf")
+        r = rel(np.asarray(io.load(tmp_path / f"{name}.bsdf").f(qi, qo))[cov], src[cov])
+        if name == "filled":
+            assert np.median(r) <= 0.02 and np.percentile(r, 95) <= 0.10, np.percentile(r, [50, 95])
+        else:
+            assert np.percentile(r, 95) > 0.2, np.percentile(r, 95)

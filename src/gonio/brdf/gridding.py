@@ -254,7 +254,8 @@ def interpolate_samples(
     TabulatedBRDF
         ``mask`` is the coverage: nodes inside the samples' convex hull (in the embedding) with
         both directions above the horizon. Nodes outside the hull hold the nearest sample's value
-        (so that a renderer sees no holes; read them as extrapolation) and sigma 0.
+        (so that a renderer sees no holes; read them as extrapolation) and sigma 0; the table is
+        ``filled`` (the native file keeps these values, the RGL writer uses them).
     """
     axes = axes or render_axes()
     _check_iso_axes(axes)
@@ -294,6 +295,7 @@ def interpolate_samples(
         channels=samples.channels,
         meta=meta,
         interpolation=interpolation,
+        filled=True,
     )
 
 

@@ -26,6 +26,12 @@ remaining corners are renormalized; where no corner is valid the result is 0. Wh
 invalid node holds (NaN, garbage) never reaches a result. ``f`` is 0 when ``wi`` or ``wo`` is on
 or below the horizon.
 
+A table built with ``filled=True`` declares that its invalid nodes hold a finite extrapolation
+of the valid ones (the nearest sample outside a scattered-data interpolant's coverage, see
+:func:`gonio.brdf.gridding.interpolate_samples`). ``f`` still ignores them; they are kept by the
+native file and used by writers of formats that have no mask (an RGL tensor file holds values
+everywhere: zeros there would put a step at the coverage edge).
+
 JAX
 ---
 :meth:`TabulatedBRDF.f` is pure JAX, vectorized over any batch shape, and keeps float32 inputs in
@@ -146,6 +152,8 @@ class TabulatedBRDF:
     sampling_res : ``(n_theta_o, n_theta_i, n_phi_i)`` of the sampling structures (outgoing
         buckets and the incident-direction grid); for anisotropic tables the outgoing buckets
         are ``n_theta_o x 2 n_theta_o`` in (theta_o, phi_o). Default ``(32, 64, 128)``.
+    filled : True when the invalid nodes hold a finite extrapolation of the valid ones (module
+        docstring); they must then be finite. Default False: invalid nodes mean nothing.
 
     Raises
     ------
@@ -169,6 +177,7 @@ class TabulatedBRDF:
         interpolation: str = "linear",
         *,
         sampling_res: tuple[int, int, int] = (32, 64, 128),
+        filled: bool = False,
     ) -> None:
         if parameterization not in PARAMETERIZATIONS:
             raise ParameterError(
@@ -211,6 +220,9 @@ class TabulatedBRDF:
                 f"values are NaN or infinite at {int(bad.sum())} valid nodes (first at {first}); "
                 "mark them invalid in the mask"
             )
+        filled = bool(filled)
+        if filled and not np.all(np.isfinite(vals)):
+            raise FormatError("a filled table needs finite values at its invalid nodes too")
         sig = None
         if sigma is not None:
             sig = numeric_array(sigma, "sigma", np.float32)
@@ -251,6 +263,7 @@ class TabulatedBRDF:
         self.meta: dict[str, Any] = dict(meta or {})
         self.interpolation = interpolation
         self.sampling_res = res
+        self.filled = filled
         has_mask = not bool(m.all())
         fold = 0
         if parameterization == "half_diff_iso":
@@ -327,6 +340,7 @@ class TabulatedBRDF:
             "meta": self.meta,
             "interpolation": self.interpolation,
             "sampling_res": self.sampling_res,
+            "filled": self.filled,
         }
         unknown = set(changes) - set(kw)
         if unknown:

@@ -26,7 +26,10 @@ def register(subparsers: Any) -> None:
             "inverse-variance mean of the samples in each cell, sigma 1/sqrt(sum of weights), "
             "cells without samples masked invalid. --method interp tabulates the log-linear "
             "Delaunay interpolant of the samples (gonio.brdf.gridding): mask = nodes inside the "
-            "samples' convex hull, sigma propagated through the interpolation weights."
+            "samples' convex hull, sigma propagated through the interpolation weights; the "
+            "nodes outside keep the nearest sample's value as an extrapolation (a filled table, "
+            "/mask attribute invalid_values = extrapolated), which gonio's lookups ignore and "
+            "the RGL writer (gonio convert OUT x.bsdf) uses beyond the coverage."
         ),
     )
     p.add_argument("input", metavar="IN", help="scattered BRDF file (e.g. RUN/table.brdf.h5)")

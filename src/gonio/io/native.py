@@ -9,7 +9,9 @@ Summary of version 1
 Root attributes ``format`` = "gonio-brdf", ``format_version`` = 1, ``kind`` ("gridded" |
 "scattered"), ``units`` = "1/sr", ``software``, ``created_utc``, ``metadata`` (a JSON object
 with the provenance). Group ``/channels``. Gridded files: group ``/axes`` and datasets
-``/values`` (n1, ..., nk, C), ``/mask`` (n1, ..., nk) uint8, optional ``/sigma`` and ``/counts``.
+``/values`` (n1, ..., nk, C), ``/mask`` (n1, ..., nk) uint8, optional ``/sigma`` and ``/counts``;
+``/mask`` attribute ``invalid_values`` says what ``/values`` holds at invalid nodes: ``"zero"``
+(also when absent) or ``"extrapolated"`` (a filled table's extrapolation, kept as written).
 Scattered files: ``/wi`` and ``/wo`` (N, 3) float64, ``/values`` (N, C), optional ``/sigma``,
 ``/weights``. Values are float32 compressed losslessly (shuffle + deflate), chunked with one
 channel per chunk and a few rows of the first axis per chunk; or, opt-in, log-quantized with a
@@ -50,6 +52,8 @@ INTERPOLATIONS = ("linear", "nearest")
 WARPS = ("linear", "sqrt")
 CHANNEL_KINDS = ("rgb", "spectral", "mono")
 ENCODINGS = ("float32", "log-quantized-delta")
+#: What ``/values`` holds at invalid nodes (``/mask`` attribute ``invalid_values``).
+INVALID_VALUES = ("zero", "extrapolated")
 #: Recommended provenance keys in the ``metadata`` attribute (others are allowed).
 PROVENANCE_FIELDS: dict[str, tuple[list[str], str]] = {
     "rig": (["object", "string"], "rig that measured the data: name, rig file and its hash"),
@@ -231,7 +235,10 @@ def _write_gridded(
     values = np.asarray(t.values, dtype=np.float32)
     grid_shape = tuple(a.size for a in t.axes)
     mask = np.ones(grid_shape, bool) if t.mask is None else np.asarray(t.mask, dtype=bool)
-    _check_finite(path, "values", values, mask)
+    # a filled table's extrapolation at invalid nodes is data too (TabulatedBRDF.filled)
+    filled = bool(getattr(t, "filled", False)) and not bool(mask.all())
+    kept = np.ones_like(mask) if filled else mask
+    _check_finite(path, "values", values, kept)
     h5.attrs["parameterization"] = str(t.parameterization)
     h5.attrs["interpolation"] = str(getattr(t, "interpolation", "linear"))
     axes = h5.create_group("axes")
@@ -246,13 +253,13 @@ def _write_gridded(
         g.attrs["periodic"] = np.int8(bool(a.periodic))
         g.attrs["node_offset"] = float(a.node_offset)
         g.create_dataset("nodes", data=np.asarray(a.nodes(), dtype=np.float64))
-    clean = np.where(mask[..., None] & np.isfinite(values), values, np.float32(0))
+    clean = np.where(kept[..., None] & np.isfinite(values), values, np.float32(0))
     report: dict = {}
     if lossy is None:
         ds = _dataset(h5, "values", clean, True, level)
         ds.attrs["encoding"] = "float32"
     else:
-        codes, enc = encode_lossy(clean, mask, lossy)
+        codes, enc = encode_lossy(clean, kept, lossy)
         decoded = decode_lossy(codes, enc)
         achieved = lossy_stats(clean, decoded, mask, enc.floor)
         ds = _dataset(h5, "values", codes, True, max(level, 6))
@@ -267,7 +274,8 @@ def _write_gridded(
     ds.attrs["units"] = UNITS
     if hook is not None:
         hook("values")
-    _dataset(h5, "mask", mask.astype(np.uint8), False, level)
+    ds = _dataset(h5, "mask", mask.astype(np.uint8), False, level)
+    ds.attrs["invalid_values"] = INVALID_VALUES[1] if filled else INVALID_VALUES[0]
     if t.sigma is not None:
         sigma = np.asarray(t.sigma, dtype=np.float32)
         ds = _dataset(h5, "sigma", np.where(mask[..., None], sigma, np.float32(0)), True, level)
@@ -519,7 +527,17 @@ def _header(h5: Any, path: PathLike) -> dict:
                 raise fail(path, f"/{name} has shape {h5[name].shape}, expected {grid}")
         if "mask" not in h5:
             raise fail(path, "missing dataset /mask")
-        header["grid"] = {"parameterization": param, "interpolation": interp, "axes": axes}
+        invalid = INVALID_VALUES[0]  # files written before the attribute hold zeros there
+        if "invalid_values" in h5["mask"].attrs:
+            invalid = _attr_str(h5["mask"], "invalid_values", path)
+            if invalid not in INVALID_VALUES:
+                raise fail(path, f"unknown /mask invalid_values {invalid!r}")
+        header["grid"] = {
+            "parameterization": param,
+            "interpolation": interp,
+            "axes": axes,
+            "invalid_values": invalid,
+        }
     else:
         n = ds.shape[0] if ds.ndim == 2 else -1
         if ds.ndim != 2 or ds.shape[1] != n_ch:
@@ -617,6 +635,8 @@ def _read_arrays(h5: Any, header: dict, path: PathLike) -> dict:
         if "counts" in h5:
             out["counts"] = np.asarray(h5["counts"][()])
         valid = np.broadcast_to(out["mask"][..., None], out["values"].shape)
+        if header["grid"]["invalid_values"] == "extrapolated":  # every stored value is data
+            check_brdf_values(path, "/values", out["values"])
     else:
         valid = np.ones(out["values"].shape, dtype=bool)
     # a BRDF in 1/sr (and its standard deviation) is finite, >= 0 and below MAX_BRDF
@@ -661,6 +681,7 @@ def _build(header: dict, arrays: dict) -> Any:
             channels=channels,
             meta=meta,
             interpolation=g["interpolation"],
+            filled=g["invalid_values"] == "extrapolated",
         )
     return MeasuredSamples(
         wi=arrays["wi"],

@@ -9,6 +9,7 @@ from gonio.io.native import (
     FORMAT_NAME,
     FORMAT_VERSION,
     INTERPOLATIONS,
+    INVALID_VALUES,
     KINDS,
     PARAMETERIZATIONS,
     PROVENANCE_FIELDS,
@@ -88,6 +89,11 @@ def table_metadata_schema() -> dict:
                     "parameterization": {"enum": list(PARAMETERIZATIONS)},
                     "interpolation": {"enum": list(INTERPOLATIONS)},
                     "axes": {"type": "array", "items": axis, "minItems": 1},
+                    "invalid_values": {
+                        "enum": list(INVALID_VALUES),
+                        "description": "what /values holds at invalid nodes: zero, or a filled "
+                        "table's extrapolation (/mask attribute invalid_values; absent = zero)",
+                    },
                 },
             },
             "samples": {
