@@ -66,7 +66,8 @@ import numpy as np
 from gonio.brdf import warp
 from gonio.brdf.models import BRDFModel
 from gonio.errors import ParameterError
-from gonio.render.lights import Environment, Light, light_list
+from gonio.render import sobol as _sobol_mod
+from gonio.render.lights import Environment, Light, LightSample, light_list, merge_environments
 from gonio.render.materials import (
     has_delta,
     is_table,
@@ -75,7 +76,6 @@ from gonio.render.materials import (
     restrict_model_channels,
     restrict_table_channels,
 )
-from gonio.render import sobol as _sobol_mod
 from gonio.render.scene import Camera, SphereHits, intersect_sphere
 
 Array = jnp.ndarray
@@ -254,12 +254,30 @@ def _power(a: Array, b: Array) -> Array:
     return jnp.where(a > 0, 1.0 / (1.0 + r * r), 0.0)
 
 
-def _light_stage(lights: tuple[Light, ...], position: Array, frame: Array, u: Array):
-    """Sample every light: list of (wi local (P,S,3), value (P,S,C), pdf (P,S))."""
+def _pick(stacked: Any, i: Array) -> Any:
+    """Light ``i`` of a stacked group (``i`` a traced scalar, or an index array: then every
+    leaf gains its shape in front)."""
+    return jax.tree_util.tree_map(lambda leaf: jnp.take(leaf, i, axis=0), stacked)
+
+
+def _light_stage(groups: tuple, position: Array, frame: Array, u: Array):
+    """One light sample per group and sample: list of (wi local (P,S,3), value (P,S,C), pdf
+    (P,S)). In a stacked group the light is chosen uniformly among its ``count`` members by
+    the first of the pair's numbers (rescaled to [0, 1) for the light's own sampling), and
+    ``pdf`` includes the choice (divided by ``count``)."""
     out = []
-    p = position[:, None, :]
-    for k, light in enumerate(lights):
-        ls = light.sample(jnp.broadcast_to(p, (*u.shape[:-1], 3)), u[..., 2 + 2 * k : 4 + 2 * k])
+    p = jnp.broadcast_to(position[:, None, :], (*u.shape[:-1], 3))
+    for k, (light, count) in enumerate(groups):
+        uk = u[..., 2 + 2 * k : 4 + 2 * k]
+        if count is None:
+            ls = light.sample(p, uk)
+        else:
+            n = count.astype(jnp.float32)
+            x = uk[..., 0] * n
+            j = jnp.clip(jnp.floor(x).astype(jnp.int32), 0, count - 1)
+            u0 = jnp.clip(x - j.astype(jnp.float32), 0.0, 1.0 - 2.0**-24)
+            ls = _pick(light, j).sample(p, jnp.stack([u0, uk[..., 1]], -1))
+            ls = LightSample(ls.wi, ls.value, ls.pdf / n)
         out.append((_local(frame, ls.wi), ls.value, ls.pdf))
     return out
 
@@ -267,7 +285,7 @@ def _light_stage(lights: tuple[Light, ...], position: Array, frame: Array, u: Ar
 def _shade_light(lights, light_samples, f_vals, brdf_pdfs, weights, mis: bool):
     """Sum over lights of f L cos / pdf (times the MIS weight); (P, S, C)."""
     total = 0.0
-    for light, (wi, value, pdf), f, pb in zip(
+    for (light, _), (wi, value, pdf), f, pb in zip(
         lights, light_samples, f_vals, brdf_pdfs, strict=True
     ):
         cos = jnp.maximum(wi[..., 2], 0.0)
@@ -280,18 +298,29 @@ def _shade_light(lights, light_samples, f_vals, brdf_pdfs, weights, mis: bool):
 
 
 def _shade_brdf(lights, position, frame, brdf, mis: bool, weights):
-    """Sum over lights of L(wi_b) f cos / pdf_b (times the MIS weight); (P, S, C)."""
+    """Sum over lights of L(wi_b) f cos / pdf_b (times the MIS weight); (P, S, C). Every
+    member of a stacked group is looked at, in a loop with a traced trip count; its light
+    sampling density is its own times the chance ``1 / count`` of being chosen."""
     wi, pdf_b, weight, delta = brdf
     wi_w = _world(frame, wi)
     p = jnp.broadcast_to(position[:, None, :], wi_w.shape)
-    total = 0.0
-    for light in lights:
+
+    def term(light, n):
         if mis:
             le, pl = light.radiance_pdf(p, wi_w)
-            c = weight * le * jnp.where(delta, 1.0, _power(pdf_b, pl))[..., None]
-        else:
-            c = weight * light.radiance(p, wi_w)
-        total = total + c
+            return weight * le * jnp.where(delta, 1.0, _power(pdf_b, pl / n))[..., None]
+        return weight * light.radiance(p, wi_w)
+
+    total = 0.0
+    for light, count in lights:
+        if count is None:
+            total = total + term(light, 1.0)
+            continue
+        n = count.astype(jnp.float32)
+        first = term(_pick(light, 0), n)
+        total = total + jax.lax.fori_loop(
+            1, count, lambda i, acc, light=light, n=n: acc + term(_pick(light, i), n), first
+        )
     return total * weights[None, :, None]
 
 
@@ -371,6 +400,16 @@ def _delta_kernel_model(model, groups, position, frame, wo):
     return total
 
 
+def _area_groups(lights: Sequence[Light]) -> tuple:
+    """Area and environment lights as the kernels take them: ``((light, count), ...)``, one
+    light sample per group. An environment is its own group (``count`` None; environments of
+    one image size are merged beforehand, :func:`gonio.render.lights.merge_environments`);
+    other lights are stacked by kind as :func:`_delta_groups` does, so that their number is a
+    traced value, not part of the kernel's shape."""
+    envs = tuple((lt, None) for lt in lights if isinstance(lt, Environment))
+    return envs + _delta_groups([lt for lt in lights if not isinstance(lt, Environment)])
+
+
 def _delta_groups(lights: Sequence[Light]) -> tuple:
     """Delta lights grouped by kind (pytree structure and leaf shapes), each group's leaves
     stacked along a new first axis padded to a power of 2 (at least 8): ``((stacked, count),
@@ -384,8 +423,8 @@ def _delta_groups(lights: Sequence[Light]) -> tuple:
     for (treedef, _), members in groups.items():
         cap = max(8, 1 << (len(members) - 1).bit_length())
         padded = members + [members[-1]] * (cap - len(members))
-        stacked = [jnp.asarray(np.stack(col)) for col in zip(*padded, strict=True)]
-        out.append((treedef.unflatten(stacked), jnp.asarray(len(members), jnp.int32)))
+        stacked = [_dev(np.stack(col)) for col in zip(*padded, strict=True)]
+        out.append((treedef.unflatten(stacked), _dev(np.int32(len(members)))))
     return tuple(out)
 
 
@@ -546,6 +585,7 @@ def render_sphere(
         out += _render_delta(material, delta_lights, hits, tile_samples, stats)
 
     if area_lights:
+        area_lights = tuple(merge_environments(area_lights))
         if tech.light_sampling or not optimize:
             area_lights = tuple(
                 lt.importance() if isinstance(lt, Environment) else lt for lt in area_lights
@@ -575,6 +615,16 @@ def _padded_hits(hits: SphereHits, n: int) -> SphereHits:
     )
 
 
+def _dev(a: np.ndarray) -> Array:
+    """A host array on the default device: ``jax.device_put`` copies without compiling anything,
+    where ``jnp.asarray`` compiles a small copy kernel per new shape (5-30 ms each, paid by
+    every fresh process on its first image)."""
+    a = np.asarray(a)
+    if a.dtype == np.float64:
+        a = a.astype(np.float32)
+    return jax.device_put(a)
+
+
 def _tiles(n: int, size: int):
     for start in range(0, n, size):
         yield start, min(n, start + size)
@@ -593,9 +643,9 @@ def _render_delta(material, lights, hits: SphereHits, tile_samples, stats) -> np
     groups = _delta_groups(lights) if isinstance(material, BRDFModel) else ()
     out = []
     for a, b in _tiles(n, size):
-        pos = jnp.asarray(_pad(hits.position[a:b], size))
-        frame = jnp.asarray(_pad(hits.frame[a:b], size))
-        wo = jnp.asarray(_pad(hits.wo[a:b], size))
+        pos = _dev(_pad(hits.position[a:b], size))
+        frame = _dev(_pad(hits.frame[a:b], size))
+        wo = _dev(_pad(hits.wo[a:b], size))
         if isinstance(material, BRDFModel):
             r = _delta_kernel_model(material, groups, pos, frame, wo)
         else:
@@ -614,7 +664,8 @@ def _render_area(
     material, lights, hits, spp, tech, seed, tile_samples, progress, stats, proposal=None
 ):
     n_pix = hits.count
-    dims = 2 + 2 * len(lights)
+    groups = _area_groups(lights)
+    dims = 2 + 2 * len(groups)
     sobol = _sobol_mod.sobol_ints(spp, dims)
     shift = _sobol_mod.shifts(np.random.default_rng([seed, 1]), n_pix, dims)
     s_batch = 4 * SAMPLE_BATCH if spp % (4 * SAMPLE_BATCH) == 0 else SAMPLE_BATCH
@@ -629,7 +680,6 @@ def _render_area(
     done = 0
     out = np.zeros((n_pix, max(1, _out_c(material, lights))), np.float64)
     rng = np.random.default_rng([seed, 2])
-    lights_t = tuple(lights)
     # Kernel calls are dispatched asynchronously; keeping a few in flight lets the XLA CPU
     # runtime execute tiles concurrently on several cores.
     pending: collections.deque = collections.deque()
@@ -644,14 +694,14 @@ def _render_area(
                 progress(done, total)
 
     for a, b in tiles:
-        pos = jnp.asarray(_pad(hits.position[a:b], p_tile))
-        frame = jnp.asarray(_pad(hits.frame[a:b], p_tile))
-        wo = jnp.asarray(_pad(hits.wo[a:b], p_tile))
-        sh = jnp.asarray(_pad(shift[a:b], p_tile))
+        pos = _dev(_pad(hits.position[a:b], p_tile))
+        frame = _dev(_pad(hits.frame[a:b], p_tile))
+        wo = _dev(_pad(hits.wo[a:b], p_tile))
+        sh = _dev(_pad(shift[a:b], p_tile))
         for k in range(n_batches):
-            sb = jnp.asarray(sob[k * s_batch : (k + 1) * s_batch])
-            wb = jnp.asarray(wts[k * s_batch : (k + 1) * s_batch])
-            r = _tile(material, lights_t, pos, frame, wo, sb, sh, wb, tech, rng, proposal)
+            sb = _dev(sob[k * s_batch : (k + 1) * s_batch])
+            wb = _dev(wts[k * s_batch : (k + 1) * s_batch])
+            r = _tile(material, groups, pos, frame, wo, sb, sh, wb, tech, rng, proposal)
             pending.append((a, b, r))
             drain(IN_FLIGHT)
             stats.calls += 1

@@ -23,6 +23,7 @@ Lights are JAX pytrees (their arrays are leaves), so new values do not recompile
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
 
@@ -321,7 +322,10 @@ class Environment(Light):
     """
 
     _LEAVES = ("image", "_dist")
-    _STATIC = ("name",)
+    #: Where the image came from ("studio", "uniform", "array" or the file name), for display.
+    #: Not part of the pytree: a kernel must not recompile because a file has another name
+    #: (a light rebuilt inside a trace shows this default).
+    name: str = "environment"
 
     def __init__(self, image: Any = "studio", scale: float = 1.0) -> None:
         name = "array"
@@ -465,6 +469,39 @@ def studio_environment(height: int = 128, width: int = 256) -> np.ndarray:
     return img.astype(np.float32)
 
 
+def merge_environments(lights: Sequence[Light]) -> list[Light]:
+    """The same lights with every set of environments of one image size replaced by one
+    environment whose image is their sum (grey images broadcast to the others' channels).
+
+    Lights add up and a distant light does not depend on the shading point, so the sum is the
+    same illumination; one importance map for the sum samples it at least as well as one map
+    per image, and the render kernel's shape does not depend on how many images there were.
+    The merged light takes the place of the first of its members.
+    """
+    by_size: dict[tuple[int, int], list[Environment]] = {}
+    for lt in lights:
+        if isinstance(lt, Environment):
+            by_size.setdefault(tuple(lt.image.shape[:2]), []).append(lt)
+    out: list[Light] = []
+    for lt in lights:
+        if not isinstance(lt, Environment):
+            out.append(lt)
+            continue
+        members = by_size[tuple(lt.image.shape[:2])]
+        if len(members) == 1:
+            out.append(lt)
+        elif lt is members[0]:
+            merged = object.__new__(Environment)
+            total = members[0].image
+            for m in members[1:]:
+                total = total + m.image
+            merged.image = total
+            merged.name = "+".join(m.name for m in members)
+            merged._dist = None
+            out.append(merged)
+    return out
+
+
 def light_list(lights: Any) -> list[Light]:
     """Validate the ``lights`` argument of the renderer: a Light or a sequence of them."""
     if isinstance(lights, Light):
@@ -492,5 +529,6 @@ __all__ = [
     "SphereLight",
     "direction_to_latlong",
     "latlong_to_direction",
+    "merge_environments",
     "studio_environment",
 ]
