@@ -38,6 +38,30 @@ def test_digital_shift_keeps_the_net_stratified_and_is_uniform():
     assert chi2 < 37.7
 
 
+def test_padded_pairs_are_each_the_shifted_net_in_a_random_order():
+    pts = sobol.sobol_ints(64, 2)
+    sh = sobol.shifts(np.random.default_rng(8), 3000, 6)
+    u = np.asarray(sobol.padded_unit(pts, sh))  # (3000, 64, 6)
+    assert u.shape == (3000, 64, 6) and u.min() >= 0.0 and u.max() < 1.0
+    for k in range(3):
+        pair = u[:50, :, 2 * k : 2 * k + 2]
+        cell = np.floor(pair[..., 0] * 8).astype(int) * 8 + np.floor(pair[..., 1] * 8)
+        assert all(np.unique(c).size == 64 for c in cell)
+    # undoing the shift of pair 1 gives the net's point i XOR r for sample i, with r from the
+    # shift's low bits: a per-pixel permutation (not the first pair's order)
+    top = np.uint32(0xFFFFFF00)
+    raw = (u[..., 2] * 2.0**24).astype(np.uint32) << np.uint32(8)
+    unshifted = raw ^ (sh[:, None, 2] & top)
+    r = sh[:, 2] & np.uint32(63)
+    idx = np.arange(64, dtype=np.uint32)[None, :] ^ r[:, None]
+    np.testing.assert_array_equal(unshifted, pts[idx, 0] & top)
+    assert np.unique(r).size == 64
+    # every sample of a later pair is uniform over pixels: chi-square, 16 bins, 15 degrees of
+    # freedom, significance 1e-3 (critical 37.7)
+    counts = np.bincount(np.floor(u[:, 9, 5] * 16).astype(int), minlength=16)
+    assert ((counts - 187.5) ** 2 / 187.5).sum() < 37.7
+
+
 def test_render_path_does_not_import_scipy_stats_or_matplotlib():
     code = (
         "import sys, gonio.render.integrator, gonio.render.cli, gonio.render.output;"

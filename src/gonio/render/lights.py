@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf.lookup import atan2
 from gonio.brdf.sampling import Distribution2D
 from gonio.errors import ParameterError
 
@@ -300,9 +301,16 @@ def latlong_to_direction(xy: Array) -> Array:
 
 
 def direction_to_latlong(w: Array) -> Array:
-    """Inverse of :func:`latlong_to_direction` -> ``(x, y)`` in ``[0, 1]^2``."""
-    y = jnp.arccos(jnp.clip(w[..., 1], -1.0, 1.0)) / jnp.pi
-    x = jnp.arctan2(w[..., 0], -w[..., 2]) / (2.0 * jnp.pi) + 0.5
+    """Inverse of :func:`latlong_to_direction` -> ``(x, y)`` in ``[0, 1]^2``.
+
+    Both angles go through :func:`gonio.brdf.lookup.atan2` (a float32 polynomial within
+    2.2e-7 relative, exact ``arctan2`` in float64): XLA's float32 ``arccos`` and ``arctan2``
+    made this function 12x slower (4.95 against 0.41 ms for 65,536 directions, same run) and
+    were most of the cost of evaluating the environment at BRDF-sampled directions.
+    """
+    cy = jnp.clip(w[..., 1], -1.0, 1.0)
+    y = atan2(jnp.sqrt(jnp.maximum(0.0, (1.0 - cy) * (1.0 + cy))), cy) / jnp.pi
+    x = atan2(w[..., 0], -w[..., 2]) / (2.0 * jnp.pi) + 0.5
     return jnp.stack([x, y], -1)
 
 

@@ -10,8 +10,9 @@ integers. Points come in SciPy's order (Gray code, Antonov-Saleev): the first ``
 a (t, m, s)-net, and the first two dimensions a (0, m, 2)-net.
 
 Randomization is a *digital shift*: every pixel XORs the integers with its own uniform random
-32-bit words. Each shifted point is uniform on [0, 1)^d (so every pixel is an unbiased estimate,
-independent of the others), and unlike a Cranley-Patterson rotation (adding a shift modulo 1) a
+32-bit words (:func:`padded_unit` also reuses the first two dimensions for every pair). Each
+shifted point is uniform on [0, 1)^d (so every pixel is an unbiased estimate, independent of
+the others), and unlike a Cranley-Patterson rotation (adding a shift modulo 1) a
 digital shift keeps the net's stratification in every elementary interval.
 """
 
@@ -89,4 +90,29 @@ def to_unit(points: jnp.ndarray, shift: jnp.ndarray) -> jnp.ndarray:
     return (x >> 8).astype(jnp.float32) * jnp.float32(2.0**-24)
 
 
-__all__ = ["BITS", "direction_numbers", "shifts", "sobol_ints", "to_unit"]
+def padded_unit(points: jnp.ndarray, shift: jnp.ndarray) -> jnp.ndarray:
+    """``d = shift.shape[1]`` uniforms per sample from a 2-D net, as float32 (P, S, d).
+
+    ``points`` (S, 2) uint32 are the first two Sobol' dimensions in aligned blocks of a power
+    of 2 up to 256 points (each block a (0, m, 2)-net); ``shift`` (P, d) uint32 one digital shift
+    per pixel and dimension. Dimensions 0-1 are the points digitally shifted (:func:`to_unit`);
+    every further pair is the same net in an order permuted per pixel and pair (sample ``i``
+    takes point ``i XOR r``, ``r`` from the shift's low 8 bits, which the conversion drops),
+    with its own shift: each pair gets the best 2-D stratification Sobol' has, while the pairing
+    between pairs is random ("padding", Kollig and Keller 2002). Same-run A/B against Sobol'
+    dimensions 2-3 for the second pair: relative MSE 8-16 % lower (see
+    :mod:`gonio.render.integrator`).
+    """
+    s, d = points.shape[0], shift.shape[1]
+    n_pix = shift.shape[0]
+    cols = [jnp.broadcast_to(points[None], (n_pix, s, 2))]
+    i = jnp.arange(s, dtype=jnp.uint32)
+    mask = jnp.uint32(min(s, 256) - 1) if s & (s - 1) == 0 else jnp.uint32(0)
+    for k in range(1, (d + 1) // 2):
+        r = shift[:, 2 * k] & mask
+        cols.append(jnp.take(points, (i[None, :] ^ r[:, None]).astype(jnp.int32), axis=0))
+    x = jnp.concatenate(cols, -1)[..., :d] ^ shift[:, None, :]
+    return (x >> 8).astype(jnp.float32) * jnp.float32(2.0**-24)
+
+
+__all__ = ["BITS", "direction_numbers", "padded_unit", "shifts", "sobol_ints", "to_unit"]
