@@ -6,8 +6,11 @@ lighting is therefore the *complete* solution, not an approximation. Per pixel i
 
     L_o(wo) = sum over lights of  int f(wi, wo) L_i(wi) cos(theta_i) dwi
 
-with, per sample, one light sample per (non-delta) light and one BRDF sample shared by all
-lights, combined by the power heuristic (beta = 2). Delta lights (directional, point) are
+with, per sample, one light sample per group of (non-delta) lights and one BRDF sample shared
+by all lights, combined by the power heuristic (beta = 2). A group is one environment
+(environments of one image size are first merged into one, their images summed) or all lights
+of one other kind (sphere lights), of which each sample picks one uniformly (its density
+divided by the group's count, in the MIS weights too). Delta lights (directional, point) are
 evaluated exactly, once per pixel: no samples, no BRDF sampling.
 
 Sampling strategies (``sampler``):
@@ -43,9 +46,11 @@ Work is split into tiles of pixels x samples of bounded size (``tile_samples``),
 three jitted float32 stages: light sampling, the material (``f`` and ``pdf`` at the light
 samples, BRDF samples), shading. Tile shapes do not follow the request: ``spp`` is padded to a
 multiple of :data:`SAMPLE_BATCH` and pixels to one of a few tile sizes (padding has zero
-weight), and delta lights of one kind are looped over with a traced count, so that a new
-``spp``, image size or number of delta lights reuses the compiled kernels (with the persistent
-cache of :mod:`gonio.compile_cache`, across processes too). Analytic models are traced into
+weight), and delta and area lights of one kind are stacked and looped over (or picked from)
+with a traced count, so that a new ``spp``, image size or number of delta, area or environment
+lights reuses the compiled kernels (with the persistent cache of :mod:`gonio.compile_cache`,
+across processes too). Each tile's sums stay on the device until the end of the render (one
+transfer back). Analytic models are traced into
 the middle stage; tabulated BRDFs are called there directly, because their samplers keep
 host-side state (per-outgoing-direction CDFs built lazily for the buckets of outgoing directions
 actually seen, rejection loops).
@@ -353,19 +358,21 @@ def _model_stage(model, proposal, light_wi, wo, sobol, shift, *, kind, mis, ligh
 
 
 @functools.partial(jax.jit, static_argnames=("mis",))
-def _shade_stage(lights, ls, fv, pb, position, frame, brdf, weights, *, mis):
+def _shade_stage(lights, ls, fv, pb, position, frame, brdf, weights, acc, *, mis):
+    """``acc`` (P, C) plus this batch's radiance sums: a tile's sums stay on the device."""
     total = 0.0
     if ls is not None:
         pbs = pb if pb is not None else [None] * len(ls)
         total = total + _shade_light(lights, ls, fv, pbs, weights, mis)
     if brdf is not None:
         total = total + _shade_brdf(lights, position, frame, brdf, mis, weights)
-    return jnp.sum(total, axis=1)
+    return acc + jnp.broadcast_to(jnp.sum(total, axis=1), acc.shape)
 
 
-def _tile(material, lights, pos, frame, wo, sob, shift, weights, tech: _Technique, rng,
+def _tile(material, lights, pos, frame, wo, sob, shift, weights, acc, tech: _Technique, rng,
           proposal=None):  # fmt: skip
-    """Radiance sums (P, C) of one tile: P pixels x S samples (``weights`` masks padding)."""
+    """``acc`` plus the radiance sums (P, C) of one tile: P pixels x S samples (``weights``
+    masks padding)."""
     ls = _light_stage_jit(lights, pos, frame, sob, shift) if tech.light_sampling else None
     light_wi = [wi for wi, _, _ in ls] if ls is not None else []
     # Tables are traced too (their f is JAX code) unless one of their own samplers is used.
@@ -381,7 +388,7 @@ def _tile(material, lights, pos, frame, wo, sob, shift, weights, tech: _Techniqu
         fv = [f(wi, wo_s) for wi in light_wi] if ls is not None else None
         pb = [pdf(wi, wo_s) for wi in light_wi] if ls is not None and tech.mis else None
         brdf = sample(wo_s, u[..., :2]) if tech.kind != "none" else None
-    return _shade_stage(lights, ls, fv, pb, pos, frame, brdf, weights, mis=tech.mis)
+    return _shade_stage(lights, ls, fv, pb, pos, frame, brdf, weights, acc, mis=tech.mis)
 
 
 @jax.jit
@@ -680,17 +687,25 @@ def _render_area(
     tiles = list(_tiles(n_pix, p_tile))
     total = len(tiles) * n_batches
     done = 0
-    out = np.zeros((n_pix, max(1, _out_c(material, lights))), np.float64)
+    c_out = max(1, _out_c(material, lights))
     rng = np.random.default_rng([seed, 2])
+    # Sample points and weights go to the device once; each tile's sums stay there (the shade
+    # stage adds each batch into them) and come back in one transfer at the end, so that no
+    # kernel call waits on a copy to the host.
+    batches = [
+        (_dev(sob[k * s_batch : (k + 1) * s_batch]), _dev(wts[k * s_batch : (k + 1) * s_batch]))
+        for k in range(n_batches)
+    ]
+    sums = []
     # Kernel calls are dispatched asynchronously; keeping a few in flight lets the XLA CPU
-    # runtime execute tiles concurrently on several cores.
+    # runtime execute tiles concurrently on several cores, and waiting (without a copy) for the
+    # call dispatched IN_FLIGHT calls earlier bounds the memory held by queued calls.
     pending: collections.deque = collections.deque()
 
     def drain(limit: int) -> None:
         nonlocal done
         while len(pending) > limit:
-            a0, b0, res = pending.popleft()
-            out[a0:b0] += np.asarray(res, np.float64)[: b0 - a0]
+            jax.block_until_ready(pending.popleft())
             done += 1
             if progress is not None:
                 progress(done, total)
@@ -700,15 +715,18 @@ def _render_area(
         frame = _dev(_pad(hits.frame[a:b], p_tile))
         wo = _dev(_pad(hits.wo[a:b], p_tile))
         sh = _dev(_pad(shift[a:b], p_tile))
-        for k in range(n_batches):
-            sb = _dev(sob[k * s_batch : (k + 1) * s_batch])
-            wb = _dev(wts[k * s_batch : (k + 1) * s_batch])
-            r = _tile(material, groups, pos, frame, wo, sb, sh, wb, tech, rng, proposal)
-            pending.append((a, b, r))
+        acc = _dev(np.zeros((p_tile, c_out), np.float32))
+        for k, (sb, wb) in enumerate(batches):
+            acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, rng, proposal)
+            pending.append(acc)
             drain(IN_FLIGHT)
             stats.calls += 1
             stats.samples += (b - a) * int(np.sum(wts[k * s_batch : (k + 1) * s_batch]))
+        sums.append(acc)
     drain(0)
+    out = np.zeros((n_pix, c_out), np.float64)
+    for (a, b), tile_sum in zip(tiles, jax.device_get(sums), strict=True):
+        out[a:b] = tile_sum[: b - a]
     return out / spp
 
 

@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf._trig import cos_sin_turns
 from gonio.brdf.lookup import atan2
 from gonio.brdf.sampling import Distribution2D
 from gonio.errors import ParameterError
@@ -294,10 +295,12 @@ def latlong_to_direction(xy: Array) -> Array:
     ``x = 0.5`` faces the way the camera looks (-z, the backdrop behind the sphere); ``x = 0.75``
     is +x (image right) and ``x = 0`` / ``1`` is +z (behind the camera).
     """
-    theta = jnp.pi * xy[..., 1]
-    phi = 2.0 * jnp.pi * (xy[..., 0] - 0.5)
-    st = jnp.sin(theta)
-    return jnp.stack([st * jnp.sin(phi), jnp.cos(theta), -st * jnp.cos(phi)], -1)
+    xy = jnp.asarray(xy)
+    # theta = pi y and phi = 2 pi (x - 1/2) in turns, through the exact-reduction polynomial
+    # (XLA's float32 sin/cos cost ~50x an exp; gonio.brdf._trig)
+    ct, st = cos_sin_turns(0.5 * xy[..., 1])
+    cp, sp = cos_sin_turns(xy[..., 0] - 0.5)
+    return jnp.stack([st * sp, ct, -st * cp], -1)
 
 
 def direction_to_latlong(w: Array) -> Array:
@@ -392,7 +395,7 @@ class Environment(Light):
         # u[..., 1] picks the row (y), u[..., 0] the column (x)
         xy, pdf_uv, _ = self._dist.sample(jnp.asarray(u)[..., ::-1])
         wi = latlong_to_direction(xy)
-        sin_t = jnp.sin(jnp.pi * xy[..., 1])
+        sin_t = cos_sin_turns(0.5 * xy[..., 1])[1]  # the same as inside latlong_to_direction
         pdf = jnp.where(sin_t > 0, pdf_uv / (2.0 * jnp.pi**2 * jnp.maximum(sin_t, 1e-30)), 0.0)
         value = jnp.where((pdf > 0)[..., None], self._texel(xy), 0.0)
         return LightSample(wi, value, pdf)
