@@ -665,8 +665,13 @@ def _render_delta(material, lights, hits: SphereHits, tile_samples, stats) -> np
                 f = np.asarray(material.f(wi, np.asarray(wo)), np.float32)
                 r = r + f * np.asarray(ls.value) * np.maximum(wi[..., 2], 0.0)[..., None]
         stats.calls += 1
-        out.append(np.asarray(r, np.float64)[: b - a])
-    return np.concatenate(out, 0)
+        out.append(r)
+    # one transfer for all tiles (analytic models: every tile stays on the device until here)
+    res = jax.device_get(out)
+    spans = list(_tiles(n, size))
+    return np.concatenate(
+        [np.asarray(x, np.float64)[: b - a] for x, (a, b) in zip(res, spans, strict=True)], 0
+    )
 
 
 def _render_area(
