@@ -12,6 +12,8 @@ kernel compilation or cache load, rendering and writing.
 - gonio cold: an empty ``XDG_CACHE_HOME`` (no compiled kernels on disk),
 - gonio warm: the cache filled by an earlier run (the second process a user starts),
 - gonio off: ``--no-compile-cache``,
+- import jax alone: ``python -c "import jax, jax.numpy"``, the floor under every gonio figure
+  (its ratio is to Mitsuba cold),
 - Mitsuba cold: ``HOME`` pointed at an empty folder (Dr.Jit keeps its kernel cache in
   ``~/.drjit``), Mitsuba warm: that folder kept from an earlier run.
 
@@ -130,6 +132,11 @@ def main() -> None:
             "gonio cache off": lambda: _run(
                 [*gonio_cmd, "--no-compile-cache"], {**base, "XDG_CACHE_HOME": str(warm_cache)}
             ),
+            # The floor under every gonio figure: the interpreter and JAX's own import (with
+            # jax.numpy), nothing of gonio's, in a process of its own.
+            "import jax alone": lambda: _run(
+                [sys.executable, "-c", "import jax, jax.numpy"], {**base}
+            ),
             "Mitsuba cold": mitsuba_cold,
             "Mitsuba warm": lambda: _run(mi_cmd, {**base, "HOME": str(warm_home)}),
         }
@@ -163,7 +170,7 @@ def main() -> None:
 
     fig, ax = plt.subplots(figsize=(6.5, 3))
     names = [r[0] for r in rows]
-    ax.barh(names, [r[1] for r in rows], xerr=None, color=["C0"] * 3 + ["C1"] * 2)
+    ax.barh(names, [r[1] for r in rows], xerr=None, color=["C0"] * 3 + ["C2"] + ["C1"] * 2)
     for i, ts in enumerate(times.values()):
         ax.plot(ts, [i] * len(ts), "k.", ms=4)
     ax.invert_yaxis()

@@ -12,9 +12,10 @@ that the same script gives the device figures as soon as such a machine is avail
   sample per pixel and light for delta lights).
 
 Known host round trips that bound the render figures on a GPU (not on a CPU): the renderer
-uploads every tile's geometry from NumPy and copies every tile's result back to NumPy to
-accumulate it (``integrator._render_area``, a few tiles in flight); tabulated BRDFs sampled by
-their own methods run outside ``jit`` and build per-bucket structures on the host. Analytic
+uploads every tile's geometry from NumPy (its sample points once per render; tile sums stay on
+the device and come back in one transfer at the end, ``integrator._render_area``, which waits
+without a copy on the call dispatched a few calls earlier); tabulated BRDFs sampled by their own
+methods run outside ``jit`` and build per-bucket structures on the host. Analytic
 models, as here, are traced into the render kernels.
 
 Writes benchmarks/results/gpu_<platform>.csv and .png and prints a Markdown table.

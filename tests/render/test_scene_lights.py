@@ -149,3 +149,18 @@ def test_environment_from_exr_file(tmp_path):
     np.testing.assert_allclose(np.asarray(env.image), 2 * img, rtol=1e-6)
     with pytest.raises(ParameterError):
         Environment(tmp_path / "missing.exr")
+
+
+def test_latlong_inverse_in_float32_matches_float64_trigonometry():
+    # direction_to_latlong uses a polynomial atan2 in float32; it must agree with arccos and
+    # arctan2 evaluated in float64 on the same float32 directions to a few float32 ulps
+    rng = np.random.default_rng(11)
+    w = rng.normal(size=(20000, 3))
+    w = (w / np.linalg.norm(w, axis=-1, keepdims=True)).astype(np.float32)
+    got = np.asarray(direction_to_latlong(w))
+    assert got.dtype == np.float32
+    w64 = w.astype(np.float64)
+    ref_x = np.arctan2(w64[:, 0], -w64[:, 2]) / (2 * np.pi) + 0.5
+    ref_y = np.arccos(np.clip(w64[:, 1], -1, 1)) / np.pi
+    np.testing.assert_allclose(got[:, 0], ref_x, atol=3e-7)
+    np.testing.assert_allclose(got[:, 1], ref_y, atol=3e-7)
