@@ -189,3 +189,29 @@ def test_chi2_detects_a_wrong_jacobian():
     m = Wrong(0.3, "beckmann", "smith", fresnel=models.Schlick(0.5))
     with pytest.raises(AssertionError, match=r"differs|p =|integrates"):
         mc.check_chi2(mc.Jitted(m), theta_o_deg=(60,), n_tests=1, n_samples=200_000)
+
+
+@pytest.mark.parametrize("dist", ["beckmann", "ggx"])
+def test_known_zero_diffuse_skips_the_mixture_exactly(dist):
+    """A concrete rho_d = 0 samples the specular lobe alone; a traced rho_d = 0 goes through the
+    two-lobe mixture. Both must give the same pdf and the same samples (F > 0 everywhere)."""
+    import jax
+
+    rng = np.random.default_rng(5)
+    wo = frames.spherical_to_direction(rng.uniform(0, 1.4, 500), rng.uniform(0, 6.2, 500))
+    wi = frames.spherical_to_direction(rng.uniform(0, 1.4, 500), rng.uniform(0, 6.2, 500))
+    u = rng.random((500, 2))
+    m = models.TorranceSparrow(0.3, dist, "smith", models.Conductor(**GOLD))
+    assert m._diffuse_free()
+
+    def traced(rho, fn, *args):
+        return fn(m.replace(rho_d=rho), *args)
+
+    rho = np.zeros(3)
+    p_mix = jax.jit(traced, static_argnums=1)(rho, models.TorranceSparrow.pdf, wi, wo)
+    s_mix = jax.jit(traced, static_argnums=1)(rho, models.TorranceSparrow.sample, wo, u)
+    np.testing.assert_allclose(m.pdf(wi, wo), p_mix, rtol=1e-12)
+    s = m.sample(wo, u)
+    np.testing.assert_allclose(s.wi, s_mix.wi, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(s.pdf, s_mix.pdf, rtol=1e-12)
+    np.testing.assert_allclose(s.weight, s_mix.weight, rtol=1e-12)
