@@ -7,10 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf import warp
-from gonio.brdf.frames import dot, normalize, reflect, safe_div
+from gonio.brdf.frames import dot, normalize, reflect, safe_div, upper
 from gonio.brdf.models import microfacet as mf
 from gonio.brdf.models._base import (
     BRDFModel,
+    BRDFSample,
     Param,
     _is_concrete,
     channel_mean,
@@ -156,6 +157,43 @@ class TorranceSparrow(BRDFModel):
         else:
             h = mf.sample_ndf(u, self.alpha, self.distribution)
         return reflect(wo, h)
+
+    def _finish(self, wi: Array, wo: Array, ok_o: Array) -> BRDFSample:
+        """Sample weight ``f cos_i / pdf`` with ``D`` cancelled (specular lobe alone, Smith).
+
+        With ``den = cos_i cos_o + cos_o mu_i + cos_i mu_o`` (``G2 / (4 cos_i cos_o) =
+        1 / (4 den)``): visible normals give ``F cos_i (cos_o + mu_o) / den`` (``F G2 / G1(wo)``,
+        as Mitsuba's ``roughconductor`` writes it), distribution sampling gives
+        ``F cos_i (wo.h) / (n.h den)``. The same values as
+        the generic ``f cos_i / pdf`` up to rounding, without evaluating ``D`` a second time:
+        same-run A/B of ``sample`` at 1e6 float32 lanes, load average 30: Beckmann conductor
+        3.4 -> 5.0 M/s, GGX visible 3.7 -> 9.3 M/s (19 -> 17 and 13 -> 11 loops).
+        """
+        if not (self._diffuse_free() and self.shadowing == "smith"):
+            return super()._finish(wi, wo, ok_o)
+        a, dist = self.alpha, self.distribution
+        ok = ok_o & upper(wi)
+        wi_s = jnp.where(ok[..., None], wi, jnp.array([0.0, 0.0, 1.0], wi.dtype))
+        h = normalize(wi_s + wo)
+        d = mf.ndf(h, a, dist)
+        mi, mo = mf.smith_mu(wi_s, a, dist), mf.smith_mu(wo, a, dist)
+        ci, co = wi_s[..., 2], wo[..., 2]
+        cif, cof = jnp.maximum(ci, mf._COS_FLOOR), jnp.maximum(co, mf._COS_FLOOR)
+        den = cif * cof + cof * mi + cif * mo
+        if self.sampling == "visible":
+            pdf = safe_div(d, 4.0 * (co + mo))
+            g = safe_div(ci * (co + mo), den)
+        else:
+            oh = jnp.maximum(dot(wo, h), 0.0)
+            nh = jnp.maximum(h[..., 2], 0.0)
+            pdf = safe_div(d * nh, 4.0 * oh)
+            g = safe_div(ci * oh, nh * den)
+        ok = ok & (pdf > 0)
+        pdf = jnp.where(ok, pdf, 0.0)
+        # Stored once before the channels' Fresnel loop (as in specular()).
+        packed = jax.lax.optimization_barrier(jnp.stack([jnp.where(ok, g, 0.0), dot(wi_s, h)], -1))
+        weight = jnp.where(ok[..., None], packed[..., :1] * self.fresnel.eval(packed[..., 1]), 0.0)
+        return BRDFSample(wi, pdf.astype(wo.dtype), weight.astype(wo.dtype), jnp.zeros_like(ok))
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
         if self._diffuse_free():
