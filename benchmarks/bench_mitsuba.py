@@ -21,6 +21,11 @@ rounds (ABBA); a figure is the median of ``--repeats`` calls after a warm-up (co
 Dr.Jit's kernel cache excluded). The ratio is gonio's throughput over Mitsuba's in the same
 round; the table gives the median ratio over rounds (>1: gonio faster).
 
+Both sides use the machine's cores: Dr.Jit's thread pool (``drjit.thread_count()``, in the
+CSV) and XLA:CPU, which splits every loop over the batch into one task per core (its
+``outer_dimension_partitions``); inputs are on the device before timing, and each side waits for
+its result (``block_until_ready`` / ``drjit.sync_thread``) inside the timed call.
+
 Writes benchmarks/results/mitsuba_kernels.csv and mitsuba_kernels.png and prints a Markdown
 table. Run: PYTHONPATH=src python benchmarks/bench_mitsuba.py [--rounds K] [--quick]
 """
@@ -176,6 +181,7 @@ def main() -> None:
             "mitsuba_M_per_s": f"{n / statistics.median(d['mitsuba']) / 1e6:.3g}",
             "ratio_gonio_over_mitsuba": f"{ratio:.3f}",
             "variant": args.variant, "rounds": rounds, "load_avg_1min": f"{load:.1f}",
+            "drjit_threads": dr.thread_count(), "cpus": os.cpu_count(),
         })  # fmt: skip
     RESULTS.mkdir(exist_ok=True)
     with open(RESULTS / "mitsuba_kernels.csv", "w", newline="") as fh:
@@ -200,8 +206,8 @@ def main() -> None:
     fig.tight_layout()
     fig.savefig(RESULTS / "mitsuba_kernels.png", dpi=120)
 
-    print(f"\nbatch {n:.0e}, Mitsuba {args.variant}, {rounds} rounds x {repeats} calls, "
-          f"load average {load:.1f}\n")  # fmt: skip
+    print(f"\nbatch {n:.0e}, Mitsuba {args.variant} ({dr.thread_count()} threads), {rounds} rounds "
+          f"x {repeats} calls, {os.cpu_count()} CPUs, load average {load:.1f}\n")  # fmt: skip
     print("| gonio model / Mitsuba BSDF | op | gonio M/s | Mitsuba M/s | gonio / Mitsuba |")
     print("|---|---|---:|---:|---:|")
     for r in rows:

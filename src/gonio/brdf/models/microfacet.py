@@ -46,6 +46,7 @@ which would lose everything below float32's epsilon.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jax.scipy.special import erfc
 
@@ -248,28 +249,40 @@ def sample_visible_ggx(wo: Array, u: Array, alpha: Array) -> Array:
     (see :func:`visible_pdf`). ``wo`` must be above the horizon.
     """
     alpha = jnp.asarray(alpha).astype(wo.dtype)
+    # Written per component, and the unnormalized normal stored (optimization_barrier) before
+    # it is normalized and reflected about: XLA:CPU otherwise splits the (..., 3)-shaped version
+    # into 12 loops and recomputes the cheap part of the sampler in several of them. Same
+    # values up to rounding; same-run A/B of reflect(wo, h) at 1e6 float32 lanes, load average
+    # 31: 5.1 -> 16.8 M/s (3 loops). Per component without the barrier: 2.3 M/s.
     # Stretch to the configuration where the roughness is 1 (hemisphere of visible normals).
-    v = normalize(jnp.stack([alpha * wo[..., 0], alpha * wo[..., 1], wo[..., 2]], -1))
-    lensq = v[..., 0] ** 2 + v[..., 1] ** 2
+    vx, vy, vz = _normalized(alpha * wo[..., 0], alpha * wo[..., 1], wo[..., 2])
+    lensq = vx * vx + vy * vy
     has = lensq > 0
     inv = jnp.where(has, 1.0 / jnp.sqrt(jnp.where(has, lensq, 1.0)), 0.0)
-    t1 = jnp.stack(
-        [jnp.where(has, -v[..., 1] * inv, 1.0), jnp.where(has, v[..., 0] * inv, 0.0),
-         jnp.zeros_like(lensq)], -1,
-    )  # fmt: skip
-    t2 = jnp.cross(v, t1)
+    t1x = jnp.where(has, -vy * inv, 1.0)
+    t1y = jnp.where(has, vx * inv, 0.0)
+    t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y - vy * t1x  # v x t1 (t1 has no z component)
     r = jnp.sqrt(u[..., 0])
     cp, sp = cos_sin_turns(u[..., 1])
     p1 = r * cp
     p2 = r * sp
-    s = 0.5 * (1.0 + v[..., 2])
+    s = 0.5 * (1.0 + vz)
     p2 = (1.0 - s) * safe_sqrt(1.0 - p1 * p1) + s * p2
     pz = safe_sqrt(1.0 - p1 * p1 - p2 * p2)
-    n = p1[..., None] * t1 + p2[..., None] * t2 + pz[..., None] * v
+    nx = p1 * t1x + p2 * t2x + pz * vx
+    ny = p1 * t1y + p2 * t2y + pz * vy
+    nz = p2 * t2z + pz * vz
     # Unstretch.
-    return normalize(
-        jnp.stack([alpha * n[..., 0], alpha * n[..., 1], jnp.maximum(n[..., 2], 0.0)], -1)
-    )
+    h = jnp.stack([alpha * nx, alpha * ny, jnp.maximum(nz, 0.0)], -1)
+    return normalize(jax.lax.optimization_barrier(h))
+
+
+def _normalized(x: Array, y: Array, z: Array) -> tuple[Array, Array, Array]:
+    """The components of :func:`~gonio.brdf.frames.normalize` of ``(x, y, z)``."""
+    n2 = x * x + y * y + z * z
+    ok = n2 > 0
+    inv = jnp.where(ok, 1.0 / jnp.sqrt(jnp.where(ok, n2, 1.0)), 0.0)
+    return jnp.where(ok, x * inv, 0.0), jnp.where(ok, y * inv, 0.0), jnp.where(ok, z * inv, 1.0)
 
 
 def visible_pdf(wo: Array, h: Array, alpha: Array, dist: str) -> Array:
