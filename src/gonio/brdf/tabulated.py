@@ -412,10 +412,9 @@ class TabulatedBRDF:
         rng : rejection only: where the extra random numbers come from (a NumPy Generator, an
             int seed or a JAX key); default: derived deterministically from ``u``.
         proposal : rejection only: ``"majorant"`` (default: a piecewise-constant bound of
-            ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table),
-            ``"cosine"``, or an analytic model whose ``sample``/``pdf`` is used (mixed with 10 %
-            cosine sampling); see :mod:`gonio.brdf.table_rejection`. The sampled density is the
-            same for all three.
+            ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table) or
+            ``"cosine"``; see :mod:`gonio.brdf.table_rejection`. The sampled density is the
+            same for both.
 
         Returns
         -------
