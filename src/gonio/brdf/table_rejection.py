@@ -1,29 +1,21 @@
 """Exact rejection sampling of tabulated BRDFs: the reference density ``g cos / rho(wo)``.
 
-The sampled density is proportional to ``g(wi, wo) cos(theta_i)`` with ``g = max(mean over
-channels of f, 0)``, exactly (not piecewise constant like inversion and alias): it is the
-reference the faster samplers are checked against, not a fast path. Two proposals ``q``:
-
-``"majorant"`` (default)
-    Per outgoing bucket (:mod:`gonio.brdf.table_buckets`), a bound ``m_c`` of ``g cos`` over
-    each cell ``c`` of an incident grid twice as fine as the inversion's and every outgoing
-    direction in the bucket. Cells are drawn in proportion to ``m_c Omega_c`` from an alias
-    table, the direction is uniform in solid angle in the cell, and it is accepted with
-    probability ``g cos / bound_c``, where ``bound_c = M q_c >= m_c`` and ``q_c`` is the density
-    the alias table realizes. Acceptance is ``rho / sum_c m_c Omega_c``.
-``"cosine"``
-    A cosine-weighted hemisphere, accepted with probability ``g cos / (M q)``, ``M`` a bound of
-    ``pi g`` over the bucket.
+The sampled density is exactly ``g(wi, wo) cos(theta_i) / rho(wo)``, ``g = max(mean over
+channels of f, 0)`` (not piecewise constant like inversion and alias): the reference the faster
+samplers are checked against, not a fast path. Proposals: ``"majorant"`` (default), per outgoing
+bucket (:mod:`gonio.brdf.table_buckets`) a bound ``m_c`` of ``g cos`` over each cell ``c`` of an
+incident grid twice as fine as the inversion's and every ``wo`` in the bucket, cells drawn in
+proportion to ``m_c Omega_c`` (acceptance ``rho / sum_c m_c Omega_c``); or ``"cosine"``, the
+cosine-weighted hemisphere with a bound of ``pi g`` over the bucket.
 
 The bounds are rigorous: interval ranges of the Rusinkiewicz angles theta_h and theta_d over the
 cell and the bucket (:func:`half_diff_ranges`), then the largest valid table node those ranges
-use (multilinear or nearest interpolation with renormalized weights never exceeds it), times the
-cell's largest ``cos theta_i``; small relative margins cover float32 rounding. ``rho(wo) = int g
-cos dwi`` is a 128 x 256 midpoint quadrature over the half vector (sqrt-warped theta_h, where the
-tables put their nodes) at 9 theta_o nodes per bucket (5 x 5 (theta_o, phi_o) nodes for
-anisotropic tables), interpolated linearly in between. Proposals and acceptance tests run in
-float32 in one traced loop (:func:`gonio.brdf.sampling.rejection_sample_traced`), eagerly or
-under ``jit``.
+use (interpolation with renormalized weights never exceeds it), times the cell's largest
+``cos theta_i``; small margins cover float32 rounding. ``rho(wo) = int g cos dwi`` is a 128 x 256
+midpoint quadrature over the half vector (sqrt-warped theta_h, as the tables' nodes) at 9
+theta_o nodes per bucket (5 x 5 (theta_o, phi_o) nodes for anisotropic tables), interpolated
+linearly in between. Proposals and acceptance tests run in float32 in one traced loop
+(:func:`gonio.brdf.sampling.rejection_sample_traced`), eagerly or under ``jit``.
 """
 
 from __future__ import annotations
@@ -91,9 +83,6 @@ class TableRejection:
         self._node_max: np.ndarray | None = None
 
     # -- bounds ------------------------------------------------------------------------------
-    def _g(self, wi: Any, wo: Any) -> np.ndarray:
-        return np.maximum(np.asarray(self.table.f(wi, wo)).mean(axis=-1), 0.0)
-
     def _cell_bounds(self, b: int, nt: int, npp: int) -> tuple[np.ndarray, np.ndarray]:
         """``(bound of g cos theta_i, bound of g)``, ``(nt, npp)`` each, over every cell of an
         ``nt x npp`` incident grid (uniform in theta_i, and in phi relative to phi_o for
@@ -152,7 +141,7 @@ class TableRejection:
                 wo = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
                 wh = h @ wo
                 wi = 2 * wh[:, None] * h - wo
-                g = self._g(wi, np.broadcast_to(wo, wi.shape))
+                g = np.asarray(_g_of(self.table, wi, np.broadcast_to(wo, wi.shape)))
                 ok = (wh > 0) & (wi[:, 2] > 0)
                 rho.append(np.sum(np.where(ok, g * wi[:, 2] * 4 * wh * jac, 0.0)))
         return np.reshape(rho, (kt, kp))
@@ -170,7 +159,7 @@ class TableRejection:
 
     # -- entry points ------------------------------------------------------------------------
     def sample(self, wo: Array, u: Array, rng: Any, proposal: Any, dt: Any):
-        """``(wi, pdf, None)`` for ``wo (..., 3)``, ``u (..., 2)`` (``u`` below 1), in ``dt``."""
+        """``(wi, pdf)`` for ``wo (..., 3)``, ``u (..., 2)`` (``u`` below 1), in ``dt``."""
         shape = wo.shape[:-1]
         wo_f, u_f = wo.reshape(-1, 3), u.reshape(-1, 2)
         store = self.stores[_checked(proposal)]
@@ -188,7 +177,7 @@ class TableRejection:
             self.stats["rejection_samples"] = float(wo_f.shape[0])
         wi = wi.astype(dt)
         pdf = jnp.where(ok, self.pdf(wi, wo_f, proposal, dt), 0.0)
-        return wi.reshape(*shape, 3), pdf.reshape(shape), None
+        return wi.reshape(*shape, 3), pdf.reshape(shape)
 
     def pdf(self, wi: Array, wo: Array, proposal: Any, dt: Any) -> Array:
         store = self.stores[_checked(proposal)]
@@ -326,7 +315,7 @@ def rect_max(a: np.ndarray, r0: Any, r1: Any, c0: Any, c1: Any) -> np.ndarray:
         m[:, j, j + 1 :] = np.maximum.accumulate(a[:, j:], axis=1)
     r0, r1, c0, c1 = np.broadcast_arrays(*(np.asarray(x, np.int64) for x in (r0, r1, c0, c1)))
     out = np.full(r0.shape, -np.inf)
-    for i in range(int(r0.min(initial=0)), int(r1.max(initial=0))):
+    for i in range(int(r0.min(initial=nr)), int(r1.max(initial=0))):
         out = np.maximum(out, np.where((r0 <= i) & (i < r1), m[i, c0, c1], -np.inf))
     return out
 

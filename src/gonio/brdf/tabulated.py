@@ -98,8 +98,7 @@ def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
 
 
 def _sampled_values(spec: LookupSpec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
-    """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample` when
-    the sampler has not looked it up."""
+    """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample`."""
     return wi, eval_kernel(data, wi, wo_s, spec)
 
 
@@ -433,9 +432,8 @@ class TabulatedBRDF:
                 f"sample needs wo (..., 3) and u (..., 2), got {wo.shape}, {u.shape}"
             )
         wo, wo_s, u = _sample_inputs(wo, u)
-        wi, pdf, val = self._sampler().sample(wo_s, u, method, rng, proposal)
-        if val is None:  # the sampler did not look the table up at wi
-            wi, val = _sampled_values(self._spec, self._data, wo_s, wi.astype(wo.dtype))
+        wi, pdf = self._sampler().sample(wo_s, u, method, rng, proposal)
+        wi, val = _sampled_values(self._spec, self._data, wo_s, wi.astype(wo.dtype))
         return _sample_result(wo, wi, pdf, val)
 
     def pdf(self, wi: Any, wo: Any, method: str = "inversion", proposal: Any = "majorant") -> Array:
