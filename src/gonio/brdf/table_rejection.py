@@ -56,19 +56,14 @@ _ONE_MINUS_EPS32 = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
 _RHO_NODES = {True: (9, 1), False: (5, 5)}  # (theta_o, phi_o) nodes of rho per bucket, by iso
 _RHO_RES = (128, 256)
 _COSINE_BOUND_RES = (16, 32)  # incident cells over which the cosine proposal bounds g
-# Bound of a bucket where g = 0 everywhere: negative, so that the acceptance test passes at once;
-# the sample's pdf is then 0 (rho = 0) and it fails after one proposal, not max_rounds of them.
+# Bound where g = 0 in the whole bucket: negative, so the acceptance test passes at once and the
+# sample fails (pdf 0, as rho = 0) after one proposal instead of max_rounds of them.
 _EMPTY = -1.0
 
 
 class TableRejection:
-    """Lazily built rejection structures of one table, per proposal and outgoing bucket.
-
-    Parameters
-    ----------
-    table : the :class:`gonio.brdf.tabulated.TabulatedBRDF`.
-    geo : the sampler's bucket geometry (the majorant's incident grid is twice as fine).
-    """
+    """Lazily built rejection structures of a :class:`gonio.brdf.tabulated.TabulatedBRDF`, per
+    proposal and outgoing bucket of the sampler's geometry ``geo``."""
 
     def __init__(self, table: Any, geo: BucketGeometry) -> None:
         self.table = table
