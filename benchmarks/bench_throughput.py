@@ -5,9 +5,9 @@ merged later are picked up automatically) it times jitted ``f``, ``pdf`` and ``s
 of 1e6 float32 queries (directions uniform over the upper hemisphere). For a MERL-resolution
 (90 x 90 x 180, RGB) table of Lambert + Torrance-Sparrow (GGX, alpha 0.2, Smith, Schlick 0.04) it
 times the lookup ``f`` and sampling by inversion, alias and rejection (the default majorant
-proposal, also called under ``jit``, the cosine proposal, and the table's own Torrance-Sparrow
-lobe as an analytic proposal; with acceptance rates) and reports the one-off build time of the
-lazily built sampling structures for every outgoing bucket met.
+proposal, also called under ``jit``, and the cosine proposal; with acceptance rates) and
+reports the one-off build time of the lazily built sampling structures for every outgoing bucket
+met.
 
 Compilation and the lazy builds are warm-up and excluded; each figure is the median of
 ``--repeats`` runs. Queries are random (cache-unfriendly for table lookups; a renderer's coherent
@@ -79,7 +79,7 @@ def analytic_models() -> list[tuple[str, models.BRDFModel]]:
 
 
 def benchmark_table() -> tuple[TabulatedBRDF, models.BRDFModel | None]:
-    """The table and its specular lobe (used as the analytic rejection proposal)."""
+    """The table and its specular lobe (the model's Torrance-Sparrow term, or None)."""
     try:
         spec = models.TorranceSparrow(
             alpha=0.2, distribution="ggx", shadowing="smith", fresnel=models.Schlick(0.04)
@@ -98,8 +98,8 @@ def main() -> None:
         "--rejection-batch",
         type=int,
         default=100_000,
-        help="queries per call of rejection sampling with the cosine or lobe proposal (default "
-        "1e5: their low acceptance makes 1e6 slow); the majorant proposal uses --batch",
+        help="queries per call of rejection sampling with the cosine proposal (default "
+        "1e5: its low acceptance makes 1e6 slow); the majorant proposal uses --batch",
     )
     ap.add_argument("--quick", action="store_true", help="batch 1e5, 2 repeats (smoke test)")
     args = ap.parse_args()
@@ -140,7 +140,7 @@ def main() -> None:
         record("model", name, "sample", median_time(lambda s=s: s(wo, u), repeats))
 
     t0 = time.perf_counter()
-    table, lobe = benchmark_table()
+    table, _ = benchmark_table()
     print(f"tabulated the model on MERL's grid in {time.perf_counter() - t0:.1f} s")
     lookup = jax.jit(lambda a, b: table.f(a, b))
     record("lookup", "MERL 90x90x180 RGB", "f", median_time(lambda: lookup(wi, wo), repeats))
@@ -154,8 +154,6 @@ def main() -> None:
         ("rejection-jit", "rejection", "majorant", True),
         ("rejection-cosine", "rejection", "cosine", False),
     ]
-    if lobe is not None:
-        variants.append(("rejection-lobe", "rejection", lobe, False))
     for label, method, proposal, under_jit in variants:
         t0 = time.perf_counter()
         table.pdf(wo[:1], wo[:1], method=method, proposal=proposal)  # time one lazy build

@@ -1,5 +1,5 @@
-"""The interval bounds behind exact rejection sampling of tables: half/difference angle ranges
-over boxes of directions, and rectangle maxima."""
+"""The interval bounds behind exact rejection sampling of tables (gonio.brdf.table_rejection):
+half/difference angle ranges over boxes of directions, and rectangle maxima."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gonio.brdf import frames
-from gonio.brdf.table_bounds import RangeMax2D as _RangeMax2D
-from gonio.brdf.table_bounds import half_diff_ranges as _half_diff_ranges
+from gonio.brdf.table_rejection import half_diff_ranges as _half_diff_ranges
+from gonio.brdf.table_rejection import rect_max
 
 HALF_PI = math.pi / 2
 
@@ -76,12 +76,11 @@ def test_half_diff_ranges_are_tight_at_grazing_angles():
 def test_range_max_matches_brute_force(shape, seed):
     rng = np.random.default_rng(seed)
     a = rng.normal(size=shape)
-    rm = _RangeMax2D(a)
     n = 300
     r0 = rng.integers(0, shape[0], n)
     r1 = r0 + 1 + rng.integers(0, shape[0] - r0)
     c0 = rng.integers(0, shape[1], n)
     c1 = c0 + 1 + rng.integers(0, shape[1] - c0)
-    got = rm.query(r0, r1, c0, c1)
+    got = rect_max(a, r0, r1, c0, c1)
     want = [a[i:j, k:m].max() for i, j, k, m in zip(r0, r1, c0, c1, strict=True)]
     np.testing.assert_array_equal(got, want)

@@ -163,19 +163,16 @@ class TableSampler:
 
     # -- public entry points -------------------------------------------------------------------
     def sample(self, wo: Array, u: Array, method: str, rng: Any, proposal: Any):
-        """``(wi, pdf, f)``: ``f (..., C)`` is the table at ``(wi, wo)`` when the sampler has
-        already looked it up (rejection in float32), else None."""
+        """``(wi, pdf)`` for ``wo (..., 3)``, ``u (..., 2)``, in ``wo``'s precision."""
         dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
         if method == "rejection":  # proposals and acceptance tests run in float32
             return self.rejection.sample(wo, u, rng, proposal, dt)
         slot_of, arrays = self._store(method).prepare(self.geo, wo, dt)
         cos_desc, _cos_asc, omega = self._consts[dt]
         if method == "inversion":
-            wi, pdf = _inversion_kernel(self.geo, slot_of, arrays["dist"], cos_desc, omega, wo, u)
-            return wi, pdf, None
+            return _inversion_kernel(self.geo, slot_of, arrays["dist"], cos_desc, omega, wo, u)
         q, alias, p = arrays["q"], arrays["alias"], arrays["p"]
-        wi, pdf = _alias_kernel(self.geo, slot_of, q, alias, p, cos_desc, omega, wo, u)
-        return wi, pdf, None
+        return _alias_kernel(self.geo, slot_of, q, alias, p, cos_desc, omega, wo, u)
 
     def pdf(self, wi: Array, wo: Array, method: str, proposal: Any) -> Array:
         dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32

@@ -104,8 +104,7 @@ def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
 
 
 def _sampled_values(spec: LookupSpec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
-    """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample` when
-    the sampler has not looked it up."""
+    """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample`."""
     return wi, eval_kernel(data, wi, wo_s, spec)
 
 
@@ -426,10 +425,9 @@ class TabulatedBRDF:
         rng : rejection only: where the extra random numbers come from (a NumPy Generator, an
             int seed or a JAX key); default: derived deterministically from ``u``.
         proposal : rejection only: ``"majorant"`` (default: a piecewise-constant bound of
-            ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table),
-            ``"cosine"``, or an analytic model whose ``sample``/``pdf`` is used (mixed with 10 %
-            cosine sampling); see :mod:`gonio.brdf.table_rejection`. The sampled density is the
-            same for all three.
+            ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table) or
+            ``"cosine"``; see :mod:`gonio.brdf.table_rejection`. The sampled density is the
+            same for both.
 
         Returns
         -------
@@ -448,9 +446,8 @@ class TabulatedBRDF:
                 f"sample needs wo (..., 3) and u (..., 2), got {wo.shape}, {u.shape}"
             )
         wo, wo_s, u = _sample_inputs(wo, u)
-        wi, pdf, val = self._sampler().sample(wo_s, u, method, rng, proposal)
-        if val is None:  # the sampler did not look the table up at wi
-            wi, val = _sampled_values(self._spec, self._data, wo_s, wi.astype(wo.dtype))
+        wi, pdf = self._sampler().sample(wo_s, u, method, rng, proposal)
+        wi, val = _sampled_values(self._spec, self._data, wo_s, wi.astype(wo.dtype))
         return _sample_result(wo, wi, pdf, val)
 
     def pdf(self, wi: Any, wo: Any, method: str = "inversion", proposal: Any = "majorant") -> Array:

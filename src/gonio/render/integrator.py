@@ -144,8 +144,10 @@ def resolve_sampler(
             raise ParameterError("proposal= applies to tabulated BRDFs only")
         if not isinstance(proposal, BRDFModel) or has_delta(proposal):
             raise ParameterError("proposal must be an analytic BRDF model without delta lobes")
-        if sampler not in ("brdf", "rejection"):
-            raise ParameterError("proposal= is used by sampler='brdf' (lobe) or 'rejection'")
+        if sampler != "brdf":  # rejection proposes from its own rigorous majorant
+            raise ParameterError(
+                "proposal= is used by sampler='brdf' only (a table sampled by an analytic lobe)"
+            )
     if sampler == "brdf" and table and proposal is not None:
         kind = "lobe"
     elif sampler in ("auto", "mis", "brdf"):
@@ -531,8 +533,9 @@ def render_sphere(
     stats : filled with counts of what was done.
     proposal : tables only: an analytic model (typically the table's fit). With
         ``sampler="brdf"`` the table is sampled by the model's own sampler ("analytic lobe"
-        sampling: directions and pdf from the model, values from the table); with
-        ``sampler="rejection"`` it is the rejection sampler's proposal instead of cosine.
+        sampling: directions and pdf from the model, values from the table). Other samplers
+        refuse it (``"rejection"`` proposes from the table's own majorant: an exact reference
+        needs a rigorous bound that an analytic model's density does not give).
     optimize : for benchmarks only: ``False`` turns off every shortcut that skips work a scene
         does not need (pixels that miss the sphere are shaded and thrown away, delta lights are
         sampled ``spp`` times with BRDF samples wasted on them, the environment importance map
