@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gonio.brdf.models import Lambert
-from gonio.render import integrator
+from gonio.render import delta, integrator
 from gonio.render.lights import Directional, Environment, SphereLight
 
 
@@ -16,7 +16,7 @@ def _sizes() -> tuple[int, ...]:
         integrator._light_stage_jit._cache_size(),
         integrator._model_stage._cache_size(),
         integrator._shade_stage._cache_size(),
-        integrator._delta_kernel_model._cache_size(),
+        delta.delta_kernel_model._cache_size(),
     )
 
 

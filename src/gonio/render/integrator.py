@@ -74,6 +74,7 @@ from gonio.brdf import warp
 from gonio.brdf.models import BRDFModel
 from gonio.errors import ParameterError
 from gonio.render import sobol as _sobol_mod
+from gonio.render.delta import render_delta
 from gonio.render.lights import Environment, Light, LightSample, light_list, merge_environments
 from gonio.render.materials import (
     has_delta,
@@ -84,6 +85,7 @@ from gonio.render.materials import (
     restrict_table_channels,
 )
 from gonio.render.scene import Camera, SphereHits, intersect_sphere
+from gonio.render.tiling import device_array, pad_rows, pixel_tile, sampled_groups, tile_spans
 
 Array = jnp.ndarray
 
@@ -98,10 +100,6 @@ DEFAULT_TILE_SAMPLES = 1 << 17
 #: of ``4 * SAMPLE_BATCH`` uses that larger batch (a second kernel shape), which measured ~15 %
 #: faster at 64 spp on a 2-core CPU.
 SAMPLE_BATCH = 16
-
-#: Smallest pixel tile; tiles are this times a power of 4 (up to ``tile_samples / SAMPLE_BATCH``),
-#: so that all image sizes share a handful of compiled kernels instead of one each.
-MIN_PIXEL_TILE = 256
 
 #: Tiles dispatched ahead of the one being collected (one per core keeps every core busy).
 IN_FLIGHT = max(1, min(4, os.cpu_count() or 1))
@@ -393,61 +391,6 @@ def _tile(material, lights, pos, frame, wo, sob, shift, weights, acc, tech: _Tec
     return _shade_stage(lights, ls, fv, pb, pos, frame, brdf, weights, acc, mis=tech.mis)
 
 
-@jax.jit
-def _delta_kernel_model(model, groups, position, frame, wo):
-    """Sum over delta lights of f E cos; ``groups`` from :func:`_delta_groups`."""
-    total = 0.0
-    for stacked, count in groups:
-
-        def term(i, stacked=stacked):
-            light = jax.tree_util.tree_map(lambda leaf: leaf[i], stacked)
-            ls = light.sample(position, jnp.zeros((*position.shape[:-1], 2), jnp.float32))
-            wi = jnp.einsum("pij,pj->pi", frame, ls.wi)
-            return model.f(wi, wo) * ls.value * jnp.maximum(wi[..., 2], 0.0)[..., None]
-
-        # A traced trip count: renders with 1 .. capacity lights of a kind share this kernel,
-        # and the padding costs nothing.
-        total = total + jax.lax.fori_loop(1, count, lambda i, acc: acc + term(i), term(0))
-    return total
-
-
-def _area_groups(lights: Sequence[Light]) -> tuple:
-    """Area and environment lights as the kernels take them: ``((light, count), ...)``, one
-    light sample per group. An environment is its own group (``count`` None; environments of
-    one image size are merged beforehand, :func:`gonio.render.lights.merge_environments`);
-    other lights are stacked by kind as :func:`_delta_groups` does, so that their number is a
-    traced value, not part of the kernel's shape."""
-    envs = tuple((lt, None) for lt in lights if isinstance(lt, Environment))
-    return envs + _delta_groups([lt for lt in lights if not isinstance(lt, Environment)])
-
-
-def _delta_groups(lights: Sequence[Light]) -> tuple:
-    """Delta lights grouped by kind (pytree structure and leaf shapes), each group's leaves
-    stacked along a new first axis padded to a power of 2 (at least 8): ``((stacked, count),
-    ...)``. The capacity, not the count, is part of the kernel's shape."""
-    groups: dict[Any, list] = {}
-    for light in lights:
-        leaves, treedef = jax.tree_util.tree_flatten(light)
-        leaves = [np.asarray(x, np.float32) for x in leaves]
-        groups.setdefault((treedef, tuple(x.shape for x in leaves)), []).append(leaves)
-    out = []
-    for (treedef, _), members in groups.items():
-        cap = max(8, 1 << (len(members) - 1).bit_length())
-        padded = members + [members[-1]] * (cap - len(members))
-        stacked = [_dev(np.stack(col)) for col in zip(*padded, strict=True)]
-        out.append((treedef.unflatten(stacked), _dev(np.int32(len(members)))))
-    return tuple(out)
-
-
-def _pixel_tile(n: int, cap: int) -> int:
-    """Pixels per kernel call for ``n`` pixels: ``MIN_PIXEL_TILE`` times a power of 4, or
-    ``cap``."""
-    size = MIN_PIXEL_TILE
-    while size < n and size < cap:
-        size *= 4
-    return max(1, min(size, cap))
-
-
 # -- driver ------------------------------------------------------------------------------------
 
 
@@ -594,7 +537,7 @@ def render_sphere(
 
     # Delta lights: exact, one evaluation per pixel.
     if delta_lights:
-        out += _render_delta(material, delta_lights, hits, tile_samples, stats)
+        out += render_delta(material, delta_lights, hits, tile_samples, stats)
 
     if area_lights:
         area_lights = tuple(merge_environments(area_lights))
@@ -627,61 +570,11 @@ def _padded_hits(hits: SphereHits, n: int) -> SphereHits:
     )
 
 
-def _dev(a: np.ndarray) -> Array:
-    """A host array on the default device: ``jax.device_put`` copies without compiling anything,
-    where ``jnp.asarray`` compiles a small copy kernel per new shape (5-30 ms each, paid by
-    every fresh process on its first image)."""
-    a = np.asarray(a)
-    if a.dtype == np.float64:
-        a = a.astype(np.float32)
-    return jax.device_put(a)
-
-
-def _tiles(n: int, size: int):
-    for start in range(0, n, size):
-        yield start, min(n, start + size)
-
-
-def _pad(a: np.ndarray, n: int) -> np.ndarray:
-    if a.shape[0] == n:
-        return a
-    pad = np.repeat(a[-1:], n - a.shape[0], axis=0)
-    return np.concatenate([a, pad], 0)
-
-
-def _render_delta(material, lights, hits: SphereHits, tile_samples, stats) -> np.ndarray:
-    n = hits.count
-    size = _pixel_tile(n, tile_samples)
-    groups = _delta_groups(lights) if isinstance(material, BRDFModel) else ()
-    out = []
-    for a, b in _tiles(n, size):
-        pos = _dev(_pad(hits.position[a:b], size))
-        frame = _dev(_pad(hits.frame[a:b], size))
-        wo = _dev(_pad(hits.wo[a:b], size))
-        if isinstance(material, BRDFModel):
-            r = _delta_kernel_model(material, groups, pos, frame, wo)
-        else:
-            r = 0.0
-            for light in lights:
-                ls = light.sample(pos, jnp.zeros((size, 2), jnp.float32))
-                wi = np.asarray(jnp.einsum("pij,pj->pi", frame, ls.wi))
-                f = np.asarray(material.f(wi, np.asarray(wo)), np.float32)
-                r = r + f * np.asarray(ls.value) * np.maximum(wi[..., 2], 0.0)[..., None]
-        stats.calls += 1
-        out.append(r)
-    # one transfer for all tiles (analytic models: every tile stays on the device until here)
-    res = jax.device_get(out)
-    spans = list(_tiles(n, size))
-    return np.concatenate(
-        [np.asarray(x, np.float64)[: b - a] for x, (a, b) in zip(res, spans, strict=True)], 0
-    )
-
-
 def _render_area(
     material, lights, hits, spp, tech, seed, tile_samples, progress, stats, proposal=None
 ):
     n_pix = hits.count
-    groups = _area_groups(lights)
+    groups = sampled_groups(lights)
     dims = 2 + 2 * len(groups)
     sobol = _sobol_mod.sobol_ints(spp, 2)
     shift = _sobol_mod.shifts(np.random.default_rng([seed, 1]), n_pix, dims)
@@ -691,8 +584,8 @@ def _render_area(
     sob[:spp] = sobol
     wts = np.zeros(n_batches * s_batch, np.float32)
     wts[:spp] = 1.0
-    p_tile = _pixel_tile(n_pix, max(1, tile_samples // s_batch))
-    tiles = list(_tiles(n_pix, p_tile))
+    p_tile = pixel_tile(n_pix, max(1, tile_samples // s_batch))
+    tiles = list(tile_spans(n_pix, p_tile))
     total = len(tiles) * n_batches
     done = 0
     c_out = max(1, _out_c(material, lights))
@@ -701,7 +594,10 @@ def _render_area(
     # stage adds each batch into them) and come back in one transfer at the end, so that no
     # kernel call waits on a copy to the host.
     batches = [
-        (_dev(sob[k * s_batch : (k + 1) * s_batch]), _dev(wts[k * s_batch : (k + 1) * s_batch]))
+        (
+            device_array(sob[k * s_batch : (k + 1) * s_batch]),
+            device_array(wts[k * s_batch : (k + 1) * s_batch]),
+        )
         for k in range(n_batches)
     ]
     sums = []
@@ -719,11 +615,11 @@ def _render_area(
                 progress(done, total)
 
     for a, b in tiles:
-        pos = _dev(_pad(hits.position[a:b], p_tile))
-        frame = _dev(_pad(hits.frame[a:b], p_tile))
-        wo = _dev(_pad(hits.wo[a:b], p_tile))
-        sh = _dev(_pad(shift[a:b], p_tile))
-        acc = _dev(np.zeros((p_tile, c_out), np.float32))
+        pos = device_array(pad_rows(hits.position[a:b], p_tile))
+        frame = device_array(pad_rows(hits.frame[a:b], p_tile))
+        wo = device_array(pad_rows(hits.wo[a:b], p_tile))
+        sh = device_array(pad_rows(shift[a:b], p_tile))
+        acc = device_array(np.zeros((p_tile, c_out), np.float32))
         for k, (sb, wb) in enumerate(batches):
             acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, rng, proposal)
             pending.append(acc)

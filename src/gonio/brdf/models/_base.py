@@ -80,7 +80,7 @@ class BRDFSample(NamedTuple):
     delta: Array
 
 
-def _is_concrete(x: Any) -> bool:
+def is_concrete(x: Any) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
@@ -123,10 +123,10 @@ class Node:
             value = values.get(p.name)
             if value is None:
                 value = p.default
-            if _is_concrete(value):
+            if is_concrete(value):
                 value = self._check(p, value)
             object.__setattr__(self, p.name, value)
-        if _is_concrete(self._own_values()):
+        if is_concrete(self._own_values()):
             self._own_channels()  # raises on mismatched per-channel lengths
 
     def _check(self, p: Param, value: Any) -> Array:
@@ -221,7 +221,7 @@ class Node:
                     raise ParameterError(f"{type(self).__name__}: unknown parameter {key!r}")
                 nested.setdefault(head, {})[rest] = value
             elif head in specs:
-                own[head] = self._check(specs[head], value) if _is_concrete(value) else value
+                own[head] = self._check(specs[head], value) if is_concrete(value) else value
             else:
                 raise ParameterError(f"{type(self).__name__}: unknown parameter {key!r}")
         leaves, aux = self._tree_flatten()
@@ -266,7 +266,7 @@ class Node:
         parts = []
         for p in self.PARAMS:
             v = getattr(self, p.name)
-            parts.append(f"{p.name}={np.asarray(v).tolist() if _is_concrete(v) else '<traced>'}")
+            parts.append(f"{p.name}={np.asarray(v).tolist() if is_concrete(v) else '<traced>'}")
         parts += [f"{c}={getattr(self, c)!r}" for c in self.CHILDREN]
         parts += [f"{s}={getattr(self, s)!r}" for s in self.STATIC]
         return f"{type(self).__name__}({', '.join(parts)})"

@@ -13,8 +13,8 @@ from gonio.brdf.models._base import (
     BRDFModel,
     BRDFSample,
     Param,
-    _is_concrete,
     channel_mean,
+    is_concrete,
     mixture_sample,
 )
 from gonio.brdf.models.fresnel import Fresnel, Schlick
@@ -114,7 +114,7 @@ class TorranceSparrow(BRDFModel):
     def _diffuse_free(self) -> bool:
         """True where ``rho_d`` is a concrete zero (not traced): no diffuse lobe to sample."""
         rho = self.rho_d
-        return _is_concrete(rho) and not np.any(np.asarray(rho))
+        return is_concrete(rho) and not np.any(np.asarray(rho))
 
     def _f(self, wi: Array, wo: Array) -> Array:
         rho = jnp.atleast_1d(self.rho_d).astype(wi.dtype)

@@ -1,0 +1,82 @@
+"""Tiles of pixels for the render kernels, host arrays on the device, and lights stacked by kind.
+
+Kernel shapes do not follow the request: pixels are cut into a few tile sizes and lights of one
+kind are stacked to a padded capacity with a traced count, so that a new image size or light
+count reuses the compiled kernels (:mod:`gonio.render.integrator`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from gonio.render.lights import Environment, Light
+
+Array = jnp.ndarray
+
+#: Smallest pixel tile; tiles are this times a power of 4 (up to ``tile_samples / SAMPLE_BATCH``),
+#: so that all image sizes share a handful of compiled kernels instead of one each.
+MIN_PIXEL_TILE = 256
+
+
+def pixel_tile(n: int, cap: int) -> int:
+    """Pixels per kernel call for ``n`` pixels: ``MIN_PIXEL_TILE`` times a power of 4, or
+    ``cap``."""
+    size = MIN_PIXEL_TILE
+    while size < n and size < cap:
+        size *= 4
+    return max(1, min(size, cap))
+
+
+def device_array(a: np.ndarray) -> Array:
+    """A host array on the default device: ``jax.device_put`` copies without compiling anything,
+    where ``jnp.asarray`` compiles a small copy kernel per new shape (5-30 ms each, paid by
+    every fresh process on its first image)."""
+    a = np.asarray(a)
+    if a.dtype == np.float64:
+        a = a.astype(np.float32)
+    return jax.device_put(a)
+
+
+def tile_spans(n: int, size: int):
+    for start in range(0, n, size):
+        yield start, min(n, start + size)
+
+
+def pad_rows(a: np.ndarray, n: int) -> np.ndarray:
+    if a.shape[0] == n:
+        return a
+    pad = np.repeat(a[-1:], n - a.shape[0], axis=0)
+    return np.concatenate([a, pad], 0)
+
+
+def sampled_groups(lights: Sequence[Light]) -> tuple:
+    """Area and environment lights as the kernels take them: ``((light, count), ...)``, one
+    light sample per group. An environment is its own group (``count`` None; environments of
+    one image size are merged beforehand, :func:`gonio.render.lights.merge_environments`);
+    other lights are stacked by kind as :func:`stack_by_kind` does, so that their number is a
+    traced value, not part of the kernel's shape."""
+    envs = tuple((lt, None) for lt in lights if isinstance(lt, Environment))
+    return envs + stack_by_kind([lt for lt in lights if not isinstance(lt, Environment)])
+
+
+def stack_by_kind(lights: Sequence[Light]) -> tuple:
+    """Delta lights grouped by kind (pytree structure and leaf shapes), each group's leaves
+    stacked along a new first axis padded to a power of 2 (at least 8): ``((stacked, count),
+    ...)``. The capacity, not the count, is part of the kernel's shape."""
+    groups: dict[Any, list] = {}
+    for light in lights:
+        leaves, treedef = jax.tree_util.tree_flatten(light)
+        leaves = [np.asarray(x, np.float32) for x in leaves]
+        groups.setdefault((treedef, tuple(x.shape for x in leaves)), []).append(leaves)
+    out = []
+    for (treedef, _), members in groups.items():
+        cap = max(8, 1 << (len(members) - 1).bit_length())
+        padded = members + [members[-1]] * (cap - len(members))
+        stacked = [device_array(np.stack(col)) for col in zip(*padded, strict=True)]
+        out.append((treedef.unflatten(stacked), device_array(np.int32(len(members)))))
+    return tuple(out)
