@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -69,7 +70,7 @@ def run_material(name: str) -> list[dict[str, Any]]:
     from gonio import fit as gf
     from gonio import io
     from gonio.brdf import ngan
-    from gonio.errors import ParameterError
+    from gonio.errors import GonioError, ParameterError
     from gonio.fit.data import prepare
     from gonio.fit.score import score
 
@@ -92,7 +93,14 @@ def run_material(name: str) -> list[dict[str, Any]]:
                 bbm = None
         for metric in METRICS:
             t1 = time.perf_counter()
-            res = gf.fit(data, model=preset, loss=metric)
+            try:
+                res = gf.fit(data, model=preset, loss=metric)
+            except GonioError as exc:  # recorded as a loss for gonio, the run goes on
+                print(f"{name} {preset} {metric}: {exc}", flush=True)
+                rows.append({"material": name, "family": preset, "metric": metric,
+                             "loss": metric, "published": pub[metric], "gonio": float("nan"),
+                             "ratio": float("nan"), "win": False, "error": str(exc)})  # fmt: skip
+                continue
             wall = time.perf_counter() - t1
             ours = score(res.model, data)
             rows.append(
@@ -267,11 +275,15 @@ def main() -> None:
         names = [n for n in QUICK if n in names]
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            rows = [r for rs in pool.map(run_material, names) for r in rs]
-    else:
-        rows = [r for n in names for r in run_material(n)]
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    partial = RESULTS / f"{args.out}_partial.jsonl"  # rows so far, if the run is cut short
+    partial.unlink(missing_ok=True)
+    rows = []
+    with ProcessPoolExecutor(max(args.jobs, 1)) as pool:
+        for rs in pool.map(run_material, names):
+            rows += rs
+            with open(partial, "a") as fh:
+                fh.writelines(json.dumps(r) + "\n" for r in rs)
     wall = time.perf_counter() - t0
     _report(rows, args.out, f"{len(names)} materials, {args.jobs} jobs, {wall:.0f} s wall "
             f"({os.cpu_count()} CPUs, load {load:.1f} at start)")  # fmt: skip

@@ -108,7 +108,10 @@ class FitOptions:
         channel fitted on its own; returns one result per channel).
     optimizer : local method ``"lm"``, ``"lbfgs"`` or ``"slsqp"``.
     global_method : None, ``"crs2"``, ``"mlsl"`` or ``"direct"`` before the local stage.
-    n_starts, seed, subsample, max_iter : multi-start settings (see :func:`~.optimize.optimize`).
+    n_starts, seed, subsample, refine, max_iter : multi-start settings (see
+        :func:`~.optimize.optimize`): the starts run on ``subsample`` random samples, the best
+        one is refined on a stratified subset of ``refine`` samples (data of more than twice as
+        many samples only; 0 turns it off), then polished on every sample.
     laplace_method : ``"gauss-newton"`` or ``"hessian"``.
     covariance : Laplace covariance: ``"auto"`` (default), ``"residual"`` (residual-scaled
         inverse Hessian) or ``"cluster"`` (cluster-robust sandwich, which includes the model's
@@ -131,6 +134,7 @@ class FitOptions:
     n_starts: int = 8
     seed: int = 0
     subsample: int = 4000
+    refine: int = 65536
     max_iter: int = 200
     laplace_method: str = "gauss-newton"
     covariance: str = "auto"
@@ -260,6 +264,7 @@ def _fit_one(
         seed=seed,
         subsample=subsample,
         max_iter=max_iter,
+        refine=opts.refine,
     )
     spikes = _degenerate(layout, opt.u)
     restarted = None
@@ -269,7 +274,7 @@ def _fit_one(
         say(f"{name}: degenerate optimum ({', '.join(spikes)} on a bound); restarting")
         again = optimize(problem, method=optimizer, global_method=global_method,
                          n_starts=max(2 * n_starts, 16), seed=seed + 1, subsample=subsample,
-                         max_iter=max_iter)  # fmt: skip
+                         max_iter=max_iter, refine=opts.refine)  # fmt: skip
         restarted = not _degenerate(layout, again.u)
         if restarted:
             opt = again
