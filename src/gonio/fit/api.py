@@ -348,6 +348,8 @@ def _fit_one(
             "timings": opt.timings,
             "n_starts": n_starts,
             "seed": seed,
+            "subsample": subsample,
+            "refine": opts.refine,
         },
         warnings=warnings_,
         channel=channel,
