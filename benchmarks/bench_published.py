@@ -347,11 +347,19 @@ def main() -> None:
                     help="fit nothing: plot results/OUT_speed.csv into OUT_speed.png")  # fmt: skip
     ap.add_argument("--combine", metavar="STEM,STEM",
                     help="fit nothing: merge results/STEM.csv of earlier runs (on disjoint "
-                    "materials) into results/OUT.csv, .png and _summary.csv")  # fmt: skip
+                    "materials; STEM_partial: the streamed rows of a stopped run) into "
+                    "results/OUT.csv, .png and _summary.csv")  # fmt: skip
     args = ap.parse_args()
     if args.combine:
         rows = []
         for stem in args.combine.split(","):
+            if not (RESULTS / f"{stem}.csv").exists() and stem.endswith("_partial"):
+                # the rows streamed by a run that was stopped before its report
+                for line in (RESULTS / f"{stem}.jsonl").read_text().splitlines():
+                    r = json.loads(line)
+                    if "family" in r:
+                        rows.append(r)
+                continue
             with open(RESULTS / f"{stem}.csv", newline="") as fh:
                 for r in csv.DictReader(fh):
                     for k in ("published", "gonio", "ratio", "fit_s"):
