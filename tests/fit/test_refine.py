@@ -12,7 +12,7 @@ import gonio.fit  # noqa: F401
 from gonio.brdf import models
 from gonio.fit import presets
 from gonio.fit.cli import LOSS_NAMES
-from gonio.fit.losses import LOSSES, get_loss
+from gonio.fit.losses import LOSSES, evaluate, evaluate_many, get_loss
 from gonio.fit.objective import Problem
 from gonio.fit.optimize import optimize, subset_curvature
 from gonio.fit.params import Layout
@@ -92,3 +92,21 @@ def test_fit_cli_parser_does_not_import_jax():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
+
+
+@pytest.mark.parametrize("with_sigma", [True, False])
+def test_evaluate_many_compiled_pass_equals_numpy(with_sigma):
+    from gonio.fit.data import from_arrays
+    from tests.fit.synth import cosine_directions
+
+    rng = np.random.default_rng(11)
+    n = 100_000  # 3e5 values: above the size where the compiled pass is used
+    wi, wo = cosine_directions(n, rng), cosine_directions(n, rng)
+    y = rng.gamma(0.5, 1.0, size=(n, 3)) - 0.01  # a few slightly negative values
+    f = np.abs(y + 0.1 * rng.standard_normal((n, 3)))
+    sigma = 0.05 + 0.1 * np.abs(y) if with_sigma else None
+    data = from_arrays(wi, wo, y, sigma=sigma, weights=rng.uniform(0.5, 2.0, n))
+    assert data.values.size >= 1 << 18
+    fast = evaluate_many(LOSSES, f[: data.n], data)
+    for name in LOSSES:
+        assert fast[name] == pytest.approx(evaluate(name, f[: data.n], data), rel=1e-10)

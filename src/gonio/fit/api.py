@@ -15,7 +15,7 @@ from gonio.brdf.models import BRDFModel
 from gonio.errors import FitError, ParameterError
 from gonio.fit import presets
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
-from gonio.fit.losses import LOSSES, evaluate, get_loss
+from gonio.fit.losses import LOSSES, evaluate_many, get_loss
 from gonio.fit.objective import Problem
 from gonio.fit.optimize import optimize
 from gonio.fit.params import Layout
@@ -282,7 +282,7 @@ def _fit_one(
     f = problem.predict(opt.u)
     if not np.all(np.isfinite(f)):
         raise FitError(f"{name}: the fitted model is not finite on the data")
-    metrics = {k: evaluate(k, f, fd) for k in LOSSES}
+    metrics = evaluate_many(LOSSES, f, fd)
     sig = 1.0 if fd.sigma is None else fd.sigma
     chi2 = float(np.sum(((f - fd.values) / sig) ** 2))
     dof = max(n_res - layout.size, 1)

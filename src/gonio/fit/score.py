@@ -26,7 +26,7 @@ import numpy as np
 from gonio.brdf.models import BRDFModel
 from gonio.errors import FitError, FormatError
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
-from gonio.fit.losses import evaluate
+from gonio.fit.losses import evaluate_many
 
 #: The metrics reported by :func:`score` (keys of :data:`gonio.fit.losses.LOSSES`).
 SCORES = ("ngan", "low-e2")
@@ -75,7 +75,7 @@ def score(model: Any, data: Any, theta_max_deg: float = DEFAULT_THETA_MAX_DEG) -
     f = model_values(model, fd)
     if not np.all(np.isfinite(f)):
         raise FitError("the model is not finite on the data")
-    return {k: evaluate(k, f, fd) for k in SCORES}
+    return evaluate_many(SCORES, f, fd)
 
 
 def load_scored_model(spec: str, material: str | None) -> tuple[str, BRDFModel]:
