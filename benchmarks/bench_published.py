@@ -19,7 +19,7 @@ Run from the repository root::
     PYTHONPATH=src python benchmarks/bench_published.py            # every material
     PYTHONPATH=src python benchmarks/bench_published.py --quick    # 8 materials
     PYTHONPATH=src python benchmarks/bench_published.py --materials gold-paint,pvc
-    PYTHONPATH=src python benchmarks/bench_published.py --speed gold-paint   # timings only
+    PYTHONPATH=src python benchmarks/bench_published.py --speed gold-paint,pvc,white-fabric
 
 Writes ``results/published.csv`` (one row per material, family and metric), ``published.png``
 (gonio against published, per family and metric) and prints the summary table (wins, median
@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -69,12 +70,16 @@ def run_material(name: str) -> list[dict[str, Any]]:
     from gonio import fit as gf
     from gonio import io
     from gonio.brdf import ngan
-    from gonio.errors import ParameterError
+    from gonio.errors import GonioError, ParameterError
     from gonio.fit.data import prepare
     from gonio.fit.score import score
 
     t0 = time.perf_counter()
-    data = prepare(io.load(f"{ARCHIVE}::{name}"))
+    try:
+        data = prepare(io.load(f"{ARCHIVE}::{name}"))
+    except GonioError as exc:  # e.g. a network with negative output, refused by the reader
+        print(f"{name}: not scored: {exc}", flush=True)
+        return [{"material": name, "error": str(exc)}]
     t_table = time.perf_counter() - t0
     rows = []
     published = _published()
@@ -92,7 +97,14 @@ def run_material(name: str) -> list[dict[str, Any]]:
                 bbm = None
         for metric in METRICS:
             t1 = time.perf_counter()
-            res = gf.fit(data, model=preset, loss=metric)
+            try:
+                res = gf.fit(data, model=preset, loss=metric)
+            except GonioError as exc:  # recorded as a loss for gonio, the run goes on
+                print(f"{name} {preset} {metric}: {exc}", flush=True)
+                rows.append({"material": name, "family": preset, "metric": metric,
+                             "loss": metric, "published": pub[metric], "gonio": float("nan"),
+                             "ratio": float("nan"), "win": False, "error": str(exc)})  # fmt: skip
+                continue
             wall = time.perf_counter() - t1
             ours = score(res.model, data)
             rows.append(
@@ -125,7 +137,8 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             sel = [r for r in rows if r["family"] == preset and r["metric"] == metric]
             if not sel:
                 continue
-            ratios = np.array([r["ratio"] for r in sel])
+            ratios = np.array([float(r["ratio"]) for r in sel])  # NaN: the fit failed
+            ratios = np.where(np.isfinite(ratios), ratios, np.inf)
             out.append(
                 {
                     "family": preset,
@@ -184,43 +197,138 @@ def _write_csv(rows: list[dict[str, Any]], path: Path) -> None:
         w.writerows(rows)
 
 
-def speed(name: str, preset: str = "lambert+cook-torrance", loss: str = "ngan") -> list[dict]:
-    """Wall times of one fit of a MERL-resolution table, cold (a fresh ``gonio fit`` process) and
-    warm (in process, second call), and the check that the multi-start on a 4000-cell subsample
-    keeps the optimum of a multi-start on every cell."""
+def _cold_cli(name: str, preset: str, loss: str, cache: str, refine: int | None = None) -> float:
+    """Seconds of one fresh ``gonio fit`` process on ``ARCHIVE::name`` (JSON only, no plots)."""
     import subprocess
     import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "gonio", "fit", f"{ARCHIVE}::{name}", "-m", preset,
+               "--loss", loss, "--no-plots", "-o", out]  # fmt: skip
+        if refine is not None:
+            cmd += ["--refine", str(refine)]
+        env = {**os.environ, "GONIO_COMPILE_CACHE": cache}
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True, env=env)
+        return time.perf_counter() - t0
+
+
+def speed(names: list[str], repeats: int = 3) -> list[dict]:
+    """Timings of single fits of MERL-resolution tables and the check that the staged fit keeps
+    the optimum.
+
+    - cold: a fresh ``gonio fit`` process (imports, tabulating the network, fit, JSON), with an
+      empty persistent compilation cache and again with the cache it filled;
+    - warm: in process, the default staged fit (multi-start on 4000 random cells, refinement on
+      a stratified 65,536-cell subset, polish on every cell with the subset's curvature) against
+      the earlier path (``refine=0``: every polish step on every cell), alternated ``repeats``
+      times on the first material so that both see the same machine load; the ratio of the
+      medians is the gain independent of the load;
+    - optimum: per material and family (loss ``ngan``, same seed), the final loss of the default
+      fit against the ``refine=0`` path and, on the first material, against a fit whose
+      multi-start and polish both run on every cell (``subsample`` = all cells, ``refine=0``).
+    """
     import tempfile
 
     from gonio import fit as gf
     from gonio import io
     from gonio.fit.data import prepare
 
-    rows = []
-    with tempfile.TemporaryDirectory() as out:
-        cmd = [sys.executable, "-m", "gonio", "fit", f"{ARCHIVE}::{name}", "-m", preset,
-               "--loss", loss, "--no-plots", "-o", out]  # fmt: skip
-        t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, capture_output=True)
-        rows.append({"what": "cold gonio fit process (import, table, fit, JSON)",
-                     "seconds": time.perf_counter() - t0})  # fmt: skip
+    preset, loss = "lambert+cook-torrance", "ngan"
+    rows: list[dict[str, Any]] = []
+
+    def row(what: str, seconds: float, **kw: Any) -> None:
+        rows.append({"what": what, "seconds": seconds, "load1": os.getloadavg()[0], **kw})
+        print(f"  {what}: {seconds:.4g} {kw if kw else ''}", flush=True)
+
+    with tempfile.TemporaryDirectory() as cache:
+        row("cold gonio fit, empty compile cache", _cold_cli(names[0], preset, loss, cache))
+        row("cold gonio fit, compile cache filled", _cold_cli(names[0], preset, loss, cache))
+        row("cold gonio fit --refine 0, cache filled",
+            _cold_cli(names[0], preset, loss, cache, refine=0))  # fmt: skip
     t0 = time.perf_counter()
-    data = prepare(io.load(f"{ARCHIVE}::{name}"))
-    rows.append(
-        {"what": "tabulate the network + prepare cells", "seconds": time.perf_counter() - t0}
-    )
-    costs = {}
-    for label, sub in (("first fit (compiles)", 4000), ("warm fit", 4000),
-                       ("warm fit, multi-start on every cell", data.n)):  # fmt: skip
+    tables = {n: prepare(io.load(f"{ARCHIVE}::{n}")) for n in names}
+    row("tabulate the networks + prepare cells", (time.perf_counter() - t0) / len(names))
+    data = tables[names[0]]
+    for label, refine in (("first fit, staged (compiles)", 65536),
+                          ("first fit, refine=0 (compiles)", 0)):  # fmt: skip
         t0 = time.perf_counter()
-        r = gf.fit(data, preset, loss=loss, subsample=sub)
-        rows.append({"what": label, "seconds": time.perf_counter() - t0, "loss": r.loss,
-                     "polish_s": r.optimizer["timings"]["polish"],
-                     "starts_s": r.optimizer["timings"]["starts"], "n_cells": data.n})  # fmt: skip
-        costs[label] = r.loss
-    rel = abs(costs["warm fit"] - costs["warm fit, multi-start on every cell"]) / costs["warm fit"]
-    rows.append({"what": "relative loss difference, subsample vs every cell", "seconds": rel})
+        gf.fit(data, preset, loss=loss, refine=refine)
+        row(label, time.perf_counter() - t0)
+    times: dict[int, list[float]] = {65536: [], 0: []}
+    for _ in range(repeats):
+        for refine in times:
+            t0 = time.perf_counter()
+            r = gf.fit(data, preset, loss=loss, refine=refine)
+            times[refine].append(time.perf_counter() - t0)
+            row(f"warm fit, refine={refine}", times[refine][-1], loss=r.loss,
+                **{f"{k}_s": v for k, v in r.optimizer["timings"].items()})  # fmt: skip
+    new, old = float(np.median(times[65536])), float(np.median(times[0]))
+    row("warm fit median, staged (default)", new)
+    row("warm fit median, refine=0", old)
+    row("warm speed-up, same run (refine=0 / staged)", old / new)
+    for name in names[1:2]:
+        t0 = time.perf_counter()
+        gf.fit(tables[name], preset, loss=loss)
+        row(
+            f"first fit of a second material ({name}): compiled code reused",
+            time.perf_counter() - t0,
+        )
+    for name in names:
+        for fam in FAMILIES.values():
+            t0 = time.perf_counter()
+            staged = gf.fit(tables[name], fam, loss=loss)
+            t1 = time.perf_counter()
+            plain = gf.fit(tables[name], fam, loss=loss, refine=0)
+            t2 = time.perf_counter()
+            row(f"optimum {name} {fam}: (staged - refine=0) / refine=0",
+                (staged.loss - plain.loss) / plain.loss, staged_loss=staged.loss,
+                ref_loss=plain.loss, staged_s=t1 - t0, ref_s=t2 - t1)  # fmt: skip
+            if name != names[0]:
+                continue
+            full = gf.fit(tables[name], fam, loss=loss, subsample=tables[name].n, refine=0)
+            row(f"optimum {name} {fam}: (staged - every cell) / every cell",
+                (staged.loss - full.loss) / full.loss, staged_loss=staged.loss,
+                ref_loss=full.loss, staged_s=t1 - t0, ref_s=time.perf_counter() - t2)  # fmt: skip
     return rows
+
+
+def _plot_speed(rows: list[dict[str, Any]], path: Path) -> None:
+    """Bar chart of the speed section's timings (seconds) and the optimum check."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    timed = [r for r in rows if not str(r["what"]).startswith(("optimum", "warm speed-up"))
+             and not str(r["what"]).startswith("warm fit, refine")]  # fmt: skip
+    opt = [r for r in rows if str(r["what"]).startswith("optimum")]
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5), gridspec_kw={"width_ratios": [3, 2]})
+    ax = axes[0]
+    y = np.arange(len(timed))
+    ax.barh(y, [float(r["seconds"]) for r in timed], color="tab:blue")
+    ax.set_yticks(y, [f"{r['what']} (load {float(r['load1']):.0f})" for r in timed], fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlabel("seconds (2-core machine, shared; 1-min load average in brackets)")
+    ax.set_title("single fit of a MERL-resolution table, lambert+cook-torrance, loss ngan",
+                 fontsize=9)  # fmt: skip
+    ax = axes[1]
+    if opt:
+        rel = [abs(float(r["seconds"])) for r in opt]
+        y = np.arange(len(opt))
+        ax.barh(y, np.maximum(rel, 1e-16), color="tab:green")
+        ax.set_xscale("log")
+        labels = [str(r["what"]).split(":")[0].removeprefix("optimum ")
+                  + (" vs every-cell starts" if "every cell" in str(r["what"]) else " vs refine=0")
+                  for r in opt]  # fmt: skip
+        ax.set_yticks(y, labels, fontsize=7)
+        ax.invert_yaxis()
+        ax.set_xlabel("|staged - reference| / reference, final loss")
+        ax.set_title("the staged fit keeps the optimum (loss ngan)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main() -> None:
@@ -229,14 +337,31 @@ def main() -> None:
     ap.add_argument("--materials", help="comma-separated material names")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", default="published", help="result file stem (default published)")
-    ap.add_argument("--speed", metavar="MATERIAL", help="only the timing section on MATERIAL")
+    ap.add_argument("--speed", metavar="MATERIAL,...",
+                    help="only the timing and optimum checks, on these materials (the first "
+                    "one timed)")  # fmt: skip
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the materials of results/OUT_partial.jsonl (an interrupted run)",
+    )
+    ap.add_argument("--plot-speed", action="store_true",
+                    help="fit nothing: plot results/OUT_speed.csv into OUT_speed.png")  # fmt: skip
     ap.add_argument("--combine", metavar="STEM,STEM",
                     help="fit nothing: merge results/STEM.csv of earlier runs (on disjoint "
-                    "materials) into results/OUT.csv, .png and _summary.csv")  # fmt: skip
+                    "materials; STEM_partial: the streamed rows of a stopped run) into "
+                    "results/OUT.csv, .png and _summary.csv")  # fmt: skip
     args = ap.parse_args()
     if args.combine:
         rows = []
         for stem in args.combine.split(","):
+            if not (RESULTS / f"{stem}.csv").exists() and stem.endswith("_partial"):
+                # the rows streamed by a run that was stopped before its report
+                for line in (RESULTS / f"{stem}.jsonl").read_text().splitlines():
+                    r = json.loads(line)
+                    if "family" in r:
+                        rows.append(r)
+                continue
             with open(RESULTS / f"{stem}.csv", newline="") as fh:
                 for r in csv.DictReader(fh):
                     for k in ("published", "gonio", "ratio", "fit_s"):
@@ -249,13 +374,17 @@ def main() -> None:
         print(f"no {ARCHIVE}: skipped")
         return
     if args.speed:
-        load = os.getloadavg()[0]
-        rows = speed(args.speed)
+        load = os.getloadavg()
+        print(f"{args.speed}: {os.cpu_count()} CPUs, load average {load[0]:.1f} {load[1]:.1f} "
+              f"{load[2]:.1f} at start", flush=True)  # fmt: skip
+        rows = speed(args.speed.split(","))
         RESULTS.mkdir(parents=True, exist_ok=True)
         _write_csv(rows, RESULTS / f"{args.out}_speed.csv")
-        print(f"{args.speed}, {os.cpu_count()} CPUs, load {load:.1f} at start")
-        for r in rows:
-            print(f"  {r['what']}: {r['seconds']:.4g}")
+        _plot_speed(rows, RESULTS / f"{args.out}_speed.png")
+        return
+    if args.plot_speed:
+        with open(RESULTS / f"{args.out}_speed.csv", newline="") as fh:
+            _plot_speed(list(csv.DictReader(fh)), RESULTS / f"{args.out}_speed.png")
         return
     from gonio.io.nbrdf import list_materials
 
@@ -267,11 +396,24 @@ def main() -> None:
         names = [n for n in QUICK if n in names]
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            rows = [r for rs in pool.map(run_material, names) for r in rs]
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    partial = RESULTS / f"{args.out}_partial.jsonl"  # rows so far, if the run is cut short
+    rows = []
+    if args.resume and partial.exists():
+        rows = [json.loads(line) for line in partial.read_text().splitlines() if line]
+        done = {r["material"] for r in rows}
+        names = [n for n in names if n not in done]
     else:
-        rows = [r for n in names for r in run_material(n)]
+        partial.unlink(missing_ok=True)
+    with ProcessPoolExecutor(max(args.jobs, 1)) as pool:
+        for rs in pool.map(run_material, names):
+            rows += rs
+            with open(partial, "a") as fh:
+                fh.writelines(json.dumps(r) + "\n" for r in rs)
+    skipped = sorted({r["material"] for r in rows if "family" not in r})
+    if skipped:
+        print(f"not scored (table refused by the reader): {', '.join(skipped)}")
+    rows = [r for r in rows if "family" in r]
     wall = time.perf_counter() - t0
     _report(rows, args.out, f"{len(names)} materials, {args.jobs} jobs, {wall:.0f} s wall "
             f"({os.cpu_count()} CPUs, load {load:.1f} at start)")  # fmt: skip

@@ -74,6 +74,7 @@ def test_help_documents_every_flag(capsys):
         "--jobs",
         "--global",
         "--fix",
+        "--refine",
     ):
         assert flag in out
 
@@ -229,3 +230,15 @@ def test_batch_redoes_other_options_and_keeps_every_model_in_the_summary(tmp_pat
     summary = json.loads((out / "m0" / "summary.json").read_text())
     assert sorted(summary["models"]) == ["lambert", "oren-nayar"]
     assert sorted(r["model"] for r in summary["table"]) == ["lambert", "oren-nayar"]
+
+
+def test_archive_members_are_materials_of_their_own(tmp_path):
+    from gonio.fit.batch import material_name, pending
+
+    zip_path = tmp_path / "merl_nbrdf.zip"
+    zip_path.write_bytes(b"")
+    paths = expand_inputs([f"{zip_path}::gold-paint", f"{zip_path}::pvc"])
+    assert [material_name(p) for p in paths] == ["gold-paint", "pvc"]
+    assert material_name(tmp_path / "x.brdf.h5") == "x"
+    todo, done = pending(paths, tmp_path / "out")
+    assert len(todo) == 2 and not done

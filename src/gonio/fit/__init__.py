@@ -15,12 +15,35 @@ objective), :mod:`~gonio.fit.lm` and :mod:`~gonio.fit.optimize` (optimizers),
 (model names; ``FAMILIES`` lists the literature's families as published).
 """
 
-import gonio.brdf  # noqa: F401  (enables float64 in JAX before anything is traced)
-from gonio.fit.api import FitOptions, fit
-from gonio.fit.data import FitData, prepare
-from gonio.fit.losses import LOSSES
-from gonio.fit.presets import available as available_models
-from gonio.fit.result import FitResult, load_model, read_result
+from importlib import import_module
+from typing import Any
+
+# The names below are loaded on first use (PEP 562), so that ``gonio fit --help`` and the
+# command-line parser do not import JAX (about 4 s on a loaded 2-core machine). gonio.fit.api
+# imports gonio.brdf, which enables float64 in JAX before anything is traced.
+_LAZY = {
+    "FitOptions": ("gonio.fit.api", "FitOptions"),
+    "fit": ("gonio.fit.api", "fit"),
+    "FitData": ("gonio.fit.data", "FitData"),
+    "prepare": ("gonio.fit.data", "prepare"),
+    "LOSSES": ("gonio.fit.losses", "LOSSES"),
+    "available_models": ("gonio.fit.presets", "available"),
+    "FitResult": ("gonio.fit.result", "FitResult"),
+    "load_model": ("gonio.fit.result", "load_model"),
+    "read_result": ("gonio.fit.result", "read_result"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        module, attr = _LAZY[name]
+        import gonio.brdf  # noqa: F401  (float64 in JAX before anything is traced)
+
+        value = getattr(import_module(module), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'gonio.fit' has no attribute {name!r}")
+
 
 __all__ = [
     "LOSSES",

@@ -15,7 +15,7 @@ from gonio.brdf.models import BRDFModel
 from gonio.errors import FitError, ParameterError
 from gonio.fit import presets
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
-from gonio.fit.losses import LOSSES, evaluate, get_loss
+from gonio.fit.losses import LOSSES, evaluate_many, get_loss
 from gonio.fit.objective import Problem
 from gonio.fit.optimize import optimize
 from gonio.fit.params import Layout
@@ -108,7 +108,10 @@ class FitOptions:
         channel fitted on its own; returns one result per channel).
     optimizer : local method ``"lm"``, ``"lbfgs"`` or ``"slsqp"``.
     global_method : None, ``"crs2"``, ``"mlsl"`` or ``"direct"`` before the local stage.
-    n_starts, seed, subsample, max_iter : multi-start settings (see :func:`~.optimize.optimize`).
+    n_starts, seed, subsample, refine, max_iter : multi-start settings (see
+        :func:`~.optimize.optimize`): the starts run on ``subsample`` random samples, the best
+        one is refined on a stratified subset of ``refine`` samples (data of more than twice as
+        many samples only; 0 turns it off), then polished on every sample.
     laplace_method : ``"gauss-newton"`` or ``"hessian"``.
     covariance : Laplace covariance: ``"auto"`` (default), ``"residual"`` (residual-scaled
         inverse Hessian) or ``"cluster"`` (cluster-robust sandwich, which includes the model's
@@ -131,6 +134,7 @@ class FitOptions:
     n_starts: int = 8
     seed: int = 0
     subsample: int = 4000
+    refine: int = 65536
     max_iter: int = 200
     laplace_method: str = "gauss-newton"
     covariance: str = "auto"
@@ -260,6 +264,7 @@ def _fit_one(
         seed=seed,
         subsample=subsample,
         max_iter=max_iter,
+        refine=opts.refine,
     )
     spikes = _degenerate(layout, opt.u)
     restarted = None
@@ -269,7 +274,7 @@ def _fit_one(
         say(f"{name}: degenerate optimum ({', '.join(spikes)} on a bound); restarting")
         again = optimize(problem, method=optimizer, global_method=global_method,
                          n_starts=max(2 * n_starts, 16), seed=seed + 1, subsample=subsample,
-                         max_iter=max_iter)  # fmt: skip
+                         max_iter=max_iter, refine=opts.refine)  # fmt: skip
         restarted = not _degenerate(layout, again.u)
         if restarted:
             opt = again
@@ -277,7 +282,7 @@ def _fit_one(
     f = problem.predict(opt.u)
     if not np.all(np.isfinite(f)):
         raise FitError(f"{name}: the fitted model is not finite on the data")
-    metrics = {k: evaluate(k, f, fd) for k in LOSSES}
+    metrics = evaluate_many(LOSSES, f, fd)
     sig = 1.0 if fd.sigma is None else fd.sigma
     chi2 = float(np.sum(((f - fd.values) / sig) ** 2))
     dof = max(n_res - layout.size, 1)
@@ -343,6 +348,8 @@ def _fit_one(
             "timings": opt.timings,
             "n_starts": n_starts,
             "seed": seed,
+            "subsample": subsample,
+            "refine": opts.refine,
         },
         warnings=warnings_,
         channel=channel,

@@ -35,7 +35,11 @@ DATA_SUFFIXES = (".h5", ".hdf5", ".binary", ".bsdf", ".brdf", ".alta", ".dat", "
 
 
 def material_name(path: Path) -> str:
-    """``acryl_blue`` for ``acryl_blue.brdf``, ``x`` for ``x.brdf.h5``."""
+    """``acryl_blue`` for ``acryl_blue.brdf``, ``x`` for ``x.brdf.h5``, ``gold-paint`` for an
+    archive member ``merl_nbrdf.zip::gold-paint`` (:mod:`gonio.io.nbrdf`)."""
+    archive, sep, member = str(path).rpartition("::")
+    if sep and archive and member:
+        return member
     return path.name.split(".")[0] or path.name
 
 

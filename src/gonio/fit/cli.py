@@ -13,11 +13,13 @@ from typing import Any
 
 from gonio.errors import FitError, ParameterError
 
+#: Names of :data:`gonio.fit.losses.LOSSES` (written out so that building the parser does not
+#: import JAX; a test checks that the two agree).
+LOSS_NAMES = ("cube-root", "low-e1", "low-e2", "ngan", "wls")
+
 
 def register(subparsers: Any) -> None:
     """Add the ``fit`` subcommand."""
-    from gonio.fit.losses import LOSSES
-
     p = subparsers.add_parser(
         "fit",
         help="fit analytic BRDF models (with uncertainty) to measured files",
@@ -50,7 +52,7 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--loss",
         default="auto",
-        choices=["auto", *sorted(LOSSES)],
+        choices=["auto", *LOSS_NAMES],
         help="metric to minimize. Default auto: wls (chi-square) when the data has sigma; "
         "without sigma (published tables: MERL, RGL, Cornell, ALTA) low-e1, Low et al.'s log "
         "metric ln(1 + f cos_i), because their errors are closer to relative than absolute and "
@@ -107,6 +109,15 @@ def register(subparsers: Any) -> None:
         "--starts", type=int, default=8, metavar="N", help="multi-start points (default 8)"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of subsamples and starts (default 0)")
+    p.add_argument(
+        "--refine",
+        type=int,
+        default=65536,
+        metavar="N",
+        help="on data of more than 2N samples, refine the best start on a stratified subset "
+        "of N samples before the polish on every sample, whose steps then use the subset's "
+        "curvature (default 65536; 0: every polish step on every sample, the slower path)",
+    )
     p.add_argument(
         "--fix",
         action="append",
@@ -190,8 +201,8 @@ def run(args: argparse.Namespace) -> int:
         build(m)  # unknown names fail here, before any work
     if args.theta_max <= 0 or args.theta_max > 90:
         raise FitError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
-    if args.starts < 1 or args.mcmc_steps < 10 or args.jobs < 1:
-        raise FitError("--starts and --jobs must be >= 1 and --mcmc-steps >= 10")
+    if args.starts < 1 or args.mcmc_steps < 10 or args.jobs < 1 or args.refine < 0:
+        raise FitError("--starts and --jobs must be >= 1, --mcmc-steps >= 10 and --refine >= 0")
     from gonio.fit.batch import expand_inputs
 
     paths = expand_inputs(args.inputs)
@@ -209,6 +220,8 @@ def run(args: argparse.Namespace) -> int:
         "mcmc_steps": args.mcmc_steps,
         "fixed": _parse_fix(args.fix) or None,
     }
+    if args.refine != 65536:  # recorded only when set, so earlier batch folders stay done
+        fit_opts["refine"] = args.refine
     options = {"models": models, "fit": fit_opts, "plots": not args.no_plots,
                "score": args.score is not None}  # fmt: skip
     out = Path(args.out)

@@ -92,6 +92,21 @@ class FitData:
         idx = np.sort(rng.choice(self.n, size=max_samples, replace=False))
         return self.subset(idx)
 
+    def stratified_subset(self, max_samples: int, seed: int = 0) -> FitData:
+        """At most ``max_samples`` samples, one drawn at random (fixed seed) from each of
+        ``max_samples`` strata of equal count along the half-vector polar angle theta_h; self if
+        fewer. Unlike a plain random subset, the few cells near the specular peak (small theta_h)
+        are represented in proportion, never missed by chance."""
+        if self.n <= max_samples:
+            return self
+        h = self.wi + self.wo
+        cos_h = h[:, 2] / np.linalg.norm(h, axis=1)
+        order = np.argsort(-cos_h, kind="stable")  # theta_h ascending
+        edges = np.linspace(0, self.n, max_samples + 1).astype(np.int64)
+        rng = np.random.default_rng(seed)
+        pick = edges[:-1] + (rng.random(max_samples) * np.diff(edges)).astype(np.int64)
+        return self.subset(np.sort(order[pick]))
+
     def half_diff(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rusinkiewicz ``(theta_h, theta_d, phi_d)`` in radians, each (N,), for plots."""
         from gonio.brdf.frames import half_diff

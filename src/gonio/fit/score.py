@@ -26,18 +26,45 @@ import numpy as np
 from gonio.brdf.models import BRDFModel
 from gonio.errors import FitError, FormatError
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
-from gonio.fit.losses import evaluate
+from gonio.fit.losses import evaluate_many
 
 #: The metrics reported by :func:`score` (keys of :data:`gonio.fit.losses.LOSSES`).
 SCORES = ("ngan", "low-e2")
 
 
+def _eval(model: Any, wi: Any, wo: Any) -> Any:
+    return model.f(wi, wo)
+
+
+_EVAL_JIT: list[Any] = []
+
+
 def model_values(model: Any, data: FitData, chunk: int = 1 << 18) -> np.ndarray:
-    """``model.f`` at the data's direction pairs, ``(N, C)`` float64 (chunked, no jit needed)."""
+    """``model.f`` at the data's direction pairs, ``(N, C)`` float64.
+
+    A gonio model (a JAX pytree) is evaluated by one jitted function in chunks of ``chunk``
+    pairs, the last one padded to full size, so that every model of the same structure reuses
+    one compiled program whatever the data size (evaluating op by op took 2.5 s on a MERL
+    table). Anything else with ``f(wi, wo)`` is called chunk by chunk as it is.
+    """
+    if isinstance(model, BRDFModel):
+        if not _EVAL_JIT:
+            import jax
+
+            _EVAL_JIT.append(jax.jit(_eval))
+        fn = _EVAL_JIT[0]
+    else:
+        fn = _eval
     out = []
     for s in range(0, data.n, chunk):
-        f = np.asarray(model.f(data.wi[s : s + chunk], data.wo[s : s + chunk]), dtype=np.float64)
-        out.append(np.broadcast_to(f, (f.shape[0], data.channels)))
+        wi, wo = data.wi[s : s + chunk], data.wo[s : s + chunk]
+        m = wi.shape[0]
+        if fn is not _eval and m < chunk:
+            up = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (chunk - m, 3))
+            wi, wo = np.concatenate([wi, up]), np.concatenate([wo, up])
+        f = np.asarray(fn(model, wi, wo), dtype=np.float64)
+        f = f[:m] if f.ndim and f.shape[0] == wi.shape[0] else f
+        out.append(np.broadcast_to(f, (m, data.channels)))
     return np.concatenate(out)
 
 
@@ -48,7 +75,7 @@ def score(model: Any, data: Any, theta_max_deg: float = DEFAULT_THETA_MAX_DEG) -
     f = model_values(model, fd)
     if not np.all(np.isfinite(f)):
         raise FitError("the model is not finite on the data")
-    return {k: evaluate(k, f, fd) for k in SCORES}
+    return evaluate_many(SCORES, f, fd)
 
 
 def load_scored_model(spec: str, material: str | None) -> tuple[str, BRDFModel]:

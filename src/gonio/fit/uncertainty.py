@@ -49,20 +49,20 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from statistics import NormalDist
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import stats
 
 from gonio.errors import FitError
 from gonio.fit.objective import Problem
 
 Array = jnp.ndarray
 
-Z68 = float(stats.norm.ppf(0.84))
-Z95 = float(stats.norm.ppf(0.975))
+Z68 = NormalDist().inv_cdf(0.84)  # (statistics, not scipy.stats: 1 s less to import)
+Z95 = NormalDist().inv_cdf(0.975)
 
 
 @dataclass
