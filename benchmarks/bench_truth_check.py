@@ -180,6 +180,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plan", default="demo", help="acquisition plan (default demo)")
     ap.add_argument("--quick", action="store_true", help="plan demo-quick, seeds 1 2 3")
     ap.add_argument("--workdir", type=Path, default=None, help="keep the runs here")
+    ap.add_argument("--stem", default=None,
+                    help="results file name stem (default truth_check[_PLAN]); separate stems let"
+                         " processes acquire disjoint seeds in one --workdir")  # fmt: skip
     args = ap.parse_args(argv)
     if args.quick:
         args.plan, args.seeds = "demo-quick", [1, 2, 3]
@@ -191,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
         tmp = tempfile.TemporaryDirectory()
         workdir = Path(tmp.name)
     RESULTS.mkdir(exist_ok=True)
-    stem = "truth_check" if args.plan == "demo" else f"truth_check_{args.plan}"
+    stem = args.stem or ("truth_check" if args.plan == "demo" else f"truth_check_{args.plan}")
     csv_path = RESULTS / f"{stem}.csv"
     rows, zs = [], []
     with open(csv_path, "w", newline="") as fh:

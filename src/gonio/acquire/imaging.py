@@ -280,26 +280,12 @@ class ImagingCamera:
         return hdr
 
     def _pose(self, hdr) -> BoardPose:
-        rate = np.where(np.isfinite(hdr.rate), hdr.rate, 0.0)
-        # White-balance the mosaic on the (neutral) board so that demosaicking does not turn the
-        # colour planes' different sensitivities into a pixel-level checkerboard.
-        plane = _plane_index(rate.shape, self._cfa)
-        for c in range(3):
-            sel = plane == c
-            level = float(np.percentile(rate[sel], 90))
-            if level > 0:
-                rate = np.where(sel, rate / level, rate)
-        gray = mosaic_to_gray(rate, self._cfa)
-        # A linear map with the 97th percentile at full scale keeps the board's black squares
-        # near black (what the marker decoder expects); the small specular highlight may clip.
-        # If that fails (strong light fall-off across the board), try the log tone map.
-        pos = gray[gray > 0]
-        hi = float(np.percentile(pos, 97)) if pos.size else 1.0
-        linear = (np.clip(gray / hi, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
+        gray = board_gray(hdr.rate, self._cfa)
         try:
-            return estimate_pose(linear, self.layout, self.camera_matrix)
+            return estimate_pose(linear_8bit(gray), self.layout, self.camera_matrix)
         except DeviceError:
             pass
+        # strong light fall-off across the board: the log tone map
         return estimate_pose(to_8bit(gray), self.layout, self.camera_matrix)
 
     def _rescue(self, hdr, exposures: list[float]) -> list[float]:
@@ -425,6 +411,32 @@ class ImagingCamera:
         except Exception:  # an unreadable frame only costs a probe exposure
             return None
         return _Hint(*h) if h else None
+
+
+def board_gray(rate: np.ndarray, cfa: str) -> np.ndarray:
+    """Grey image (H, W) for finding the board in an HDR mosaic (H, W) (NaN: unusable).
+
+    The mosaic is white-balanced on the (neutral) board, each colour plane divided by its 90th
+    percentile, so that demosaicking does not turn the planes' different sensitivities into a
+    pixel-level checkerboard; then demosaicked to grey (:func:`gonio.acquire.pose.mosaic_to_gray`).
+    """
+    rate = np.where(np.isfinite(rate), rate, 0.0)
+    plane = _plane_index(rate.shape, cfa)
+    for c in range(3):
+        sel = plane == c
+        level = float(np.percentile(rate[sel], 90))
+        if level > 0:
+            rate = np.where(sel, rate / level, rate)
+    return mosaic_to_gray(rate, cfa)
+
+
+def linear_8bit(gray: np.ndarray) -> np.ndarray:
+    """8-bit image for board detection: linear, the 97th percentile of the positive values at
+    full scale, which keeps the board's black squares near black (what the marker decoder
+    expects); the small specular highlight may clip."""
+    pos = gray[gray > 0]
+    hi = float(np.percentile(pos, 97)) if pos.size else 1.0
+    return (np.clip(gray / hi, 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
 
 
 def _plane_index(shape: tuple[int, int], cfa: str) -> np.ndarray:

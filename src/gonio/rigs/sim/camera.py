@@ -13,7 +13,12 @@ irradiance ``E = I cos(theta_i) / d^2`` at a point ``d`` away (inverse-square fa
 is a pinhole with natural ``cos^4`` vignetting; a pixel's photo-electron rate is
 ``L * throughput * cos^4(alpha)`` with ``L`` the radiance it sees (W/(m^2 sr)); the
 :class:`~gonio.rigs.sim.sensor.SensorModel` turns rates into noisy raw DN. Each pixel averages
-``supersample^2`` rays so that board edges are anti-aliased as a real lens would blur them.
+``supersample^2`` rays, and the lens and sensor blur (point spread function, anti-aliasing
+filter) is modelled as a Gaussian of ``psf_px`` pixels applied to the board's printed pattern at
+the camera's distance: a few point samples of a sharp pattern alias its edges by up to
+1/(2 supersample) pixel, depending on where each edge falls on the pixel grid, which moves the
+ChArUco corners by ~0.1 px and the recovered camera direction by up to ~0.1 deg, the same in
+every frame of the same geometry (``benchmarks/bench_pose_bias.py``).
 """
 
 from __future__ import annotations
@@ -138,6 +143,11 @@ class VirtualCamera:
         R, G, B planes (quantum efficiency, aperture, pixel area folded together).
     supersample : rays per pixel along each axis.
     seed : base of every frame's noise stream.
+    psf_px : standard deviation (pixels) of the Gaussian blur of the lens and sensor, applied to
+        the board's texture scaled by the camera's distance to the holder centre (exact for a
+        frontal view; foreshortening narrows it along the tilt). 0.8 px: a sharp lens behind a
+        Bayer anti-aliasing filter. The sample and the white reference are rendered unblurred
+        (their radiance varies slowly; their rims are outside the measured regions).
     """
 
     truth: Any
@@ -147,6 +157,24 @@ class VirtualCamera:
     throughput: tuple[float, float, float] = (2.0e6, 2.4e6, 1.7e6)
     supersample: int = 2
     seed: int = 0
+    psf_px: float = 0.8
+    _textures: dict[int, np.ndarray] = field(default_factory=dict, init=False, repr=False)
+
+    def board_texture(self, distance_m: float) -> np.ndarray:
+        """The board's texture blurred by :attr:`psf_px` as seen from ``distance_m`` (cached
+        per micrometre of blur)."""
+        lay = self.layout
+        texel_m = lay.square_m / lay.texture_px_per_square
+        key = round(1e6 * self.psf_px * distance_m / self.camera.focal_px)
+        if key <= 0:
+            return lay.texture
+        if key not in self._textures:
+            from scipy import ndimage
+
+            self._textures[key] = ndimage.gaussian_filter(
+                lay.texture, 1e-6 * key / texel_m, mode="nearest"
+            )
+        return self._textures[key]
 
     def radiance(
         self, pose: CameraPose, light_pos: np.ndarray, intensity: np.ndarray
@@ -186,7 +214,8 @@ class VirtualCamera:
         in_board = hit & (np.abs(p[..., 0]) < w / 2) & (np.abs(p[..., 1]) < h / 2)
         in_board &= ~in_sample & ~in_ref
 
-        board_albedo = _bilinear(lay.texture, (p[..., 0] + w / 2) / w, (h / 2 - p[..., 1]) / h)
+        tex = self.board_texture(float(np.linalg.norm(o)))
+        board_albedo = _bilinear(tex, (p[..., 0] + w / 2) / w, (h / 2 - p[..., 1]) / h)
         L += np.where(in_board[..., None], (board_albedo / np.pi)[..., None] * irradiance, 0.0)
         L += np.where(in_ref[..., None], lay.reference_albedo / np.pi * irradiance, 0.0)
         if in_sample.any():
