@@ -46,6 +46,8 @@ class Warp2D(NamedTuple):
     marg : (S, H) marginal CDF along y, or None.
     params : tuple of D arrays, the parameter values of each slice axis (increasing).
     shape : (H, W) as a small int array (its static shape is what is used).
+    single : ``(data, cond, marg)`` rounded to float32, read by float32 queries: the same
+        values they would round to after the lookup, at half the memory traffic.
     """
 
     data: Array
@@ -53,6 +55,19 @@ class Warp2D(NamedTuple):
     marg: Array | None
     params: tuple[Array, ...]
     shape: Array
+    single: tuple[Array, Array | None, Array | None] | None = None
+
+
+def _f32(*arrays):
+    return tuple(None if a is None else jnp.asarray(np.asarray(a, np.float32)) for a in arrays)
+
+
+def _in(warp: Warp2D, dtype) -> Warp2D:
+    """``warp`` with its tables in the query dtype (float32 copies for float32 queries)."""
+    if warp.single is None or jnp.dtype(dtype) != jnp.float32:
+        return warp
+    data, cond, marg = warp.single
+    return warp._replace(data=data, cond=cond, marg=marg)
 
 
 def build(values: np.ndarray, params: list[np.ndarray], cdf: bool) -> Warp2D:
@@ -77,12 +92,14 @@ def build(values: np.ndarray, params: list[np.ndarray], cdf: bool) -> Warp2D:
     else:
         data = slices
         cond_j = marg_j = None
+    data_j = jnp.asarray(data.reshape(len(slices), -1))
     return Warp2D(
-        jnp.asarray(data.reshape(len(slices), -1)),
+        data_j,
         cond_j,
         marg_j,
         tuple(jnp.asarray(np.asarray(p, dtype=np.float64)) for p in params),
         jnp.zeros((h, w), jnp.int8),
+        _f32(data_j, cond_j, marg_j),
     )
 
 
@@ -177,6 +194,7 @@ def _patch_values(warp: Warp2D, corners, px: Array, py: Array, dtype):
 def eval_warp(warp: Warp2D, pos: Array, params: tuple[Array, ...] = ()) -> Array:
     """Density (or interpolated raw value, for warps without CDFs) at ``pos`` ``(..., 2)``."""
     dtype = pos.dtype
+    warp = _in(warp, dtype)
     h, w = _hw(warp)
     corners = _corners(warp, params, dtype)
     px, py, fx, fy = _patch(warp, pos)
@@ -194,6 +212,7 @@ def eval_channels(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> Array:
     reference reader's colour lookup at a channel's own wavelength), at a third of the cost.
     """
     dtype = pos.dtype
+    warp = _in(warp, dtype)
     h, w = _hw(warp)
     n = h * w
     c_count = int(warp.data.shape[1]) // n
@@ -223,6 +242,7 @@ def build_channels(values: np.ndarray, params: list[np.ndarray]) -> Warp2D:
         None,
         tuple(jnp.asarray(np.asarray(p, dtype=np.float64)) for p in params),
         jnp.zeros((h, w), jnp.int8),
+        _f32(data, None, None),
     )
 
 
@@ -230,6 +250,7 @@ def invert(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> tuple[Array, 
     """Inverse of :func:`sample`: the uniform point ``(..., 2)`` that maps to ``pos``, and the
     density at ``pos``."""
     dtype = pos.dtype
+    warp = _in(warp, dtype)
     h, w = _hw(warp)
     n = h * w
     corners = _corners(warp, params, dtype)
@@ -263,6 +284,7 @@ def _solve_linear_cdf(a: Array, b: Array, s: Array) -> Array:
 def sample(warp: Warp2D, u: Array, params: tuple[Array, ...]) -> tuple[Array, Array]:
     """Warp uniform ``u`` ``(..., 2)`` to a point of the density; returns ``(pos, pdf)``."""
     dtype = u.dtype
+    warp = _in(warp, dtype)
     h, w = _hw(warp)
     n = h * w
     eps = float(np.finfo(np.float32).eps) / 2

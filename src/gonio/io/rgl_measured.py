@@ -62,12 +62,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf._xla import materialize
+from gonio.brdf.frames import upper
 from gonio.brdf.lookup import atan2 as _atan2  # exact in float64, fast polynomial in float32
 from gonio.brdf.models._base import (
     BRDFModel,
     BRDFSample,
+    as_float,
+    clamp_u,
     masked_outgoing,
-    sample_inputs,
 )
 from gonio.errors import ParameterError
 from gonio.io import _warp2d as w2
@@ -126,6 +129,12 @@ class RGLMeasured(BRDFModel):
     """
 
     PARAMS = ()
+
+    #: ``f``, ``pdf`` and ``sample`` take ``wo`` with size-1 axes where ``wi`` or ``u`` have
+    #: more (``(P, 1, 3)`` against ``(P, S, 3)``), and then compute what depends on ``wo`` alone
+    #: (its angles, the slice interpolation of every table, ``sigma``) once per ``wo``. The
+    #: renderer passes its per-pixel outgoing direction so.
+    broadcasts_outgoing = True
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:  # pragma: no cover - guidance only
         raise ParameterError("build RGLMeasured with gonio.io.rgl_measured.load_rgl(path)")
@@ -226,7 +235,13 @@ class RGLMeasured(BRDFModel):
         return val
 
     def _jacobian(self, u_m: Array, u_c: Array) -> Array:
-        return w2.eval_warp(self._ndf, u_m) / (4.0 * w2.eval_warp(self._sigma, u_c))
+        jac = w2.eval_warp(self._ndf, u_m) / (4.0 * w2.eval_warp(self._sigma, u_c))
+        # Stored once before it scales the C channels (and the pdf likewise before it divides
+        # them): XLA:CPU otherwise recomputes the lookups inside the channels' loop. Same-run
+        # A/B, 64^2 sphere render at 32 spp (paper_white, 3 alternating rounds, load 20-24):
+        # CPU time 0.116-0.119 s without, 0.088-0.091 s with.
+        (jac,) = materialize([jac], u_m[..., 0])
+        return jac
 
     def _half(self, wc: Array, ws: Array):
         m = wc + ws
@@ -308,14 +323,27 @@ class RGLMeasured(BRDFModel):
     def sample(self, wo: Any, u: Any) -> BRDFSample:
         """Draw ``wi`` for ``wo`` ``(..., 3)`` from ``u`` ``(..., 2)`` through the file's
         luminance and VNDF warps; ``weight = f cos(theta_i) / pdf``."""
-        wo, u = sample_inputs(wo, u)
+        wo = as_float(wo)
+        u = clamp_u(as_float(u, wo.dtype))
+        # u spans the whole batch; wo keeps its size-1 axes (see broadcasts_outgoing)
+        u = jnp.broadcast_to(u, (*jnp.broadcast_shapes(wo.shape[:-1], u.shape[:-1]), 2))
         return _sample_jit(self, wo, u)
+
+    def _f_public(self, wi: Array, wo: Array) -> Array:
+        ok_i, ok_o = upper(wi), upper(wo)
+        val = self._f(_safe(wi, ok_i), _safe(wo, ok_o))
+        ok = ok_i & ok_o
+        return jnp.where(ok[..., None], val, 0.0).astype(wi.dtype)
+
+    def _pdf_public(self, wi: Array, wo: Array) -> Array:
+        ok_i, ok_o = upper(wi), upper(wo)
+        return jnp.where(ok_i & ok_o, self._pdf(_safe(wi, ok_i), _safe(wo, ok_o)), 0.0)
 
     def _sample_public(self, wo: Array, u: Array) -> BRDFSample:
         wo_s, ok_o = masked_outgoing(wo)
         wi, pdf, val = self._sample_all(wo_s, u)
         ok = ok_o & (wi[..., 2] > 0) & (pdf > 0) & jnp.isfinite(pdf)
-        pdf = jnp.where(ok, pdf, 0.0)
+        (pdf,) = materialize([jnp.where(ok, pdf, 0.0)], pdf)
         weight = jnp.where(ok[..., None], val / jnp.where(ok, pdf, 1.0)[..., None], 0.0)
         return BRDFSample(
             wi.astype(wo.dtype),
@@ -425,20 +453,24 @@ class RGLMeasured(BRDFModel):
 
 
 def _dirs(wi: Any, wo: Any) -> tuple[Array, Array]:
-    wi, wo = jnp.asarray(wi), jnp.asarray(wo)
-    if not jnp.issubdtype(wi.dtype, jnp.floating):
-        wi = wi.astype(jnp.float64)
-    if not jnp.issubdtype(wo.dtype, jnp.floating):
-        wo = wo.astype(jnp.float64)
+    """Both directions as floats of one dtype; not broadcast (see ``broadcasts_outgoing``)."""
+    wi, wo = as_float(wi), as_float(wo)
     if wi.shape[-1:] != (3,) or wo.shape[-1:] != (3,):
         raise ParameterError(f"directions must have shape (..., 3), got {wi.shape}, {wo.shape}")
-    return wi, wo
+    dtype = jnp.result_type(wi, wo)
+    return wi.astype(dtype), wo.astype(dtype)
+
+
+def _safe(w: Array, ok: Array) -> Array:
+    """``w`` with the directions at or below the horizon replaced by the normal (the code
+    never sees degenerate input; gradients stay finite)."""
+    return jnp.where(ok[..., None], w, jnp.array([0.0, 0.0, 1.0], w.dtype))
 
 
 # jit at the public boundary (called eagerly, op-by-op dispatch of the warps would dominate;
 # under an outer jit these are inlined)
-_f_jit = jax.jit(BRDFModel.f)
-_pdf_jit = jax.jit(BRDFModel.pdf)
+_f_jit = jax.jit(RGLMeasured._f_public)
+_pdf_jit = jax.jit(RGLMeasured._pdf_public)
 _sample_jit = jax.jit(RGLMeasured._sample_public)
 
 

@@ -351,6 +351,8 @@ def _model_stage(model, proposal, light_wi, wo, sobol, shift, *, kind, mis, ligh
     f, pdf, sample = _model_ops(model, kind, proposal)
     u = _uniforms(sobol, shift)
     wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
+    if kind == "model" and getattr(model, "broadcasts_outgoing", False):
+        wo_s = wo[:, None, :]  # the model computes what depends on wo once per pixel
     fv = [f(wi, wo_s) for wi in light_wi] if light_sampling else None
     pb = [pdf(wi, wo_s) for wi in light_wi] if light_sampling and mis else None
     brdf = sample(wo_s, u[..., :2]) if kind != "none" else None
