@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import time
 from pathlib import Path
 
@@ -162,6 +163,7 @@ def throughput(n: int, files: list[str]) -> list[dict]:
                 )
                 row["ratio_f"] = row["gonio_f_Mps"] / row["mitsuba_eval_Mps"]
                 row["ratio_sample"] = row["gonio_sample_Mps"] / row["mitsuba_sample_Mps"]
+            row["load_avg_1min"] = os.getloadavg()[0]
             rows.append(row)
             print(row, flush=True)
     return rows
@@ -209,7 +211,8 @@ def fit_render(files: list[str], spp: int, ref_spp: int, res: int, fit: bool = T
                          "tabulate_s": t_tab if label == "resampled" else 0.0, "loss": "",
                          "mse": mse, "efficiency": 1.0 / (mse * t_r), "mse_own": mse_own,
                          "efficiency_own": 1.0 / (mse_own * t_r), "cpu_seconds": cpu[label],
-                         "efficiency_own_cpu": 1.0 / (mse_own * cpu[label])})  # fmt: skip
+                         "efficiency_own_cpu": 1.0 / (mse_own * cpu[label]),
+                         "load_avg_1min": os.getloadavg()[0]})  # fmt: skip
         for r in rows[-4:]:
             print(r, flush=True)
     return rows

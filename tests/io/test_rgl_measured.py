@@ -312,6 +312,28 @@ def test_renderer_consumes_it_directly_and_negative_values_stay_finite():
     assert render_sphere(clamped, None, resolution=16, spp=8).min() >= 0
 
 
+def test_outgoing_direction_with_size_one_axes_gives_the_broadcast_result():
+    """The renderer passes its per-pixel ``wo`` as ``(P, 1, 3)`` against ``(P, S, 3)``
+    (``broadcasts_outgoing``): f, pdf and sample must equal the fully broadcast call, including
+    where ``wo`` or ``wi`` is below the horizon."""
+    m = load_rgl(shared_file("rgl", "cc_ibiza_sunset_rgb.bsdf"))
+    assert m.broadcasts_outgoing
+    rng = np.random.default_rng(5)
+    wo = _hemi(rng, 12, COS_85).astype(np.float32)
+    wo[0, 2] = -wo[0, 2]  # one outgoing direction below the horizon
+    wi = _hemi(rng, 12 * 7, COS_85).astype(np.float32).reshape(12, 7, 3)
+    wi[3, 2, 2] = -wi[3, 2, 2]
+    u = rng.random((12, 7, 2)).astype(np.float32)
+    wo1, wo_b = wo[:, None, :], np.broadcast_to(wo[:, None, :], wi.shape)
+    np.testing.assert_allclose(np.asarray(m.f(wi, wo1)), np.asarray(m.f(wi, wo_b)), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(m.pdf(wi, wo1)), np.asarray(m.pdf(wi, wo_b)), rtol=1e-6)
+    a, b = m.sample(wo1, u), m.sample(wo_b, u)
+    assert a.wi.shape == b.wi.shape == (12, 7, 3) and a.weight.shape == (12, 7, 3)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-7)
+    assert np.all(np.asarray(a.pdf)[0] == 0) and np.all(np.asarray(m.f(wi, wo1))[0] == 0)
+
+
 def test_fitter_consumes_the_file_nodes():
     from gonio.fit.data import prepare
 
