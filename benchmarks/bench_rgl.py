@@ -7,7 +7,8 @@ and the exact path against the resampled (MERL-grid table) one in fitting and re
    float64) against ``eval`` and ``sample`` of Mitsuba's ``measured`` BSDF in the ``llvm_ad_rgb``
    variant (vectorized; needs Debian's ``libllvm19``), or ``scalar_rgb`` (a Python loop over
    scalar calls, far slower, measured on fewer queries) when LLVM is not available. Warm
-   timings: best of three after an untimed call of the same size (JIT compilation excluded).
+   timings: best of ``ROUNDS`` rounds that run gonio's and Mitsuba's calls in turn, after an
+   untimed call of each (JIT compilation excluded).
    Mitsuba's time includes moving the results to NumPy, gonio's too.
 2. Fit: ``gonio.fit.fit(..., "lambert+ward", loss="ngan")`` on the exact file (its own nodes,
    :meth:`RGLMeasured.to_samples`) and on its MERL-grid resampling (``to_table()``, whose
@@ -48,6 +49,7 @@ FILES = [
 SPP = 32
 REF_SPP = 1024
 REPEAT = 5
+ROUNDS = 5  # alternating throughput rounds (gonio and Mitsuba in turn)
 RES = 64
 
 
@@ -130,12 +132,27 @@ def _mitsuba_ops(mi, variant: str, path: Path, wi, wo, u):
     return ev, sa
 
 
-def throughput(n: int, files: list[str]) -> list[dict]:
+def _alternating(fns: dict, rounds: int) -> dict:
+    """Best time of each callable over ``rounds`` rounds that run them in turn (after an
+    untimed warm call of each): load on a shared machine then disturbs all of them alike."""
+    for fn in fns.values():
+        fn()
+    best = dict.fromkeys(fns, float("inf"))
+    for _ in range(rounds):
+        for key, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            best[key] = min(best[key], time.perf_counter() - t0)
+    return best
+
+
+def throughput(n: int, files: list[str], rounds: int = ROUNDS) -> list[dict]:
     import jax
 
     from gonio.io.rgl_measured import load_rgl
 
     variant, mi = _mitsuba()
+    dtypes = (np.float32, np.float64)
     rows = []
     for name in files:
         path = DATA / name
@@ -143,23 +160,28 @@ def throughput(n: int, files: list[str]) -> list[dict]:
         m = load_rgl(path)
         f_jit = jax.jit(lambda m, a, b: m.f(a, b))
         s_jit = jax.jit(lambda m, a, b: m.sample(a, b).weight)
-        for dtype in (np.float32, np.float64):
+        fns = {}
+        for dtype in dtypes:
             wi, wo, u = (x.astype(dtype) for x in _queries(n))
-            t_f = _best(lambda: np.asarray(f_jit(m, wi, wo)))  # noqa: B023
-            t_s = _best(lambda: np.asarray(s_jit(m, wo, u)))  # noqa: B023
-            row = {"file": name, "load_ms": 1e3 * t_load, "gonio_dtype": np.dtype(dtype).name,
-                   "n": n, "gonio_f_Mps": n / t_f / 1e6,
-                   "gonio_sample_Mps": n / t_s / 1e6}  # fmt: skip
+            key = np.dtype(dtype).name
+            fns[("f", key)] = lambda wi=wi, wo=wo: np.asarray(f_jit(m, wi, wo))  # noqa: B023
+            fns[("s", key)] = lambda wo=wo, u=u: np.asarray(s_jit(m, wo, u))  # noqa: B023
+        k = n if variant is not None and variant.startswith("llvm") else min(n, 2000)
+        if mi is not None:
+            ev, sa = _mitsuba_ops(mi, variant, path, *_queries(k))
+            fns["mi_eval"], fns["mi_sample"] = ev, sa
+        best = _alternating(fns, rounds)
+        for dtype in dtypes:
+            key = np.dtype(dtype).name
+            row = {"file": name, "load_ms": 1e3 * t_load, "gonio_dtype": key, "n": n,
+                   "gonio_f_Mps": n / best[("f", key)] / 1e6,
+                   "gonio_sample_Mps": n / best[("s", key)] / 1e6}  # fmt: skip
             if mi is not None:
-                k = n if variant.startswith("llvm") else min(n, 2000)
-                wi64, wo64, u64 = _queries(k)
-                ev, sa = _mitsuba_ops(mi, variant, path, wi64, wo64, u64)
-                t_me, t_ms = _best(ev, 2), _best(sa, 2)
                 row.update(
                     mitsuba_variant=variant,
                     mitsuba_n=k,
-                    mitsuba_eval_Mps=k / t_me / 1e6,
-                    mitsuba_sample_Mps=k / t_ms / 1e6,
+                    mitsuba_eval_Mps=k / best["mi_eval"] / 1e6,
+                    mitsuba_sample_Mps=k / best["mi_sample"] / 1e6,
                 )
                 row["ratio_f"] = row["gonio_f_Mps"] / row["mitsuba_eval_Mps"]
                 row["ratio_sample"] = row["gonio_sample_Mps"] / row["mitsuba_sample_Mps"]
