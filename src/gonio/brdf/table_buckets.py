@@ -165,9 +165,10 @@ class LazyBuckets:
             # inside jit the outgoing directions are unknown: build every bucket
             self.ensure(np.arange(n_buckets))
         else:
-            met = np.asarray(buckets_met(geo, wo))
+            # one explicit copy of the flags (not of a bucket per direction)
+            met = jax.device_get(buckets_met(geo, wo))
             if also_float32 and wo.dtype != jnp.float32:
-                met = met | np.asarray(buckets_met(geo, wo.astype(jnp.float32)))
+                met = met | jax.device_get(buckets_met(geo, wo.astype(jnp.float32)))
             self.ensure(np.flatnonzero(met))
         return self.stacked(n_buckets, dtype)
 
@@ -206,8 +207,8 @@ class LazyBuckets:
                 if self._combine is not None:
                     arrays = self._combine(stacks)
                 else:
-                    arrays = {name: jnp.asarray(a) for name, a in stacks.items()}
-                self._stack = (jnp.asarray(slot_of), arrays)
+                    arrays = {name: jax.device_put(a) for name, a in stacks.items()}
+                self._stack = (jax.device_put(slot_of), arrays)
         return self._stack
 
 
