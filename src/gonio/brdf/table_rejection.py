@@ -161,8 +161,7 @@ class TableRejection:
         store = self.stores[_checked(proposal)]
         # proposals run in float32, where a direction on a bucket edge may round into the
         # neighbouring bucket: that one is built too
-        wo_f = wo.reshape(-1, 3)
-        slot_of, run = store.prepare(self.geo, wo_f, jnp.float32, also_float32=True)
+        slot_of, run = store.prepare(self.geo, wo, jnp.float32, also_float32=True)
         _, pdf = store.stacked(self.n_buckets, dt)
         return {"slot_of": slot_of, "run": run, "pdf": pdf}
 

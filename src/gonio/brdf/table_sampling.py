@@ -164,7 +164,8 @@ class TableSampler:
     # -- public entry points -------------------------------------------------------------------
     def state(self, method: str, wo: Any, proposal: Any, dt: Any) -> dict[str, Any]:
         """The device arrays :meth:`sample` and :meth:`pdf` read for ``method``, with the
-        buckets of the directions ``wo (..., 3)`` built (every bucket when ``wo`` is traced).
+        buckets of the directions ``wo (..., 3)`` (or a list of such arrays) built (every bucket
+        when ``wo`` is traced).
 
         A pytree of arrays: passed to a jitted caller as an argument, it lets that caller trace
         :meth:`sample` and :meth:`pdf` (``state=``) with no host work and no host round trip;

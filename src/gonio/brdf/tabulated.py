@@ -481,22 +481,27 @@ class TabulatedBRDF:
         self, method: str, wo: Any, proposal: Any = "majorant", dtype: Any = jnp.float32
     ) -> dict[str, Any]:
         """The sampling structures of ``method`` as a pytree of device arrays, with the buckets
-        of the outgoing directions ``wo (..., 3)`` built first (on the host, once).
+        of the outgoing directions ``wo`` built first (on the host, once).
 
         Pass it to :meth:`sample` and :meth:`pdf` (``state=``), as an argument of a jitted
         function, to sample at device speed: a renderer knows every outgoing direction of an
-        image before it starts, builds once and then never waits on the host. Directions in
-        other buckets: see :meth:`gonio.brdf.table_sampling.TableSampler.state` (rejection
-        needs each direction's own bucket). The arrays are in ``dtype`` (that of the ``wo``
-        the calls will get); the pytree's shapes grow when more buckets are built (capacity a
-        power of 2), so a jitted caller recompiles only when the count passes one.
+        image before it starts, builds once and then never waits on the host. ``wo``:
+        directions ``(..., 3)``, or a list of such arrays (e.g. an image's tiles, whose fixed
+        shapes compile the bucket histogram once). Directions in other buckets: see
+        :meth:`gonio.brdf.table_sampling.TableSampler.state` (rejection needs each
+        direction's own bucket). The arrays are in ``dtype`` (that of the ``wo`` the calls will
+        get); the pytree's shapes grow when more buckets are built (capacity a power of 2), so
+        a jitted caller recompiles only when the count passes one.
         """
-        if not isinstance(wo, jax.Array) or wo.dtype != dtype:
-            wo = jax.device_put(np.asarray(wo, dtype))
-        if wo.shape[-1:] != (3,):
-            raise ParameterError(f"sampling_state needs wo (..., 3), got {wo.shape}")
-        dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
-        return self._sampler().state(method, _above_horizon(wo), proposal, dt)
+        ws = []
+        for w in wo if isinstance(wo, list | tuple) else [wo]:
+            if not isinstance(w, jax.Array) or w.dtype != dtype:
+                w = jax.device_put(np.asarray(w, dtype))
+            if w.shape[-1:] != (3,):
+                raise ParameterError(f"sampling_state needs wo (..., 3), got {w.shape}")
+            ws.append(_above_horizon(w))
+        dt = jnp.float64 if jnp.dtype(dtype) == jnp.float64 else jnp.float32
+        return self._sampler().state(method, ws, proposal, dt)
 
     def sampling_cache_size(self, method: str | None = None) -> int:
         """Number of outgoing-direction buckets whose sampling structures have been built (for

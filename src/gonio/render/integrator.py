@@ -565,13 +565,12 @@ def _render_area(
     tiles = list(tile_spans(n_pix, p_tile))
     total = len(tiles) * n_batches
     done = 0
+    wo_tiles = [device_array(pad_rows(hits.wo[a:b], p_tile)) for a, b in tiles]
     state = None
     if is_table(material) and tech.kind in TABLE_METHODS:
         # every outgoing direction of the image is known here: the table's sampling structures
         # for their buckets are built once, and the kernels take them as arguments
-        # (padded to one of the tile sizes, so that the bucket histogram compiles once per size)
-        wo_all = pad_rows(hits.wo, pixel_tile(n_pix, 1 << 30))
-        state = material.sampling_state(tech.kind, device_array(wo_all))
+        state = material.sampling_state(tech.kind, wo_tiles)
     # Sample points and weights go to the device once; each tile's sums stay there (the shade
     # stage adds each batch into them) and come back in one transfer at the end, so that no
     # kernel call waits on a copy to the host.
@@ -596,10 +595,9 @@ def _render_area(
             if progress is not None:
                 progress(done, total)
 
-    for a, b in tiles:
+    for (a, b), wo in zip(tiles, wo_tiles, strict=True):
         pos = device_array(pad_rows(hits.position[a:b], p_tile))
         frame = device_array(pad_rows(hits.frame[a:b], p_tile))
-        wo = device_array(pad_rows(hits.wo[a:b], p_tile))
         sh = device_array(pad_rows(shift[a:b], p_tile))
         acc = device_array(np.zeros((p_tile, c_out), np.float32))
         for k, (sb, wb) in enumerate(batches):
