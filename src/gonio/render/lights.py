@@ -378,7 +378,8 @@ class Environment(Light):
         scale = float(scale)
         if not (math.isfinite(scale) and scale >= 0):
             raise ParameterError(f"environment scale must be finite and >= 0, got {scale}")
-        self.image = jnp.asarray(arr * scale, dtype=jnp.float32)
+        # cast on the host: device_put compiles nothing (jnp.asarray would convert on the device)
+        self.image = jax.device_put((arr * scale).astype(np.float32))
         self.name = name
         self._dist = None
 
@@ -396,7 +397,7 @@ class Environment(Light):
     def importance(self) -> Environment:
         """This light with its importance map built (idempotent; called before sampling)."""
         if self._dist is None:
-            img = np.asarray(self.image, dtype=np.float64)
+            img = np.asarray(jax.device_get(self.image), dtype=np.float64)  # once per light
             h = img.shape[0]
             sin_t = np.sin(np.pi * (np.arange(h) + 0.5) / h)
             lum = img.mean(axis=-1) * sin_t[:, None]
