@@ -13,9 +13,10 @@ millions per second. With ``--clock cpu`` a call is timed by the CPU time of the
 costs rather than how long it waited for a core (the figure is then CPU-seconds per query, not a
 rate anyone sees; compare ratios).
 
-Writes benchmarks/results/table_ab.csv (one row per child and operation) and prints a Markdown
-table with each side's range over the rounds and the ratio of their medians.
+Writes benchmarks/results/table_ab.csv (or ``--csv NAME``; one row per child and operation) and
+prints a Markdown table with each side's range over the rounds and the ratio of their medians.
 Run: .venv/bin/python benchmarks/ab_table.py --ref COMMIT [--rounds R] [--calls K] [--clock cpu]
+[--ops lookup,inversion,render-inversion,...] [--csv NAME]
 """
 
 from __future__ import annotations
@@ -35,6 +36,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results"
 OPS = ("lookup", "inversion", "alias", "rejection", "rejection-jit")
+#: renders of the table (128² sphere, studio environment, 16 spp) by each sampler: rates in
+#: million samples (pixels hit x spp) per second
+RENDER_OPS = ("render-inversion", "render-alias", "render-rejection")
 
 
 def median_cpu_time(fn, repeats: int) -> float:
@@ -50,7 +54,7 @@ def median_cpu_time(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
-def child(batch: int, calls: int, clock: str = "wall") -> dict[str, float]:
+def child(batch: int, calls: int, clock: str = "wall", ops=OPS) -> dict[str, float]:
     """Throughput (M/s) of each operation with whichever gonio is importable."""
     import jax
     import numpy as np
@@ -69,19 +73,32 @@ def child(batch: int, calls: int, clock: str = "wall") -> dict[str, float]:
         "lookup": lambda: lookup(wi, wo),
         "rejection-jit": lambda: sample_jit(wo, u),  # the sampler called under jit: no host loop
     }
+    from gonio.render import Environment, RenderStats, render_sphere
+
+    stats = RenderStats()
+    env = Environment("studio")
+
+    def render(method):
+        return lambda: render_sphere(
+            table, env, resolution=128, spp=16, sampler=method, stats=stats
+        )
+
+    for op in RENDER_OPS:
+        calls_of[op] = render(op.split("-")[1])
     rates = {}
-    for op in OPS:
+    for op in ops:
         fn = calls_of.get(op, lambda op=op: table.sample(wo, u, method=op))
         jax.block_until_ready(fn())  # compile and build the sampling structures
         timer = median_cpu_time if clock == "cpu" else median_time
-        rates[op] = batch / timer(fn, calls) / 1e6  # after one more warm-up call
+        count = stats.pixels * 16 if op in RENDER_OPS else batch
+        rates[op] = count / timer(fn, calls) / 1e6  # after one more warm-up call
     return rates
 
 
-def run_child(src: Path, batch: int, calls: int, clock: str = "wall") -> dict[str, float]:
+def run_child(src: Path, batch: int, calls: int, clock: str = "wall", ops=OPS) -> dict[str, float]:
     env = dict(os.environ, PYTHONPATH=str(src))
     cmd = [sys.executable, __file__, "--child", "--batch", str(batch), "--calls", str(calls)]
-    cmd += ["--clock", clock]
+    cmd += ["--clock", clock, "--ops", ",".join(ops)]
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     if out.returncode != 0:
         raise SystemExit(f"benchmark child for {src} failed: {out.stderr.strip().splitlines()[-1]}")
@@ -97,11 +114,21 @@ def main() -> None:
         "--clock", choices=("wall", "cpu"), default="wall", help="time calls by wall or CPU time"
     )
     ap.add_argument("--batch", type=float, default=1e6, help="queries per call (default 1e6)")
+    ap.add_argument(
+        "--ops",
+        default=",".join(OPS),
+        help=f"comma-separated operations to time, of {', '.join(OPS + RENDER_OPS)}",
+    )
+    ap.add_argument("--csv", default="table_ab.csv", help="file name under benchmarks/results")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     batch = int(args.batch)
+    ops = tuple(o for o in args.ops.split(",") if o)
+    unknown = sorted(set(ops) - set(OPS + RENDER_OPS))
+    if unknown or not ops:
+        ap.error(f"unknown operation(s) {unknown}; choose from {', '.join(OPS + RENDER_OPS)}")
     if args.child:
-        print(json.dumps(child(batch, args.calls, args.clock)))
+        print(json.dumps(child(batch, args.calls, args.clock, ops)))
         return
     if not args.ref:
         ap.error("--ref COMMIT is required")
@@ -125,7 +152,7 @@ def main() -> None:
                 # ABBA order: with a fixed order a steady drift of the machine's speed over
                 # the run would favour whichever side goes first in every round
                 for side, src in sides if r % 2 == 0 else sides[::-1]:
-                    rates = run_child(src, batch, args.calls, args.clock)
+                    rates = run_child(src, batch, args.calls, args.clock, ops)
                     print(
                         f"round {r + 1} {side}: "
                         + ", ".join(f"{k} {v:.2f}" for k, v in rates.items())
@@ -139,7 +166,7 @@ def main() -> None:
                 ["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False
             )
     RESULTS.mkdir(exist_ok=True)
-    with open(RESULTS / "table_ab.csv", "w", newline="") as fh:
+    with open(RESULTS / args.csv, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=["round", "side", "op", "rate_M_per_s"])
         w.writeheader()
         w.writerows(rows)
@@ -148,7 +175,7 @@ def main() -> None:
         "| ratio of medians |"
     )
     print("|---|---:|---:|---:|")
-    for op in OPS:
+    for op in ops:
         ref = [float(x["rate_M_per_s"]) for x in rows if x["op"] == op and x["side"] == "ref"]
         new = [float(x["rate_M_per_s"]) for x in rows if x["op"] == op and x["side"] == "new"]
         ratio = statistics.median(new) / statistics.median(ref)

@@ -7,16 +7,22 @@ that the same script gives the device figures as soon as such a machine is avail
   Torrance-Sparrow Beckmann/GGX with Smith and conductor or dielectric Fresnel; RGB) at
   ``--batch`` float32 queries;
 - renders: ``render_sphere`` of a Lambertian and a GGX conductor sphere under the studio
-  environment (``--res``², ``--spp``), and under two directional lights; the figure is the
-  second call (the first compiles), in million samples per second (pixels hit x spp; one
-  sample per pixel and light for delta lights).
+  environment (``--res``², ``--spp``), and under two directional lights, and of a MERL-grid
+  table of a glossy model sampled by inversion and by exact rejection under the studio; the
+  figure is the best of ``--repeats`` calls after the first (which compiles and builds the
+  table's sampling structures), in million samples per second (pixels hit x spp; one sample
+  per pixel and light for delta lights);
+- recompiles: XLA compilations (counted over all of JAX; the ``count`` column) of renders
+  with other spp, image sizes and light counts, after one render of each scene kind and pixel
+  tile size (0 expected).
 
-Known host round trips that bound the render figures on a GPU (not on a CPU): the renderer
-uploads every tile's geometry from NumPy (its sample points once per render; tile sums stay on
-the device and come back in one transfer at the end, ``integrator._render_area``, which waits
-without a copy on the call dispatched a few calls earlier); tabulated BRDFs sampled by their own
-methods run outside ``jit`` and build per-bucket structures on the host. Analytic
-models, as here, are traced into the render kernels.
+Every kernel of these renders is traced, tables included (their sampling structures are built
+once per render for the outgoing directions of the image and passed as kernel arguments), and
+no kernel call waits on a copy to the host. What is left on the host per render: the sphere's
+geometry (NumPy), uploaded per tile by ``device_put`` (asynchronous), one copy of the bucket
+flags of a table and the building of new buckets, one copy of the image at the end; the driver
+waits, without a copy, on the call dispatched a few calls earlier (``integrator.IN_FLIGHT``)
+to bound the memory queued calls hold.
 
 Writes benchmarks/results/gpu_<platform>.csv and .png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_gpu.py [--quick]
@@ -38,7 +44,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_mitsuba import pairs, upper
 from gonio.brdf import models
-from gonio.render import Directional, Environment, RenderStats, render_sphere
+from gonio.brdf.tabulated import TabulatedBRDF
+from gonio.render import Directional, Environment, RenderStats, SphereLight, render_sphere
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -51,6 +58,21 @@ def timed(fn, repeats: int) -> float:
         jax.block_until_ready(fn())
         ts.append(time.perf_counter() - t0)
     return statistics.median(ts)
+
+
+def count_compiles(fn) -> int:
+    """XLA compilations during ``fn()``."""
+    n = [0]
+
+    def listener(event, duration, **kw):
+        n[0] += event == "/jax/core/compile/backend_compile_duration"
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        fn()
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    return n[0]
 
 
 def main() -> None:
@@ -98,21 +120,66 @@ def main() -> None:
             1,
         ),
     }
-    for mname, mat in materials.items():
-        for sname, (lights, spp) in scenes.items():
-            stats = RenderStats()
+    table = TabulatedBRDF.merl_like(
+        models.Lambert([0.1, 0.08, 0.05])
+        + models.TorranceSparrow(alpha=0.2, distribution="beckmann", fresnel=gold)
+    )
+    cases = [(m, mat, s, "auto") for m, mat in materials.items() for s in scenes]
+    cases += [
+        ("MERL-grid table", table, "studio environment", m) for m in ("inversion", "rejection")
+    ]
+    for mname, mat, sname, sampler in cases:
+        lights, spp = scenes[sname]
+        stats = RenderStats()
 
-            def go(mat=mat, lights=lights, spp=spp, stats=stats):
-                return render_sphere(mat, lights, resolution=args.res, spp=spp, stats=stats)
+        def go(mat=mat, lights=lights, spp=spp, stats=stats, sampler=sampler):
+            return render_sphere(
+                mat, lights, resolution=args.res, spp=spp, sampler=sampler, stats=stats
+            )
 
-            go()  # compile
+        go()  # compile (and build a table's sampling structures)
+        ts = []
+        for _ in range(args.repeats):
             t0 = time.perf_counter()
             go()
-            sec = time.perf_counter() - t0
-            samples = stats.pixels * spp * (len(lights) if spp == 1 else 1)
-            rows.append(("render", f"{mname}, {sname}", f"{args.res}² {spp} spp", samples, sec,
-                         samples / sec / 1e6))  # fmt: skip
-            print(f"render {mname}, {sname}: {sec:.3f} s, {samples / sec / 1e6:.2f} M samples/s")
+            ts.append(time.perf_counter() - t0)
+        sec = min(ts)
+        samples = stats.pixels * spp * (len(lights) if spp == 1 else 1)
+        what = f"{mname} ({sampler}), {sname}" if sampler != "auto" else f"{mname}, {sname}"
+        rows.append(("render", what, f"{args.res}² {spp} spp", samples, sec, samples / sec / 1e6))
+        print(f"render {what}: {sec:.3f} s, {samples / sec / 1e6:.2f} M samples/s", flush=True)
+
+    # Recompiles: after one render of each scene kind (and of each pixel-tile size, 256 x 4^k up
+    # to the tile cap: the first image that needs a tile size compiles it once), renders with
+    # other spp, image sizes and light counts.
+    env = scenes["studio environment"][0]
+    suns = [Directional.from_angles(0.2 * k, 0.7 * k, 1.0) for k in range(1, 6)]
+    balls = [SphereLight((3.0 * np.cos(a), 3.0 * np.sin(a), 2.0), 0.5, 3.0) for a in (0, 1, 2)]
+    for mat, sampler in ((materials["TS GGX Smith conductor"], "auto"), (table, "inversion")):
+        for r in (40, 100, 200):
+            render_sphere(mat, env, resolution=r, spp=8, sampler=sampler)
+        render_sphere(mat, env + balls[:1], resolution=args.res, spp=4, sampler=sampler)
+        render_sphere(mat, suns[:1], resolution=args.res, spp=1)
+        variants = {
+            "spp (3, 17, 40)": lambda m=mat, s=sampler: [
+                render_sphere(m, env, resolution=args.res, spp=k, sampler=s) for k in (3, 17, 40)
+            ],
+            "image sizes (44, 120, 230)": lambda m=mat, s=sampler: [
+                render_sphere(m, env, resolution=r, spp=8, sampler=s) for r in (44, 120, 230)
+            ],
+            "delta light counts (2, 3, 5)": lambda m=mat: [
+                render_sphere(m, suns[:k], resolution=args.res, spp=1) for k in (2, 3, 5)
+            ],
+            "sphere light counts (2, 3, 3) and spp": lambda m=mat, s=sampler: [
+                render_sphere(m, env + balls[:k], resolution=args.res, spp=q, sampler=s)
+                for k, q in ((2, 8), (3, 4), (3, 21))
+            ],
+        }
+        name = "MERL-grid table (inversion)" if mat is table else "TS GGX Smith conductor"
+        for label, fn in variants.items():
+            n = count_compiles(fn)
+            rows.append(("recompiles", name, f"3 renders, other {label}", n, None, None))
+            print(f"recompiles {name}, other {label}: {n}", flush=True)
 
     load = os.getloadavg()[0]
     RESULTS.mkdir(exist_ok=True)
@@ -121,7 +188,9 @@ def main() -> None:
         w = csv.writer(fh)
         w.writerow(["kind", "what", "op", "count", "seconds", "M_per_s", "device", "load_avg"])
         for r in rows:
-            w.writerow([*r[:4], f"{r[4]:.4f}", f"{r[5]:.3g}", dev.device_kind, f"{load:.1f}"])
+            rate = ["", ""] if r[4] is None else [f"{r[4]:.4f}", f"{r[5]:.3g}"]
+            w.writerow([*r[:4], *rate, dev.device_kind, f"{load:.1f}"])
+    rows = [r for r in rows if r[0] != "recompiles"]  # counts, not rates: table only
 
     import matplotlib
 
@@ -144,6 +213,10 @@ def main() -> None:
     print("|---|---|---|---:|")
     for r in rows:
         print(f"| {r[0]} | {r[1]} | {r[2]} | {r[5]:.3g} |")
+    with open(path) as fh:
+        for rec in csv.DictReader(fh):
+            if rec["kind"] == "recompiles":
+                print(f"recompiles, {rec['what']}, {rec['op']}: {rec['count']} compilations")
 
 
 if __name__ == "__main__":

@@ -42,6 +42,13 @@ def _one_minus_eps(dtype: Any) -> float:
     return _ONE_MINUS_EPS64 if jnp.dtype(dtype) == jnp.float64 else _ONE_MINUS_EPS32
 
 
+def _put(a: np.ndarray, dtype: Any = None) -> Array:
+    """A host array on the default device, cast on the host: ``jax.device_put`` copies without
+    compiling anything, where ``jnp.asarray(a, float32)`` of a float64 array compiles a small
+    conversion kernel per new shape."""
+    return jax.device_put(np.ascontiguousarray(a, dtype))
+
+
 def _float_u(u: Any) -> Array:
     u = jnp.asarray(u)
     if not jnp.issubdtype(u.dtype, jnp.floating):
@@ -138,7 +145,7 @@ class Distribution1D:
         self.batch_shape = w.shape[:-1]
         self.n = w.shape[-1]
         flat = normalized_cdf(w).reshape(-1)
-        self._cdf = {jnp.float64: jnp.asarray(flat), jnp.float32: jnp.asarray(flat, jnp.float32)}
+        self._cdf = {jnp.float64: _put(flat), jnp.float32: _put(flat, np.float32)}
 
     def tree_flatten(self) -> tuple[tuple[Array, Array], tuple[Any, ...]]:
         return (self._cdf[jnp.float64], self._cdf[jnp.float32]), (self.batch_shape, self.n)
@@ -354,14 +361,11 @@ class AliasTable:
             np.add.at(realized[r], alias[r], (1.0 - q[r]) / self.n)
         self.probs = realized.reshape(w.shape)
         flat_alias = (alias + (np.arange(p.shape[0], dtype=np.int32) * self.n)[:, None]).reshape(-1)
-        self._alias = jnp.asarray(flat_alias.astype(np.int32))
-        self._q = {
-            jnp.float64: jnp.asarray(q.reshape(-1)),
-            jnp.float32: jnp.asarray(q.reshape(-1), jnp.float32),
-        }
+        self._alias = _put(flat_alias, np.int32)
+        self._q = {jnp.float64: _put(q.reshape(-1)), jnp.float32: _put(q.reshape(-1), np.float32)}
         self._p = {
-            jnp.float64: jnp.asarray(realized.reshape(-1)),
-            jnp.float32: jnp.asarray(realized.reshape(-1), jnp.float32),
+            jnp.float64: _put(realized.reshape(-1)),
+            jnp.float32: _put(realized.reshape(-1), np.float32),
         }
 
     def _key(self, dtype: Any) -> Any:

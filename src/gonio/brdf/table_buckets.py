@@ -155,20 +155,26 @@ class LazyBuckets:
             self._cast = {}
 
     def prepare(
-        self, geo: BucketGeometry, wo: Array, dtype: Any = None, also_float32: bool = False
+        self, geo: BucketGeometry, wo: Any, dtype: Any = None, also_float32: bool = False
     ) -> tuple[Array, dict[str, Array]]:
         """Build the buckets that ``wo`` falls in (every bucket when ``wo`` is traced) and
-        return :meth:`stacked`. ``also_float32``: also the buckets of ``wo`` rounded to float32
-        (for samplers that propose in float32)."""
+        return :meth:`stacked`. ``wo``: directions ``(..., 3)``, or a list of such arrays (the
+        union of their buckets). ``also_float32``: also the buckets of ``wo`` rounded to
+        float32 (for samplers that propose in float32)."""
         n_buckets = geo.n_to * geo.n_po
-        if isinstance(wo, jax.core.Tracer):
+        ws = list(wo) if isinstance(wo, list | tuple) else [wo]
+        if any(isinstance(w, jax.core.Tracer) for w in ws):
             # inside jit the outgoing directions are unknown: build every bucket
             self.ensure(np.arange(n_buckets))
         else:
-            met = np.asarray(buckets_met(geo, wo))
-            if also_float32 and wo.dtype != jnp.float32:
-                met = met | np.asarray(buckets_met(geo, wo.astype(jnp.float32)))
-            self.ensure(np.flatnonzero(met))
+            flags = None
+            for w in ws:
+                met = buckets_met(geo, w)
+                if also_float32 and w.dtype != jnp.float32:
+                    met = met | buckets_met(geo, w.astype(jnp.float32))
+                flags = met if flags is None else flags | met
+            # one explicit copy of the flags (not of a bucket per direction)
+            self.ensure(np.flatnonzero(jax.device_get(flags)))
         return self.stacked(n_buckets, dtype)
 
     def stacked(self, n_buckets: int, dtype: Any = None) -> tuple[Array, dict[str, Array]]:
@@ -206,8 +212,8 @@ class LazyBuckets:
                 if self._combine is not None:
                     arrays = self._combine(stacks)
                 else:
-                    arrays = {name: jnp.asarray(a) for name, a in stacks.items()}
-                self._stack = (jnp.asarray(slot_of), arrays)
+                    arrays = {name: jax.device_put(a) for name, a in stacks.items()}
+                self._stack = (jax.device_put(slot_of), arrays)
         return self._stack
 
 

@@ -153,31 +153,40 @@ class TableRejection:
         return out
 
     # -- entry points ------------------------------------------------------------------------
-    def sample(self, wo: Array, u: Array, rng: Any, proposal: Any, dt: Any):
-        """``(wi, pdf)`` for ``wo (..., 3)``, ``u (..., 2)`` (``u`` below 1), in ``dt``."""
-        shape = wo.shape[:-1]
-        wo_f, u_f = wo.reshape(-1, 3), u.reshape(-1, 2)
+    def state(self, wo: Any, proposal: Any, dt: Any) -> dict[str, Any]:
+        """Device arrays of ``proposal``'s structures with the buckets of ``wo`` built (and of
+        ``wo`` rounded to float32, where the proposals run): ``run`` in float32 for the
+        proposal loop, ``pdf`` in ``dt``. Unlike inversion and alias, rejection needs every
+        direction's own bucket (another bucket's bound need not bound it)."""
         store = self.stores[_checked(proposal)]
         # proposals run in float32, where a direction on a bucket edge may round into the
         # neighbouring bucket: that one is built too
-        slot_of, arrays = store.prepare(self.geo, wo_f, jnp.float32, also_float32=True)
+        slot_of, run = store.prepare(self.geo, wo, jnp.float32, also_float32=True)
+        _, pdf = store.stacked(self.n_buckets, dt)
+        return {"slot_of": slot_of, "run": run, "pdf": pdf}
+
+    def sample(self, wo: Array, u: Array, rng: Any, proposal: Any, dt: Any, state: Any):
+        """``(wi, pdf)`` for ``wo (..., 3)``, ``u (..., 2)`` (``u`` below 1), in ``dt``;
+        ``state`` from :meth:`state`."""
+        shape = wo.shape[:-1]
+        wo_f, u_f = wo.reshape(-1, 3), u.reshape(-1, 2)
+        _checked(proposal)
         seeds = _seeds(u_f) if rng is None else seeds_from_rng(rng, (wo_f.shape[0],))
         wo32 = wo_f.astype(jnp.float32)
         u32 = jnp.clip(u_f.astype(jnp.float32), 0.0, _ONE_MINUS_EPS32)
         geo = self.geo_major if proposal == "majorant" else self.geo
-        wi, ok, rounds = _run(geo, proposal, self.table, slot_of, arrays, self._cos_desc32,
-                              wo32, u32, seeds)  # fmt: skip
+        wi, ok, rounds = _run(geo, proposal, self.table, state["slot_of"], state["run"],
+                              self._cos_desc32, wo32, u32, seeds)  # fmt: skip
         if not isinstance(rounds, jax.core.Tracer):
             self.stats["rejection_proposals"] = float(np.sum(rounds, dtype=np.int64))
             self.stats["rejection_samples"] = float(wo_f.shape[0])
         wi = wi.astype(dt)
-        pdf = jnp.where(ok, self.pdf(wi, wo_f, proposal, dt), 0.0)
+        pdf = jnp.where(ok, self.pdf(wi, wo_f, proposal, dt, state), 0.0)
         return wi.reshape(*shape, 3), pdf.reshape(shape)
 
-    def pdf(self, wi: Array, wo: Array, proposal: Any, dt: Any) -> Array:
-        store = self.stores[_checked(proposal)]
-        slot_of, arrays = store.prepare(self.geo, wo, dt, also_float32=True)
-        return _pdf_kernel(self.geo, self.table, slot_of, arrays["rho"], wi, wo)
+    def pdf(self, wi: Array, wo: Array, proposal: Any, dt: Any, state: Any) -> Array:
+        _checked(proposal)
+        return _pdf_kernel(self.geo, self.table, state["slot_of"], state["pdf"]["rho"], wi, wo)
 
 
 def _checked(proposal: Any) -> str:

@@ -70,9 +70,9 @@ class TableSampler:
         with jax.ensure_compile_time_eval():  # the sampler may be created under a jit trace
             self._consts = {
                 dt: (
-                    jnp.asarray(cos_desc, dt),
-                    jnp.asarray(cos_desc[::-1].copy(), dt),
-                    jnp.asarray(self.omega, dt),
+                    jax.device_put(cos_desc.astype(dt)),
+                    jax.device_put(cos_desc[::-1].astype(dt)),
+                    jax.device_put(self.omega.astype(dt)),
                 )
                 for dt in (jnp.float32, jnp.float64)
             }
@@ -162,25 +162,45 @@ class TableSampler:
         return {b: alias_arrays(self._cell_weights(b).reshape(-1)) for b in buckets}
 
     # -- public entry points -------------------------------------------------------------------
-    def sample(self, wo: Array, u: Array, method: str, rng: Any, proposal: Any):
-        """``(wi, pdf)`` for ``wo (..., 3)``, ``u (..., 2)``, in ``wo``'s precision."""
-        dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
-        if method == "rejection":  # proposals and acceptance tests run in float32
-            return self.rejection.sample(wo, u, rng, proposal, dt)
+    def state(self, method: str, wo: Any, proposal: Any, dt: Any) -> dict[str, Any]:
+        """The device arrays :meth:`sample` and :meth:`pdf` read for ``method``, with the
+        buckets of the directions ``wo (..., 3)`` (or a list of such arrays) built (every bucket
+        when ``wo`` is traced).
+
+        A pytree of arrays: passed to a jitted caller as an argument, it lets that caller trace
+        :meth:`sample` and :meth:`pdf` (``state=``) with no host work and no host round trip;
+        a direction in a bucket that was not built uses another built bucket's structures in
+        both (inversion and alias stay unbiased, their densities covering every cell).
+        """
+        if method == "rejection":
+            return self.rejection.state(wo, proposal, dt)
         slot_of, arrays = self._store(method).prepare(self.geo, wo, dt)
-        cos_desc, _cos_asc, omega = self._consts[dt]
+        return {"slot_of": slot_of, "arrays": arrays, "consts": self._consts[dt]}
+
+    def sample(self, wo: Array, u: Array, method: str, rng: Any, proposal: Any, state=None):
+        """``(wi, pdf)`` for ``wo (..., 3)``, ``u (..., 2)``, in ``wo``'s precision; ``state``
+        from :meth:`state` (default: built here for ``wo``)."""
+        dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
+        if state is None:
+            state = self.state(method, wo, proposal, dt)
+        if method == "rejection":  # proposals and acceptance tests run in float32
+            return self.rejection.sample(wo, u, rng, proposal, dt, state)
+        slot_of, arrays = state["slot_of"], state["arrays"]
+        cos_desc, _cos_asc, omega = state["consts"]
         if method == "inversion":
             return _inversion_kernel(self.geo, slot_of, arrays["dist"], cos_desc, omega, wo, u)
         q, alias, p = arrays["q"], arrays["alias"], arrays["p"]
         return _alias_kernel(self.geo, slot_of, q, alias, p, cos_desc, omega, wo, u)
 
-    def pdf(self, wi: Array, wo: Array, method: str, proposal: Any) -> Array:
+    def pdf(self, wi: Array, wo: Array, method: str, proposal: Any, state=None) -> Array:
         dt = jnp.float64 if wo.dtype == jnp.float64 else jnp.float32
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        if state is None:
+            state = self.state(method, wo, proposal, dt)
         if method == "rejection":
-            return jnp.where(ok, self.rejection.pdf(wi, wo, proposal, dt), 0.0)
-        slot_of, arrays = self._store(method).prepare(self.geo, wo, dt)
-        _cos_desc, cos_asc, omega = self._consts[dt]
+            return jnp.where(ok, self.rejection.pdf(wi, wo, proposal, dt, state), 0.0)
+        slot_of, arrays = state["slot_of"], state["arrays"]
+        _cos_desc, cos_asc, omega = state["consts"]
         if method == "inversion":
             p = _inversion_pdf(self.geo, slot_of, arrays["dist"], cos_asc, omega, wi, wo)
         else:

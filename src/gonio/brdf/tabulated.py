@@ -103,6 +103,12 @@ def _sample_inputs(wo: Array, u: Array) -> tuple[Array, Array, Array]:
     return wo, wo_s, u
 
 
+@jax.jit
+def _above_horizon(wo: Array) -> Array:
+    """``wo`` with directions on or below the horizon replaced by the normal (as sampled)."""
+    return jnp.where(wo[..., 2:3] > 0, wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
+
+
 def _sampled_values(spec: LookupSpec, data: Any, wo_s: Array, wi: Array) -> tuple[Array, Array]:
     """``(wi, f)``: the table at sampled ``(wi, wo_s)``, for :meth:`TabulatedBRDF.sample`."""
     return wi, eval_kernel(data, wi, wo_s, spec)
@@ -412,6 +418,7 @@ class TabulatedBRDF:
         method: str = "inversion",
         rng: Any = None,
         proposal: Any = "majorant",
+        state: Any = None,
     ) -> BRDFSample:
         """Importance-sample ``wi`` proportionally to ``mean_channels(f) cos(theta_i)``.
 
@@ -428,6 +435,9 @@ class TabulatedBRDF:
             ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table) or
             ``"cosine"``; see :mod:`gonio.brdf.table_rejection`. The sampled density is the
             same for both.
+        state : the sampling structures from :meth:`sampling_state` (same ``method`` and
+            ``proposal``), to trace this call inside ``jit`` with them as arguments: nothing is
+            built and nothing waits on the host. Default: built here for ``wo``'s buckets.
 
         Returns
         -------
@@ -446,18 +456,52 @@ class TabulatedBRDF:
                 f"sample needs wo (..., 3) and u (..., 2), got {wo.shape}, {u.shape}"
             )
         wo, wo_s, u = _sample_inputs(wo, u)
-        wi, pdf = self._sampler().sample(wo_s, u, method, rng, proposal)
+        wi, pdf = self._sampler().sample(wo_s, u, method, rng, proposal, state)
         wi, val = _sampled_values(self._spec, self._data, wo_s, wi.astype(wo.dtype))
         return _sample_result(wo, wi, pdf, val)
 
-    def pdf(self, wi: Any, wo: Any, method: str = "inversion", proposal: Any = "majorant") -> Array:
+    def pdf(
+        self,
+        wi: Any,
+        wo: Any,
+        method: str = "inversion",
+        proposal: Any = "majorant",
+        state: Any = None,
+    ) -> Array:
         """Density of :meth:`sample` (same ``method``/``proposal``) over ``wi`` per unit solid
-        angle, shape ``(...)``; 0 when either direction is on or below the horizon."""
+        angle, shape ``(...)``; 0 when either direction is on or below the horizon. ``state``:
+        as for :meth:`sample`."""
         wi, wo = _as_dirs(wi, wo)
         ok_o = wo[..., 2] > 0
         wo_s = jnp.where(ok_o[..., None], wo, jnp.array([0.0, 0.0, 1.0], wo.dtype))
-        p = self._sampler().pdf(wi, wo_s, method, proposal)
+        p = self._sampler().pdf(wi, wo_s, method, proposal, state)
         return jnp.where(ok_o & (wi[..., 2] > 0), p, 0.0).astype(wo.dtype)
+
+    def sampling_state(
+        self, method: str, wo: Any, proposal: Any = "majorant", dtype: Any = jnp.float32
+    ) -> dict[str, Any]:
+        """The sampling structures of ``method`` as a pytree of device arrays, with the buckets
+        of the outgoing directions ``wo`` built first (on the host, once).
+
+        Pass it to :meth:`sample` and :meth:`pdf` (``state=``), as an argument of a jitted
+        function, to sample at device speed: a renderer knows every outgoing direction of an
+        image before it starts, builds once and then never waits on the host. ``wo``:
+        directions ``(..., 3)``, or a list of such arrays (e.g. an image's tiles, whose fixed
+        shapes compile the bucket histogram once). Directions in other buckets: see
+        :meth:`gonio.brdf.table_sampling.TableSampler.state` (rejection needs each
+        direction's own bucket). The arrays are in ``dtype`` (that of the ``wo`` the calls will
+        get); the pytree's shapes grow when more buckets are built (capacity a power of 2), so
+        a jitted caller recompiles only when the count passes one.
+        """
+        ws = []
+        for w in wo if isinstance(wo, list | tuple) else [wo]:
+            if not isinstance(w, jax.Array) or w.dtype != dtype:
+                w = jax.device_put(np.asarray(w, dtype))
+            if w.shape[-1:] != (3,):
+                raise ParameterError(f"sampling_state needs wo (..., 3), got {w.shape}")
+            ws.append(_above_horizon(w))
+        dt = jnp.float64 if jnp.dtype(dtype) == jnp.float64 else jnp.float32
+        return self._sampler().state(method, ws, proposal, dt)
 
     def sampling_cache_size(self, method: str | None = None) -> int:
         """Number of outgoing-direction buckets whose sampling structures have been built (for

@@ -50,10 +50,11 @@ weight), and delta and area lights of one kind are stacked and looped over (or p
 with a traced count, so that a new ``spp``, image size or number of delta, area or environment
 lights reuses the compiled kernels (with the persistent cache of :mod:`gonio.compile_cache`,
 across processes too). Each tile's sums stay on the device until the end of the render (one
-transfer back). Analytic models are traced into
-the middle stage; tabulated BRDFs are called there directly, because their samplers keep
-host-side state (per-outgoing-direction CDFs built lazily for the buckets of outgoing directions
-actually seen, rejection loops).
+transfer back). Every material is traced into
+the middle stage: a table sampled by one of its own methods gets, as kernel arguments, its
+sampling structures for the outgoing directions of the image (built once per render, before the
+first tile, for the buckets those directions fall in), and rejection draws its extra random
+numbers from a hash of each sample's uniforms, so no kernel call waits on the host.
 """
 
 from __future__ import annotations
@@ -162,9 +163,10 @@ def resolve_sampler(
     return _Technique(kind, use_mis, use_mis)
 
 
-# Material operations for a technique, as functions of (wi, wo) and (wo, u). Analytic models,
-# and tables sampled by cosine or an analytic lobe, are traced into the jitted material stage;
-# tables sampled by their own methods are called eagerly.
+# Material operations for a technique, as functions of (wi, wo) and (wo, u), all traced into the
+# jitted material stage: analytic models; tables sampled by cosine or an analytic lobe; tables
+# sampled by their own methods, from the sampling structures built once per render
+# (``state``, :meth:`gonio.brdf.tabulated.TabulatedBRDF.sampling_state`) passed as arguments.
 
 
 def _cos_sample(material_f: Callable, wo: Array, u: Array) -> tuple[Array, Array, Array, Array]:
@@ -175,9 +177,10 @@ def _cos_sample(material_f: Callable, wo: Array, u: Array) -> tuple[Array, Array
     return wi, pdf, weight, jnp.zeros(pdf.shape, dtype=bool)
 
 
-def _model_ops(model: Any, kind: str, proposal: Any = None):
+def _model_ops(model: Any, kind: str, proposal: Any = None, state: Any = None):
     """Traceable operations: ``model`` is an analytic model, or a table (whose ``f`` is JAX code)
-    with kind "cosine", "lobe" (sampled by the analytic ``proposal``) or "none"."""
+    with kind "cosine", "lobe" (sampled by the analytic ``proposal``), "none" or one of its own
+    methods (sampled from ``state``; rejection's extra random numbers come from ``u``)."""
 
     def f(wi, wo):
         return jnp.asarray(model.f(wi, wo), wi.dtype)
@@ -202,6 +205,15 @@ def _model_ops(model: Any, kind: str, proposal: Any = None):
         def sample(wo, u):
             return _cos_sample(f, wo, u)
 
+    elif kind in TABLE_METHODS:
+
+        def pdf(wi, wo):
+            return model.pdf(wi, wo, method=kind, state=state)
+
+        def sample(wo, u):
+            s = model.sample(wo, u, method=kind, state=state)
+            return s.wi, s.pdf, s.weight, s.delta
+
     else:
 
         def pdf(wi, wo):
@@ -210,34 +222,6 @@ def _model_ops(model: Any, kind: str, proposal: Any = None):
         def sample(wo, u):
             s = model.sample(wo, u)
             return s.wi, s.pdf, s.weight, s.delta
-
-    return f, pdf, sample
-
-
-def _table_ops(table: Any, kind: str, rng: np.random.Generator, proposal: Any = None):
-    """Operations of a table sampled by one of its own methods (called eagerly: the table's
-    samplers build their per-outgoing-direction structures on the host, lazily)."""
-    extra = {} if proposal is None else {"proposal": proposal}
-
-    def f(wi, wo):
-        return jnp.asarray(table.f(wi, wo), jnp.float32)
-
-    def pdf(wi, wo):
-        return jnp.asarray(table.pdf(wi, wo, method=kind, **extra), jnp.float32)
-
-    def sample(wo, u):
-        wo = jnp.broadcast_to(jnp.asarray(wo), (*u.shape[:-1], 3))
-        s = table.sample(wo, u, method=kind, rng=rng, **extra)
-        wi = jnp.asarray(s.wi, jnp.float32)
-        delta = getattr(s, "delta", None)
-        if delta is None:
-            delta = jnp.zeros(wi.shape[:-1], dtype=bool)
-        return (
-            wi,
-            jnp.asarray(s.pdf, jnp.float32),
-            jnp.asarray(s.weight, jnp.float32),
-            jnp.asarray(delta, bool),
-        )
 
     return f, pdf, sample
 
@@ -347,8 +331,9 @@ def _light_stage_jit(lights, position, frame, sobol, shift):
 
 
 @functools.partial(jax.jit, static_argnames=("kind", "mis", "light_sampling"))
-def _model_stage(model, proposal, light_wi, wo, sobol, shift, *, kind, mis, light_sampling):
-    f, pdf, sample = _model_ops(model, kind, proposal)
+def _model_stage(model, proposal, state, light_wi, wo, sobol, shift, *, kind, mis,
+                 light_sampling):  # fmt: skip
+    f, pdf, sample = _model_ops(model, kind, proposal, state)
     u = _uniforms(sobol, shift)
     wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
     if kind == "model" and getattr(model, "broadcasts_outgoing", False):
@@ -371,25 +356,16 @@ def _shade_stage(lights, ls, fv, pb, position, frame, brdf, weights, acc, *, mis
     return acc + jnp.broadcast_to(jnp.sum(total, axis=1), acc.shape)
 
 
-def _tile(material, lights, pos, frame, wo, sob, shift, weights, acc, tech: _Technique, rng,
+def _tile(material, lights, pos, frame, wo, sob, shift, weights, acc, tech: _Technique, state,
           proposal=None):  # fmt: skip
     """``acc`` plus the radiance sums (P, C) of one tile: P pixels x S samples (``weights``
-    masks padding)."""
+    masks padding); three kernel calls, nothing waits on the host."""
     ls = _light_stage_jit(lights, pos, frame, sob, shift) if tech.light_sampling else None
     light_wi = [wi for wi, _, _ in ls] if ls is not None else []
-    # Tables are traced too (their f is JAX code) unless one of their own samplers is used.
-    if isinstance(material, BRDFModel) or tech.kind not in TABLE_METHODS:
-        fv, pb, brdf = _model_stage(
-            material, proposal if tech.kind == "lobe" else None, light_wi, wo, sob, shift,
-            kind=tech.kind, mis=tech.mis, light_sampling=tech.light_sampling,
-        )  # fmt: skip
-    else:
-        f, pdf, sample = _table_ops(material, tech.kind, rng, proposal)
-        u = _uniforms(sob, shift)
-        wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
-        fv = [f(wi, wo_s) for wi in light_wi] if ls is not None else None
-        pb = [pdf(wi, wo_s) for wi in light_wi] if ls is not None and tech.mis else None
-        brdf = sample(wo_s, u[..., :2]) if tech.kind != "none" else None
+    fv, pb, brdf = _model_stage(
+        material, proposal if tech.kind == "lobe" else None, state, light_wi, wo, sob, shift,
+        kind=tech.kind, mis=tech.mis, light_sampling=tech.light_sampling,
+    )  # fmt: skip
     return _shade_stage(lights, ls, fv, pb, pos, frame, brdf, weights, acc, mis=tech.mis)
 
 
@@ -467,8 +443,8 @@ def render_sphere(
     spp : samples per pixel for area and environment lights (delta lights are exact and take
         none; a scene of delta lights only is rendered with one evaluation per pixel).
     sampler : BRDF sampling strategy, see the module docstring.
-    seed : seeds the per-pixel digital shifts of the Sobol' points (and a table's rejection
-        sampler).
+    seed : seeds the per-pixel digital shifts of the Sobol' points (and through them a table's
+        rejection sampler, whose extra numbers hash each sample's uniforms).
     channels : ``None`` for all channels, or indices / names of the channels to render; only
         those are evaluated.
     camera : :class:`~gonio.render.scene.Camera` (default orthographic).
@@ -539,7 +515,7 @@ def render_sphere(
 
     # Delta lights: exact, one evaluation per pixel.
     if delta_lights:
-        out += render_delta(material, delta_lights, hits, tile_samples, stats)
+        out += render_delta(material, delta_lights, hits, tile_samples, stats, c_out)
 
     if area_lights:
         area_lights = tuple(merge_environments(area_lights))
@@ -576,7 +552,8 @@ def _render_area(
     material, lights, hits, spp, tech, seed, tile_samples, progress, stats, proposal=None
 ):
     n_pix = hits.count
-    groups = sampled_groups(lights)
+    c_out = max(1, _out_c(material, lights))
+    groups = sampled_groups(lights, c_out)
     dims = 2 + 2 * len(groups)
     sobol = _sobol_mod.sobol_ints(spp, 2)
     shift = _sobol_mod.shifts(np.random.default_rng([seed, 1]), n_pix, dims)
@@ -590,8 +567,12 @@ def _render_area(
     tiles = list(tile_spans(n_pix, p_tile))
     total = len(tiles) * n_batches
     done = 0
-    c_out = max(1, _out_c(material, lights))
-    rng = np.random.default_rng([seed, 2])
+    wo_tiles = [device_array(pad_rows(hits.wo[a:b], p_tile)) for a, b in tiles]
+    state = None
+    if is_table(material) and tech.kind in TABLE_METHODS:
+        # every outgoing direction of the image is known here: the table's sampling structures
+        # for their buckets are built once, and the kernels take them as arguments
+        state = material.sampling_state(tech.kind, wo_tiles)
     # Sample points and weights go to the device once; each tile's sums stay there (the shade
     # stage adds each batch into them) and come back in one transfer at the end, so that no
     # kernel call waits on a copy to the host.
@@ -616,14 +597,13 @@ def _render_area(
             if progress is not None:
                 progress(done, total)
 
-    for a, b in tiles:
+    for (a, b), wo in zip(tiles, wo_tiles, strict=True):
         pos = device_array(pad_rows(hits.position[a:b], p_tile))
         frame = device_array(pad_rows(hits.frame[a:b], p_tile))
-        wo = device_array(pad_rows(hits.wo[a:b], p_tile))
         sh = device_array(pad_rows(shift[a:b], p_tile))
         acc = device_array(np.zeros((p_tile, c_out), np.float32))
         for k, (sb, wb) in enumerate(batches):
-            acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, rng, proposal)
+            acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, state, proposal)
             pending.append(acc)
             drain(IN_FLIGHT)
             stats.calls += 1

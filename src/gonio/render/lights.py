@@ -22,6 +22,7 @@ Lights are JAX pytrees (their arrays are leaves), so new values do not recompile
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -85,6 +86,8 @@ class Light:
     is_delta: ClassVar[bool] = False
     _LEAVES: ClassVar[tuple[str, ...]] = ()
     _STATIC: ClassVar[tuple[str, ...]] = ()
+    #: the leaf holding the light's value per channel ("" for lights without one)
+    _SPECTRUM: ClassVar[str] = ""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -112,6 +115,16 @@ class Light:
     def with_channels(self, idx: np.ndarray) -> Light:
         """This light restricted to the channels ``idx`` (a grey light stays as it is)."""
         raise NotImplementedError
+
+    def broadcast_channels(self, c: int) -> Light:
+        """This light with a grey value repeated over ``c`` channels (the same light): grey and
+        coloured lights of one kind then share a kernel shape and a stacked group."""
+        if not self._SPECTRUM or c <= 1 or self.channels != 1:
+            return self
+        out = copy.copy(self)
+        value = np.repeat(np.asarray(getattr(self, self._SPECTRUM), np.float32), c, axis=-1)
+        object.__setattr__(out, self._SPECTRUM, value)
+        return out
 
     def sample(self, p: Array, u: Array) -> LightSample:
         raise NotImplementedError
@@ -143,6 +156,7 @@ class Directional(Light):
 
     is_delta = True
     _LEAVES = ("direction", "irradiance")
+    _SPECTRUM = "irradiance"
 
     def __init__(self, direction: Any = (0.0, 0.0, 1.0), irradiance: Any = 1.0) -> None:
         self.direction = _vector(direction, "direction", unit=True)
@@ -178,6 +192,7 @@ class PointLight(Light):
 
     is_delta = True
     _LEAVES = ("position", "intensity")
+    _SPECTRUM = "intensity"
 
     def __init__(self, position: Any, intensity: Any = 1.0) -> None:
         self.position = _vector(position, "position")
@@ -211,6 +226,7 @@ class SphereLight(Light):
     """
 
     _LEAVES = ("center", "radius", "radiance_value")
+    _SPECTRUM = "radiance_value"
 
     def __init__(self, center: Any, radius: float, radiance: Any = 1.0) -> None:
         self.center = _vector(center, "center")
@@ -362,7 +378,8 @@ class Environment(Light):
         scale = float(scale)
         if not (math.isfinite(scale) and scale >= 0):
             raise ParameterError(f"environment scale must be finite and >= 0, got {scale}")
-        self.image = jnp.asarray(arr * scale, dtype=jnp.float32)
+        # cast on the host: device_put compiles nothing (jnp.asarray would convert on the device)
+        self.image = jax.device_put((arr * scale).astype(np.float32))
         self.name = name
         self._dist = None
 
@@ -380,7 +397,7 @@ class Environment(Light):
     def importance(self) -> Environment:
         """This light with its importance map built (idempotent; called before sampling)."""
         if self._dist is None:
-            img = np.asarray(self.image, dtype=np.float64)
+            img = np.asarray(jax.device_get(self.image), dtype=np.float64)  # once per light
             h = img.shape[0]
             sin_t = np.sin(np.pi * (np.arange(h) + 0.5) / h)
             lum = img.mean(axis=-1) * sin_t[:, None]

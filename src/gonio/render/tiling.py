@@ -54,23 +54,26 @@ def pad_rows(a: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([a, pad], 0)
 
 
-def sampled_groups(lights: Sequence[Light]) -> tuple:
+def sampled_groups(lights: Sequence[Light], channels: int = 1) -> tuple:
     """Area and environment lights as the kernels take them: ``((light, count), ...)``, one
     light sample per group. An environment is its own group (``count`` None; environments of
     one image size are merged beforehand, :func:`gonio.render.lights.merge_environments`);
     other lights are stacked by kind as :func:`stack_by_kind` does, so that their number is a
     traced value, not part of the kernel's shape."""
     envs = tuple((lt, None) for lt in lights if isinstance(lt, Environment))
-    return envs + stack_by_kind([lt for lt in lights if not isinstance(lt, Environment)])
+    others = [lt for lt in lights if not isinstance(lt, Environment)]
+    return envs + stack_by_kind(others, channels)
 
 
-def stack_by_kind(lights: Sequence[Light]) -> tuple:
-    """Delta lights grouped by kind (pytree structure and leaf shapes), each group's leaves
-    stacked along a new first axis padded to a power of 2 (at least 8): ``((stacked, count),
-    ...)``. The capacity, not the count, is part of the kernel's shape."""
+def stack_by_kind(lights: Sequence[Light], channels: int = 1) -> tuple:
+    """Lights grouped by kind (pytree structure and leaf shapes), each group's leaves stacked
+    along a new first axis padded to a power of 2 (at least 8): ``((stacked, count), ...)``.
+    The capacity, not the count, is part of the kernel's shape. Grey lights are first
+    broadcast to ``channels`` (the image's), so that a mix of grey and coloured lights of one
+    kind is one group, as a scene of either alone."""
     groups: dict[Any, list] = {}
     for light in lights:
-        leaves, treedef = jax.tree_util.tree_flatten(light)
+        leaves, treedef = jax.tree_util.tree_flatten(light.broadcast_channels(channels))
         leaves = [np.asarray(x, np.float32) for x in leaves]
         groups.setdefault((treedef, tuple(x.shape for x in leaves)), []).append(leaves)
     out = []
