@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import collections
+import inspect
 import os
 from pathlib import Path
 
@@ -22,3 +24,86 @@ def shared_file(*parts: str) -> Path:
     if not path.exists():
         pytest.skip(f"shared data file not available: {path}")
     return path
+
+
+# ------------------------------------------------------------------------ xdist work units
+# Under ``pytest -n 2 --dist loadgroup`` (``make test``) every test is its own work unit unless
+# it carries ``xdist_group``, so a module- or session-scoped fixture is built again in each worker
+# that happens to run one of its tests (the reduced demo twice: about 70 s each on this machine).
+# The hook below puts the tests that share such a fixture of this suite into one group (joined
+# with any ``xdist_group`` mark they carry), and writes the group into the test's node id, which
+# is what the loadgroup scheduler reads. pytest-xdist 3.8 writes it into ``item._nodeid``, which
+# pytest 9.2's structured node ids no longer read (pytest-xdist issue 1386): without this hook
+# the marks group nothing.
+_TESTS = Path(__file__).resolve().parent
+
+
+def _marked_groups(item: pytest.Item) -> list[str]:
+    return sorted(
+        {
+            str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+            for m in item.iter_markers("xdist_group")
+        }
+    )
+
+
+def _shared_fixture_keys(item: pytest.Item) -> list[str]:
+    """One key per instance of a non-function-scoped fixture of this suite that ``item`` uses."""
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return []
+    keys = []
+    for name in item.fixturenames:
+        defs = info.name2fixturedefs.get(name)
+        if not defs or defs[-1].scope == "function":
+            continue
+        fixture = defs[-1]
+        source = Path(inspect.getsourcefile(fixture.func) or "").resolve()
+        if _TESTS not in source.parents:
+            continue  # pytest's own (tmp_path_factory, ...): nothing expensive to share
+        if fixture.scope in ("module", "class"):  # one instance per module (or class)
+            keys.append(f"{item.nodeid.split('::')[0]}::{name}")
+        else:  # session or package: one instance per worker
+            keys.append(f"{source.relative_to(_TESTS.parent)}::{name}")
+    return keys
+
+
+def _set_group(item: pytest.Item, marked: list[str], group: str) -> None:
+    nodeid = item.nodeid
+    suffix = "@" + "_".join(marked)
+    if marked and nodeid.endswith(suffix):  # a pytest or xdist where the mark already took
+        nodeid = nodeid[: -len(suffix)]
+    if hasattr(item, "_id"):  # pytest >= 9.2: the structured id; parse keeps the string as is
+        item._id = type(item._id).parse(f"{nodeid}@{group}")
+    else:
+        item._nodeid = f"{nodeid}@{group}"
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Group the tests that share an expensive fixture for ``--dist loadgroup`` (see above)."""
+    if not config.getoption("loadgroup", False):
+        return  # not an xdist worker of a loadgroup run
+    parent: dict[str, str] = {}
+
+    def root(key: str) -> str:
+        while parent.setdefault(key, key) != key:
+            key = parent[key]
+        return key
+
+    marked = {item: _marked_groups(item) for item in items}
+    keys = {item: [f"@{g}" for g in marked[item]] + _shared_fixture_keys(item) for item in items}
+    for item_keys in keys.values():
+        for key in item_keys[1:]:
+            parent[root(key)] = root(item_keys[0])
+    users: collections.Counter[str] = collections.Counter()  # tests per component
+    names: dict[str, set[str]] = collections.defaultdict(set)  # its xdist_group marks
+    for item in items:
+        if keys[item]:
+            users[root(keys[item][0])] += 1
+            names[root(keys[item][0])].update(marked[item])
+    for item in items:
+        if marked[item]:
+            _set_group(item, marked[item], "_".join(marked[item]))
+        elif keys[item] and users[top := root(keys[item][0])] > 1:
+            _set_group(item, [], min(names[top]) if names[top] else top)

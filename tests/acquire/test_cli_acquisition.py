@@ -6,42 +6,17 @@ from __future__ import annotations
 
 import os
 import signal
-import sqlite3
 import subprocess
-import sys
 import threading
 import time
 from importlib import resources
-from pathlib import Path
 
 import pytest
 
 from gonio.acquire.engine import acquire
+from tests.acquire.child import done_samples, env, gonio, gonio_cmd
 
-SRC = str(Path(__file__).resolve().parents[2] / "src")
 SIM_SAMPLE = resources.files("gonio.rigs").joinpath("sim_sample.toml").read_text()
-
-
-def _env() -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
-    env["JAX_PLATFORMS"] = "cpu"
-    return env
-
-
-def _gonio_cmd(*args) -> list[str]:
-    return [sys.executable, "-m", "gonio", *map(str, args)]
-
-
-def gonio(*args, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "gonio", *map(str, args)],
-        env=_env(),
-        capture_output=True,
-        text=True,
-        timeout=300,
-        **kw,
-    )
 
 
 def assert_one_line(err: str, *needles: str) -> None:
@@ -51,23 +26,12 @@ def assert_one_line(err: str, *needles: str) -> None:
         assert n in err, err
 
 
-def _done(run: Path) -> int:
-    try:
-        con = sqlite3.connect(f"file:{run / 'journal.sqlite'}?mode=ro", uri=True, timeout=1)
-        try:
-            return con.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
-        finally:
-            con.close()
-    except sqlite3.DatabaseError:
-        return 0
-
-
 def test_serial_adapter_unplugged_mid_acquisition_is_one_line(tmp_path):
     # the emulator in a process of its own stands for the USB adapter; killing it closes the
     # pseudo-terminal under the running acquisition, as unplugging does
     emu = subprocess.Popen(
-        [sys.executable, "-m", "gonio", "rig", "emulate", "--rig", "sim_sample"],
-        env=_env(),
+        gonio_cmd("rig", "emulate", "--rig", "sim_sample"),
+        env=env(),
         stdout=subprocess.PIPE,
         text=True,
     )
@@ -77,17 +41,17 @@ def test_serial_adapter_unplugged_mid_acquisition_is_one_line(tmp_path):
         rig.write_text(SIM_SAMPLE.replace('port = "sim"', f'port = "{port}"'))
         run = tmp_path / "run"
         acq = subprocess.Popen(
-            _gonio_cmd(
+            gonio_cmd(
                 "acquire", "--no-progress", "--rig", rig, "--plan", "iso-small", "--out", run
             ),
-            env=_env(),
+            env=env(),
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
             text=True,
         )
         t0 = time.monotonic()
         while acq.poll() is None and time.monotonic() - t0 < 120:
-            if (run / "journal.sqlite").exists() and _done(run) >= 3:
+            if done_samples(run) >= 3:
                 break
             time.sleep(0.01)
         emu.kill()
@@ -136,8 +100,8 @@ def test_rig_check_on_a_stale_port_is_one_line(tmp_path):
 def test_plan_into_a_closed_pipe_is_silent(tmp_path):
     # `gonio plan ... | head -1` where head has already gone
     proc = subprocess.Popen(
-        [sys.executable, "-m", "gonio", "plan", "--rig", "sim", "--plan", "iso-small"],
-        env=_env(),
+        gonio_cmd("plan", "--rig", "sim", "--plan", "iso-small"),
+        env=env(),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -176,7 +140,7 @@ def test_resume_with_a_different_rig_is_refused(interrupted_run):
     out = gonio("acquire", "--resume", interrupted_run, "--rig", "sim")
     assert out.returncode == 2
     assert_one_line(out.stderr, "recorded on rig 'sim_sample'", "drop --rig")
-    assert _done(interrupted_run) == 3  # nothing measured
+    assert done_samples(interrupted_run) == 3  # nothing measured
     # the recorded rig itself may be named
     out = gonio("acquire", "--resume", interrupted_run, "--rig", "sim_sample", "--no-progress")
     assert out.returncode == 0, out.stderr

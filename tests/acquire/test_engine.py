@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import json
-import os
 import random
 import signal
-import sqlite3
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,9 +19,9 @@ from gonio.rigs.config import load_rig
 from gonio.rigs.session import open_rig
 from gonio.rigs.sim import FaultConfig
 from gonio.rigs.sim.sample import SimulatedSampleCamera
+from tests.acquire.child import acquire_cmd, done_samples, env
 
 RIG = load_rig("sim")
-SRC = str(Path(__file__).resolve().parents[2] / "src")
 
 # No configuration of this plan is the park pose (theta 60/60, dphi 180 on the sim rig): a servo
 # already resting at its goal stays put when that goal's Sync Write is lost (correctly: it is
@@ -149,37 +146,12 @@ def test_out_of_limit_plan_refused_before_any_motion(tmp_path):
     goals_within_limits(run)
 
 
-def _acquire_cmd(*args):
-    return [sys.executable, "-m", "gonio", "acquire", "--no-progress", *map(str, args)]
-
-
-def _env():
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
-    env["JAX_PLATFORMS"] = "cpu"
-    return env
-
-
-def _count_done(run: Path) -> int:
-    db = run / "journal.sqlite"
-    if not db.exists():
-        return 0
-    try:
-        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=5)
-        try:
-            return con.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
-        finally:
-            con.close()
-    except sqlite3.DatabaseError:
-        return 0
-
-
 def _run_until(cmd, run: Path, n_done: int, sig: int, timeout: float = 60.0) -> int:
-    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     t0 = time.monotonic()
     try:
         while proc.poll() is None and time.monotonic() - t0 < timeout:
-            if _count_done(run) >= n_done:
+            if done_samples(run) >= n_done:
                 proc.send_signal(sig)
                 break
             time.sleep(0.01)
@@ -199,16 +171,16 @@ def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int, extr
     first = True
     for n in points:
         cmd = (
-            _acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run, *extra)
+            acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run, *extra)
             if first
-            else (_acquire_cmd("--resume", run, *extra))
+            else (acquire_cmd("--resume", run, *extra))
         )
         rc = _run_until(cmd, run, n, signal.SIGKILL)
         first = False
         assert rc == -signal.SIGKILL or rc == 0
     out = subprocess.run(
-        [*_acquire_cmd("--resume", run, *extra), "--json"],
-        env=_env(),
+        [*acquire_cmd("--resume", run, *extra), "--json"],
+        env=env(),
         capture_output=True,
         text=True,
         timeout=120,
@@ -238,7 +210,7 @@ def test_ctrl_c_parks_the_rig_then_resume_completes(reference, tmp_path, plan_fi
     ref, _ = reference
     run = tmp_path / "run"
     rc = _run_until(
-        _acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run),
+        acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run),
         run,
         5,
         signal.SIGINT,
@@ -254,7 +226,7 @@ def test_ctrl_c_parks_the_rig_then_resume_completes(reference, tmp_path, plan_fi
         last[g["id"]] = g["ticks"]
     for j in RIG.joints:
         assert last[j.id] == j.to_ticks(RIG.park_deg[j.name])
-    done = _count_done(run)
+    done = done_samples(run)
     assert 5 <= done < len(ref)
     s = acquire(run, resume=True, progress=False)
     assert s.complete and s.measured_now == len(ref) - done

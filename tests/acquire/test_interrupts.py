@@ -21,12 +21,9 @@ SIGTERM) with nothing of gonio's created or moved; no Python program can change 
 from __future__ import annotations
 
 import json
-import os
 import random
 import signal
-import sqlite3
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -36,25 +33,14 @@ import pytest
 from gonio.acquire.engine import acquire
 from gonio.acquire.journal import Journal
 from gonio.rigs.config import load_rig
+from tests.acquire.child import acquire_cmd, done_samples, env
 
-SRC = str(Path(__file__).resolve().parents[2] / "src")
 RIG = load_rig("sim_sample")
 PLAN = """kind = "isotropic"
 theta_i_deg = [20, 40, 55]
 theta_o_deg = [20, 40, 55]
 dphi_deg = [30, 90, 150, 180]
 """
-
-
-def _env() -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
-    env["JAX_PLATFORMS"] = "cpu"
-    return env
-
-
-def _cmd(*args) -> list[str]:
-    return [sys.executable, "-m", "gonio", "acquire", "--no-progress", *map(str, args)]
 
 
 @pytest.fixture(scope="module")
@@ -68,20 +54,6 @@ def reference(tmp_path_factory):
         return {r.idx: r for r in j.samples()}, d / "plan.toml"
     finally:
         j.close()
-
-
-def _done(run: Path) -> int:
-    db = run / "journal.sqlite"
-    if not db.exists():
-        return 0
-    try:
-        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=1)
-        try:
-            return con.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
-        finally:
-            con.close()
-    except sqlite3.DatabaseError:
-        return 0
 
 
 def _catches_sigterm(pid: int) -> bool:
@@ -104,7 +76,7 @@ def _signal_at(cmd, moment, sig, run: Path, timeout: float = 120.0, from_gonio=F
     appears) or ("samples", n: once n samples are journaled). With ``from_gonio`` the clock
     starts when gonio's first line has run (see :func:`_catches_sigterm`), not at the exec.
     """
-    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     t0 = time.monotonic()
     kind, value = moment
     try:
@@ -117,7 +89,7 @@ def _signal_at(cmd, moment, sig, run: Path, timeout: float = 120.0, from_gonio=F
                 if kind == "journal" and (run / "journal.sqlite").exists():
                     time.sleep(value)
                     break
-                if kind == "samples" and _done(run) >= value:
+                if kind == "samples" and done_samples(run) >= value:
                     break
                 time.sleep(0.001 if kind == "journal" else 0.005)
         if proc.poll() is None:
@@ -165,10 +137,10 @@ def _kill_many(reference, tmp_path, kills: int, seed: int) -> dict:
     for moment in _moments(rng, kills, len(ref)):
         if run.exists():
             assert _is_resumable(run), f"unrecoverable run after a kill at {moment}"
-            cmd = _cmd("--resume", run)
+            cmd = acquire_cmd("--resume", run)
             stats["resumes"] += 1
         else:
-            cmd = _cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
+            cmd = acquire_cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
             stats["fresh_starts"] += 1
         rc, err = _signal_at(cmd, moment, signal.SIGKILL, run)
         if rc == 0:
@@ -179,11 +151,11 @@ def _kill_many(reference, tmp_path, kills: int, seed: int) -> dict:
             stats["unrecoverable"] += 1
             pytest.fail(f"kill at {moment}: exit {rc}: {err}")
     final = (
-        _cmd("--resume", run)
+        acquire_cmd("--resume", run)
         if run.exists()
-        else _cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
+        else acquire_cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
     )
-    out = subprocess.run([*final, "--json"], env=_env(), capture_output=True, text=True)
+    out = subprocess.run([*final, "--json"], env=env(), capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["complete"]
     j = Journal(run)
@@ -258,7 +230,7 @@ def _interrupt_many(reference, tmp_path, sig: int, n: int, seed: int) -> dict[st
     kinds: dict[str, int] = {}
     for k, moment in enumerate(_moments(rng, n, 20)):
         run = tmp_path / f"run{k}"
-        cmd = _cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
+        cmd = acquire_cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
         rc, err = _signal_at(cmd, moment, sig, run, from_gonio=True)
         kind = _check_interrupted(run, sig, rc, err, moment)
         kinds[kind] = kinds.get(kind, 0) + 1

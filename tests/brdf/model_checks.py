@@ -96,25 +96,30 @@ def check_stress(model) -> None:
 
 
 def check_param_gradients(model, names=None) -> None:
-    """jax.grad of f, pdf and sample weight w.r.t. every parameter is finite on stress input."""
+    """jax.grad of f, pdf and sample weight w.r.t. every parameter is finite on stress input.
+
+    The loss and its gradient run under ``jax.jit`` with the model as an argument: the values are
+    those of the op-by-op evaluation, and models of one class and shape share one compile.
+    """
     d = stress_directions()
     wi = jnp.asarray(np.repeat(d, len(d), axis=0))
     wo = jnp.asarray(np.tile(d, (len(d), 1)))
     u = jnp.asarray(np.random.default_rng(0).random((wi.shape[0], 2)))
     params = model.params()
-    names = names or list(params)
-    for name in names:
-        v0 = params[name]
-
-        def loss(v, name=name):
-            m = model.replace(**{name: v})
-            s = m.sample(wo, u)
-            return (
-                jnp.sum(m.f(wi, wo)) + jnp.sum(m.pdf(wi, wo)) + jnp.sum(s.weight) + jnp.sum(s.pdf)
-            )
-
-        g = np.asarray(jax.grad(loss)(v0))
+    chosen = {name: params[name] for name in (names or list(params))}
+    for name, g in _param_gradients(model, chosen, wi, wo, u).items():
+        g = np.asarray(g)
         assert np.all(np.isfinite(g)), f"{model!r}: non-finite gradient w.r.t. {name}"
+
+
+@jax.jit
+def _param_gradients(model, chosen, wi, wo, u):
+    def loss(values):
+        m = model.replace(**values)
+        s = m.sample(wo, u)
+        return jnp.sum(m.f(wi, wo)) + jnp.sum(m.pdf(wi, wo)) + jnp.sum(s.weight) + jnp.sum(s.pdf)
+
+    return jax.grad(loss)(chosen)
 
 
 def check_sample_weight_consistent(model, n: int = 4000, seed: int = 4) -> None:
@@ -123,11 +128,12 @@ def check_sample_weight_consistent(model, n: int = 4000, seed: int = 4) -> None:
     u = np.random.default_rng(seed).random((n, 2))
     s = model.sample(wo, u)
     ok = np.asarray(s.pdf) > 0
+    # f and pdf at every sample, compared where it succeeded: one input shape per n (a jitted
+    # model compiles once, not once per count of successful samples)
+    pdf, f = np.asarray(model.pdf(s.wi, wo))[ok], np.asarray(model.f(s.wi, wo))[ok]
     wi = np.asarray(s.wi)[ok]
-    np.testing.assert_allclose(
-        np.asarray(s.pdf)[ok], np.asarray(model.pdf(wi, wo[ok])), rtol=1e-4, atol=1e-10
-    )
-    expect = np.asarray(model.f(wi, wo[ok])) * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
+    np.testing.assert_allclose(np.asarray(s.pdf)[ok], pdf, rtol=1e-4, atol=1e-10)
+    expect = f * wi[:, 2:3] / np.asarray(s.pdf)[ok][:, None]
     np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-4, atol=1e-10)
 
 
@@ -166,13 +172,28 @@ class Jitted:
 
     def __init__(self, model) -> None:
         self.model = model
-        self.f = jax.jit(model.f)
-        self.pdf = jax.jit(model.pdf)
-        self.sample = jax.jit(model.sample)
-        self.directional_albedo = jax.jit(model.directional_albedo, static_argnums=1)
+
+    # the model is an argument (a pytree), so models of one class and shape share a compile
+    def f(self, wi, wo):
+        return _jit_f(self.model, wi, wo)
+
+    def pdf(self, wi, wo):
+        return _jit_pdf(self.model, wi, wo)
+
+    def sample(self, wo, u):
+        return _jit_sample(self.model, wo, u)
+
+    def directional_albedo(self, wo, n):
+        return _jit_albedo(self.model, wo, n)
 
     def __getattr__(self, name):
         return getattr(self.model, name)
 
     def __repr__(self) -> str:
         return repr(self.model)
+
+
+_jit_f = jax.jit(lambda model, wi, wo: model.f(wi, wo))
+_jit_pdf = jax.jit(lambda model, wi, wo: model.pdf(wi, wo))
+_jit_sample = jax.jit(lambda model, wo, u: model.sample(wo, u))
+_jit_albedo = jax.jit(lambda model, wo, n: model.directional_albedo(wo, n), static_argnums=2)
