@@ -65,7 +65,7 @@ class Problem:
             "mask": padded(np.ones((n, 1)), 0.0),
             "k": {key: padded(v, 1.0 if key == "inv_sigma" else 0.0) for key, v in consts.items()},
         }
-        self.arrays = jax.tree_util.tree_map(jnp.asarray, arrays)
+        self.arrays = jax.device_put(arrays)  # (jnp.asarray would compile a copy per shape)
         self.n_chunks, self.chunk_rows = k, size
         self.n_residuals = n * self.data.channels
         self.n_params = self.layout.size
@@ -125,7 +125,7 @@ class Problem:
 
             def padded(a: np.ndarray) -> Any:
                 a = np.concatenate([a, np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a
-                return jnp.asarray(a.reshape(self.n_chunks, self.chunk_rows, *a.shape[1:]))
+                return jax.device_put(a.reshape(self.n_chunks, self.chunk_rows, *a.shape[1:]))
 
             self._score_arrays = {
                 "y": padded(d.values),
@@ -137,7 +137,7 @@ class Problem:
         )
         total_w = float(np.sum(self.data.weights)) * self.data.channels
         out = {}
-        for name, v in zip(names, sums, strict=True):
+        for name, v in zip(names, np.asarray(sums), strict=True):
             lo = LOSSES[name]
             out[name] = lo.value(float(v) / (total_w if "scale" in lo.needs else 1.0))
         return out, int(bad)
