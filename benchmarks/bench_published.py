@@ -77,7 +77,7 @@ def run_material(name: str) -> list[dict[str, Any]]:
     t0 = time.perf_counter()
     try:
         data = prepare(io.load(f"{ARCHIVE}::{name}"))
-    except GonioError as exc:  # e.g. a network with negative output, refused by the reader
+    except GonioError as exc:  # a network the reader refuses (non-finite or nowhere positive)
         print(f"{name}: not scored: {exc}", flush=True)
         return [{"material": name, "error": str(exc)}]
     t_table = time.perf_counter() - t0
@@ -223,6 +223,35 @@ def _cold_cli(
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
         return wall, cpu
+
+
+def batch(names: list[str], jobs: int = 1) -> list[dict[str, Any]]:
+    """Wall and CPU seconds of one ``gonio fit`` batch process over ``names`` (archive members)
+    with the three families (default loss, no plots), and per material."""
+    import resource
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "gonio", "fit", *[f"{ARCHIVE}::{n}" for n in names]]
+        for preset in FAMILIES.values():
+            cmd += ["-m", preset]
+        cmd += ["--no-plots", "-j", str(jobs), "-o", out]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        load0 = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    n = len(names)
+    row = {"materials": n, "families": len(FAMILIES), "jobs": jobs, "wall_s": wall,
+           "cpu_s": cpu, "wall_per_material_s": wall / n, "cpu_per_material_s": cpu / n,
+           "load1_start": load0, "load1_end": os.getloadavg()[0],
+           "names": " ".join(names)}  # fmt: skip
+    print(row, flush=True)
+    return [row]
 
 
 def speed(
@@ -380,6 +409,9 @@ def main() -> None:
     ap.add_argument("--speed", metavar="MATERIAL,...",
                     help="only the timing and optimum checks, on these materials (the first "
                     "one timed)")  # fmt: skip
+    ap.add_argument("--batch", metavar="MATERIAL,...",
+                    help="only time one `gonio fit` batch process over these materials, three "
+                    "families (results/OUT_batch.csv)")  # fmt: skip
     ap.add_argument("--baseline", metavar="SRC",
                     help="with --speed: also time cold processes of this source tree (e.g. an "
                     "earlier commit's src), alternated with the current code")  # fmt: skip
@@ -434,6 +466,10 @@ def main() -> None:
         RESULTS.mkdir(parents=True, exist_ok=True)
         _write_csv(rows, RESULTS / f"{args.out}_speed.csv")
         _plot_speed(rows, RESULTS / f"{args.out}_speed.png")
+        return
+    if args.batch:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        _write_csv(batch(args.batch.split(","), args.jobs), RESULTS / f"{args.out}_batch.csv")
         return
     if args.plot_speed:
         with open(RESULTS / f"{args.out}_speed.csv", newline="") as fh:
