@@ -24,9 +24,9 @@ Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
 * **Output**: three numbers whose ``expm1`` is ``f_r`` in sr⁻¹ (RGB, no cosine factor) with
   MERL's channel scales ``(1, 1.15, 1.66) / 1500`` already applied.
 * **Negative outputs**: ``expm1`` of a negative output is negative; 31 of the 88 published
-  networks dip below 0 somewhere on the MERL grid, in dark off-specular or grazing cells (most
-  by under 1e-3 sr⁻¹; beige-fabric in 119 cells down to -0.097, pink-plastic in 91 down to -0.39,
-  6 % of its peak). The authors' own decoder clamps them: their Mitsuba plugin's ``nn.h``
+  networks dip below 0 at valid cells of the MERL grid (from one cell to a fifth of them, by
+  -1e-5 to -0.39 sr⁻¹ at the lowest; beige-fabric in 119 cells down to -0.097, pink-plastic in
+  91 down to -0.39, 6 % of its peak). The authors' own decoder clamps them: their Mitsuba plugin's ``nn.h``
   returns ``max(expm1(output), 0)`` and their PyTorch training code ends the network with the
   same ReLU, so the networks were trained and are rendered with those cells at 0. A network is
   a model of a measurement, not a measurement: gonio decodes it the same way by default
