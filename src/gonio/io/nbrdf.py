@@ -26,9 +26,10 @@ Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
 * **Negative outputs**: ``expm1`` of a negative output is negative; 31 of the 88 published
   networks dip below 0 at valid cells of the MERL grid (from one cell to a fifth of them, by
   -1e-5 to -0.39 sr⁻¹ at the lowest; beige-fabric in 119 cells down to -0.097, pink-plastic in
-  91 down to -0.39, 6 % of its peak). The authors' own decoder clamps them: their Mitsuba plugin's ``nn.h``
-  returns ``max(expm1(output), 0)`` and their PyTorch training code ends the network with the
-  same ReLU, so the networks were trained and are rendered with those cells at 0. A network is
+  91 down to -0.39, 6 % of its peak). The authors' own decoder clamps them: their Mitsuba
+  plugin's ``nn.h`` returns ``max(expm1(output), 0)`` and their PyTorch training code ends the
+  network with the same ReLU, so the networks were trained and are rendered with those cells
+  at 0. A network is
   a model of a measurement, not a measurement: gonio decodes it the same way by default
   (``negative="clamp"``) and records what it clamped in the table's provenance
   (``meta["source"]["clamped_cells"]``, ``["clamped_values"]``, ``["lowest_output"]``;
