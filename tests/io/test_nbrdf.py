@@ -173,6 +173,10 @@ def test_negative_outputs_are_clamped_and_counted_as_the_authors_decoder_does():
         th, td, pd = (ih / 90) ** 2 * math.pi / 2, id_ / 90 * math.pi / 2, ip / 180 * math.pi
         want = np.asarray(_hand_forward(layers, th, td, pd))
         np.testing.assert_allclose(vals[ih, id_, ip], np.maximum(want, 0), rtol=2e-5, atol=1e-6)
+    # the count travels into a fit's record of its data
+    from gonio.fit.data import prepare
+
+    assert prepare(t).describe()["source"]["clamped_cells"] == src["clamped_cells"]
     with pytest.raises(FormatError) as e:
         load(f"{_zip()}::beige-fabric", negative="keep")
     assert "negative value(s)" in str(e.value) and "\n" not in str(e.value)

@@ -127,6 +127,8 @@ class FitData:
 
 
 def _jsonable(v: Any) -> bool:
+    if isinstance(v, dict):
+        return all(isinstance(k, str) and _jsonable(x) for k, x in v.items())
     return isinstance(v, (str, int, float, bool, type(None), list))
 
 
@@ -180,8 +182,11 @@ def prepare(
         source.setdefault("kind", kind)
     source.setdefault("kind", type(data).__name__)
     for key in ("name", "material", "source", "path"):
-        if key in meta and _jsonable(meta[key]):
-            source.setdefault("name" if key == "material" else key, meta[key])
+        v = meta.get(key)
+        if isinstance(v, dict):  # e.g. a reader's provenance (what an NBRDF reader clamped)
+            v = {str(k): x for k, x in v.items() if _jsonable(x)}
+        if key in meta and _jsonable(v):
+            source.setdefault("name" if key == "material" else key, v)
     if name is not None:
         source["name"] = name
 

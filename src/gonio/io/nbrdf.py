@@ -29,8 +29,8 @@ Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
   91 down to -0.39, 6 % of its peak). The authors' own decoder clamps them: their Mitsuba
   plugin's ``nn.h`` returns ``max(expm1(output), 0)`` and their PyTorch training code ends the
   network with the same ReLU, so the networks were trained and are rendered with those cells
-  at 0. A network is
-  a model of a measurement, not a measurement: gonio decodes it the same way by default
+  at 0. A network is a model of a measurement, not a measurement: gonio decodes it the same
+  way by default
   (``negative="clamp"``) and records what it clamped in the table's provenance
   (``meta["source"]["clamped_cells"]``, ``["clamped_values"]``, ``["lowest_output"]``;
   ``gonio fit`` copies it into the fit JSON's ``data``). ``negative="keep"`` returns the raw
