@@ -77,7 +77,7 @@ def run_material(name: str) -> list[dict[str, Any]]:
     t0 = time.perf_counter()
     try:
         data = prepare(io.load(f"{ARCHIVE}::{name}"))
-    except GonioError as exc:  # e.g. a network with negative output, refused by the reader
+    except GonioError as exc:  # a network the reader refuses (non-finite or nowhere positive)
         print(f"{name}: not scored: {exc}", flush=True)
         return [{"material": name, "error": str(exc)}]
     t_table = time.perf_counter() - t0
@@ -197,8 +197,13 @@ def _write_csv(rows: list[dict[str, Any]], path: Path) -> None:
         w.writerows(rows)
 
 
-def _cold_cli(name: str, preset: str, loss: str, cache: str, refine: int | None = None) -> float:
-    """Seconds of one fresh ``gonio fit`` process on ``ARCHIVE::name`` (JSON only, no plots)."""
+def _cold_cli(
+    name: str, preset: str, loss: str, cache: str, refine: int | None = None, src: str | None = None
+) -> tuple[float, float]:
+    """Wall and CPU seconds (user + system, every thread) of one fresh ``gonio fit`` process on
+    ``ARCHIVE::name`` (JSON only, no plots); ``src``: another source tree on ``PYTHONPATH``
+    (e.g. an earlier commit's ``src``, for a same-run baseline)."""
+    import resource
     import subprocess
     import sys
     import tempfile
@@ -209,25 +214,66 @@ def _cold_cli(name: str, preset: str, loss: str, cache: str, refine: int | None 
         if refine is not None:
             cmd += ["--refine", str(refine)]
         env = {**os.environ, "GONIO_COMPILE_CACHE": cache}
+        if src is not None:
+            env["PYTHONPATH"] = src
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run(cmd, check=True, capture_output=True, env=env)
-        return time.perf_counter() - t0
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        return wall, cpu
 
 
-def speed(names: list[str], repeats: int = 3) -> list[dict]:
+def batch(names: list[str], jobs: int = 1) -> list[dict[str, Any]]:
+    """Wall and CPU seconds of one ``gonio fit`` batch process over ``names`` (archive members)
+    with the three families (default loss, no plots), and per material."""
+    import resource
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "gonio", "fit", *[f"{ARCHIVE}::{n}" for n in names]]
+        for preset in FAMILIES.values():
+            cmd += ["-m", preset]
+        cmd += ["--no-plots", "-j", str(jobs), "-o", out]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        load0 = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    n = len(names)
+    row = {"materials": n, "families": len(FAMILIES), "jobs": jobs, "wall_s": wall,
+           "cpu_s": cpu, "wall_per_material_s": wall / n, "cpu_per_material_s": cpu / n,
+           "load1_start": load0, "load1_end": os.getloadavg()[0],
+           "names": " ".join(names)}  # fmt: skip
+    print(row, flush=True)
+    return [row]
+
+
+def speed(
+    names: list[str], repeats: int = 3, baseline: str | None = None, every_cell: bool = False
+) -> list[dict]:
     """Timings of single fits of MERL-resolution tables and the check that the staged fit keeps
-    the optimum.
+    the optimum. Every timing row also has its CPU seconds (``cpu_s``: user + system of every
+    thread), which a loaded machine inflates far less than the wall time.
 
     - cold: a fresh ``gonio fit`` process (imports, tabulating the network, fit, JSON), with an
-      empty persistent compilation cache and again with the cache it filled;
+      empty persistent compilation cache and again with the cache it filled; with ``baseline``
+      (another source tree, e.g. the previous commit's ``src``), ``repeats`` cold processes of
+      each, alternated, both with a filled cache, and the ratio of the medians;
     - warm: in process, the default staged fit (multi-start on 4000 random cells, refinement on
       a stratified 65,536-cell subset, polish on every cell with the subset's curvature) against
       the earlier path (``refine=0``: every polish step on every cell), alternated ``repeats``
       times on the first material so that both see the same machine load; the ratio of the
       medians is the gain independent of the load;
     - optimum: per material and family (loss ``ngan``, same seed), the final loss of the default
-      fit against the ``refine=0`` path and, on the first material, against a fit whose
-      multi-start and polish both run on every cell (``subsample`` = all cells, ``refine=0``).
+      fit against the ``refine=0`` path and, with ``every_cell``, on the first material against
+      a fit whose multi-start and polish both run on every cell (``subsample`` = all cells,
+      ``refine=0``; minutes per fit).
     """
     import tempfile
 
@@ -242,14 +288,36 @@ def speed(names: list[str], repeats: int = 3) -> list[dict]:
         rows.append({"what": what, "seconds": seconds, "load1": os.getloadavg()[0], **kw})
         print(f"  {what}: {seconds:.4g} {kw if kw else ''}", flush=True)
 
+    def cold(what: str, timing: tuple[float, float]) -> None:
+        row(what, timing[0], cpu_s=round(timing[1], 3))
+
     with tempfile.TemporaryDirectory() as cache:
-        row("cold gonio fit, empty compile cache", _cold_cli(names[0], preset, loss, cache))
-        row("cold gonio fit, compile cache filled", _cold_cli(names[0], preset, loss, cache))
-        row("cold gonio fit --refine 0, cache filled",
-            _cold_cli(names[0], preset, loss, cache, refine=0))  # fmt: skip
-    t0 = time.perf_counter()
+        cold("cold gonio fit, empty compile cache", _cold_cli(names[0], preset, loss, cache))
+        cold("cold gonio fit, compile cache filled", _cold_cli(names[0], preset, loss, cache))
+        cold("cold gonio fit --refine 0, cache filled",
+             _cold_cli(names[0], preset, loss, cache, refine=0))  # fmt: skip
+        if baseline is not None:
+            with tempfile.TemporaryDirectory() as base_cache:
+                _cold_cli(names[0], preset, loss, base_cache, src=baseline)  # fills its cache
+                runs: dict[str, list[tuple[float, float]]] = {"current": [], "baseline": []}
+                for _ in range(repeats):
+                    runs["current"].append(_cold_cli(names[0], preset, loss, cache))
+                    runs["baseline"].append(
+                        _cold_cli(names[0], preset, loss, base_cache, src=baseline)
+                    )
+                    for k in runs:
+                        cold(f"cold gonio fit, cache filled, {k} code", runs[k][-1])
+                med = {k: np.median(np.array(v), axis=0) for k, v in runs.items()}
+                for k in runs:
+                    cold(f"cold gonio fit median, {k} code", tuple(med[k]))
+                row("cold speed-up, same run (baseline / current), wall",
+                    med["baseline"][0] / med["current"][0])  # fmt: skip
+                row("cold speed-up, same run (baseline / current), CPU",
+                    med["baseline"][1] / med["current"][1])  # fmt: skip
+    t0, c0 = time.perf_counter(), time.process_time()
     tables = {n: prepare(io.load(f"{ARCHIVE}::{n}")) for n in names}
-    row("tabulate the networks + prepare cells", (time.perf_counter() - t0) / len(names))
+    row("tabulate the networks + prepare cells", (time.perf_counter() - t0) / len(names),
+        cpu_s=round((time.process_time() - c0) / len(names), 3))  # fmt: skip
     data = tables[names[0]]
     for label, refine in (("first fit, staged (compiles)", 65536),
                           ("first fit, refine=0 (compiles)", 0)):  # fmt: skip
@@ -259,10 +327,11 @@ def speed(names: list[str], repeats: int = 3) -> list[dict]:
     times: dict[int, list[float]] = {65536: [], 0: []}
     for _ in range(repeats):
         for refine in times:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             r = gf.fit(data, preset, loss=loss, refine=refine)
             times[refine].append(time.perf_counter() - t0)
             row(f"warm fit, refine={refine}", times[refine][-1], loss=r.loss,
+                cpu_s=round(time.process_time() - c0, 3),
                 **{f"{k}_s": v for k, v in r.optimizer["timings"].items()})  # fmt: skip
     new, old = float(np.median(times[65536])), float(np.median(times[0]))
     row("warm fit median, staged (default)", new)
@@ -285,7 +354,7 @@ def speed(names: list[str], repeats: int = 3) -> list[dict]:
             row(f"optimum {name} {fam}: (staged - refine=0) / refine=0",
                 (staged.loss - plain.loss) / plain.loss, staged_loss=staged.loss,
                 ref_loss=plain.loss, staged_s=t1 - t0, ref_s=t2 - t1)  # fmt: skip
-            if name != names[0]:
+            if name != names[0] or not every_cell:
                 continue
             full = gf.fit(tables[name], fam, loss=loss, subsample=tables[name].n, refine=0)
             row(f"optimum {name} {fam}: (staged - every cell) / every cell",
@@ -340,6 +409,21 @@ def main() -> None:
     ap.add_argument("--speed", metavar="MATERIAL,...",
                     help="only the timing and optimum checks, on these materials (the first "
                     "one timed)")  # fmt: skip
+    ap.add_argument("--batch", metavar="MATERIAL,...",
+                    help="only time one `gonio fit` batch process over these materials, three "
+                    "families (results/OUT_batch.csv)")  # fmt: skip
+    ap.add_argument("--baseline", metavar="SRC",
+                    help="with --speed: also time cold processes of this source tree (e.g. an "
+                    "earlier commit's src), alternated with the current code")  # fmt: skip
+    ap.add_argument(
+        "--rounds",
+        type=int,
+        default=3,
+        help="with --speed: alternated rounds per timing (default 3)",
+    )
+    ap.add_argument("--every-cell", action="store_true",
+                    help="with --speed: also fit every family with starts and polish on every "
+                    "cell (minutes per fit) for the optimum check")  # fmt: skip
     ap.add_argument(
         "--resume",
         action="store_true",
@@ -348,26 +432,27 @@ def main() -> None:
     ap.add_argument("--plot-speed", action="store_true",
                     help="fit nothing: plot results/OUT_speed.csv into OUT_speed.png")  # fmt: skip
     ap.add_argument("--combine", metavar="STEM,STEM",
-                    help="fit nothing: merge results/STEM.csv of earlier runs (on disjoint "
-                    "materials; STEM_partial: the streamed rows of a stopped run) into "
-                    "results/OUT.csv, .png and _summary.csv")  # fmt: skip
+                    help="fit nothing: merge results/STEM.csv of earlier runs (STEM_partial: the "
+                    "streamed rows of a stopped run; a material in several takes the rows of "
+                    "the first stem listed) into results/OUT.csv, .png, _summary.csv")  # fmt: skip
     args = ap.parse_args()
     if args.combine:
         rows = []
         for stem in args.combine.split(","):
             if not (RESULTS / f"{stem}.csv").exists() and stem.endswith("_partial"):
                 # the rows streamed by a run that was stopped before its report
-                for line in (RESULTS / f"{stem}.jsonl").read_text().splitlines():
-                    r = json.loads(line)
-                    if "family" in r:
-                        rows.append(r)
-                continue
-            with open(RESULTS / f"{stem}.csv", newline="") as fh:
-                for r in csv.DictReader(fh):
+                lines = (RESULTS / f"{stem}.jsonl").read_text().splitlines()
+                got = [r for r in map(json.loads, lines) if "family" in r]
+            else:
+                with open(RESULTS / f"{stem}.csv", newline="") as fh:
+                    got = list(csv.DictReader(fh))
+                for r in got:
                     for k in ("published", "gonio", "ratio", "fit_s"):
                         r[k] = float(r[k])
                     r["win"] = r["win"] == "True"
-                    rows.append(r)
+            # a material already taken from an earlier-listed stem keeps those rows
+            seen = {r["material"] for r in rows}
+            rows += [dict(r, run=stem) for r in got if r["material"] not in seen]
         _report(rows, args.out, f"combined from {args.combine}")
         return
     if not ARCHIVE.exists():
@@ -377,10 +462,14 @@ def main() -> None:
         load = os.getloadavg()
         print(f"{args.speed}: {os.cpu_count()} CPUs, load average {load[0]:.1f} {load[1]:.1f} "
               f"{load[2]:.1f} at start", flush=True)  # fmt: skip
-        rows = speed(args.speed.split(","))
+        rows = speed(args.speed.split(","), args.rounds, args.baseline, args.every_cell)
         RESULTS.mkdir(parents=True, exist_ok=True)
         _write_csv(rows, RESULTS / f"{args.out}_speed.csv")
         _plot_speed(rows, RESULTS / f"{args.out}_speed.png")
+        return
+    if args.batch:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        _write_csv(batch(args.batch.split(","), args.jobs), RESULTS / f"{args.out}_batch.csv")
         return
     if args.plot_speed:
         with open(RESULTS / f"{args.out}_speed.csv", newline="") as fh:

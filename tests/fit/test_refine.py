@@ -110,3 +110,28 @@ def test_evaluate_many_compiled_pass_equals_numpy(with_sigma):
     fast = evaluate_many(LOSSES, f[: data.n], data)
     for name in LOSSES:
         assert fast[name] == pytest.approx(evaluate(name, f[: data.n], data), rel=1e-10)
+
+
+@pytest.mark.parametrize("with_sigma", [True, False])
+def test_compiled_score_pass_equals_predict_and_evaluate_many(with_sigma):
+    from gonio.fit.data import from_arrays
+    from tests.fit.synth import cosine_directions
+
+    rng = np.random.default_rng(12)
+    n = 90_000  # chunked (3 chunks) and padded
+    wi, wo = cosine_directions(n, rng), cosine_directions(n, rng)
+    y = rng.gamma(0.5, 1.0, size=(n, 3)) - 0.01
+    sigma = 0.05 + 0.1 * np.abs(y) if with_sigma else None
+    data = from_arrays(wi, wo, y, sigma=sigma, weights=rng.uniform(0.5, 2.0, n))
+    tmpl, fixed, tied = presets.build("lambert+ward")
+    lay = Layout(tmpl, data.channels, fixed=fixed, tied=tied)
+    prob = Problem(lay, get_loss("ngan"), data)
+    u = lay.random_starts(3, seed=2)[2]
+    got, n_bad = prob.scores(u, tuple(LOSSES))
+    f = prob.predict(u)
+    want = evaluate_many(LOSSES, f, data)
+    assert n_bad == 0 and prob.n_chunks > 1
+    for name in LOSSES:
+        assert got[name] == pytest.approx(want[name], rel=1e-10)
+    sig = 1.0 if sigma is None else data.sigma
+    assert got["wls"] == pytest.approx(float(np.sum(((f - data.values) / sig) ** 2)), rel=1e-10)

@@ -87,10 +87,11 @@ def test_values_are_non_negative_and_nearly_reciprocal(name):
     th = np.arccos(rng.uniform(0.2, 1.0, (2, 4000)))  # both polar angles below 78 deg
     ph = rng.uniform(0, 2 * np.pi, (2, 4000))
     w = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
-    a, b = net.f(w[0], w[1]), net.f(w[1], w[0])
+    a, b = net.f(w[0], w[1], negative="keep"), net.f(w[1], w[0], negative="keep")
     # only the expm1 of small negative outputs, in the dark off-specular cells of metals
     assert np.all(a > -5e-3), a.min()
     assert np.mean(a < 0) < 0.5
+    np.testing.assert_array_equal(net.f(w[0], w[1]), np.maximum(a, 0.0))  # clamped by default
     # the network is not constrained to be reciprocal, but it learnt a reciprocal table: the
     # swap changes the value by a few percent of the value (weighted by the value: near-zero
     # off-specular cells of metals have large relative but negligible absolute changes)
@@ -121,7 +122,7 @@ def _write_zip(path, members: dict[str, bytes]) -> None:
             zf.writestr(k, v)
 
 
-def _h5_bytes(shapes) -> bytes:
+def _h5_bytes(shapes, last_bias: float = 0.0) -> bytes:
     buf = pyio.BytesIO()
     with h5py.File(buf, "w") as h5:
         for i, (k, b) in enumerate(shapes, start=1):
@@ -129,7 +130,7 @@ def _h5_bytes(shapes) -> bytes:
             g.attrs["weight_names"] = [f"dense_{i}/kernel:0".encode(), f"dense_{i}/bias:0".encode()]
             sub = g.create_group(f"dense_{i}")
             sub["kernel:0"] = np.full(k, 0.01, np.float32)
-            sub["bias:0"] = np.zeros(b, np.float32)
+            sub["bias:0"] = np.full(b, last_bias if i == len(shapes) else 0.0, np.float32)
     return buf.getvalue()
 
 
@@ -152,6 +153,41 @@ def test_a_small_synthetic_network_evaluates(tmp_path):
     np.testing.assert_allclose(net.f(wi, wi), [math.expm1(4 * 0.01 * 0.01 * s)] * 3, rtol=1e-5)
 
 
+def test_negative_outputs_are_clamped_and_counted_as_the_authors_decoder_does():
+    """beige-fabric's network is below 0 in some valid cells (down to -0.097, 17 % of its peak):
+    clamped at 0 by default, with the count in the provenance; refused in one line on request."""
+    t = load(f"{_zip()}::beige-fabric")
+    src = t.meta["source"]
+    net = read_nbrdf(_zip(), "beige-fabric")
+    raw = net.to_table(dims=(30, 30, 60), negative="clamp").meta["source"]
+    assert raw["clamped_values"] >= raw["clamped_cells"] > 0  # also on a coarser grid
+    m = np.asarray(t.mask)
+    vals = np.asarray(t.values)
+    assert np.all(vals[m] >= 0)
+    assert src["negative"] == "clamp" and src["lowest_output"] < -0.05
+    # the clamped cells are exactly those where the hand-written forward pass is negative
+    layers = _hand_weights("beige-fabric")
+    zero = np.argwhere(m & np.any(vals == 0, axis=-1))
+    assert len(zero) >= src["clamped_cells"] > 50
+    for ih, id_, ip in zero[:: max(1, len(zero) // 12)]:
+        th, td, pd = (ih / 90) ** 2 * math.pi / 2, id_ / 90 * math.pi / 2, ip / 180 * math.pi
+        want = np.asarray(_hand_forward(layers, th, td, pd))
+        np.testing.assert_allclose(vals[ih, id_, ip], np.maximum(want, 0), rtol=2e-5, atol=1e-6)
+    # the count travels into a fit's record of its data
+    from gonio.fit.data import prepare
+
+    assert prepare(t).describe()["source"]["clamped_cells"] == src["clamped_cells"]
+    with pytest.raises(FormatError) as e:
+        load(f"{_zip()}::beige-fabric", negative="keep")
+    assert "negative value(s)" in str(e.value) and "\n" not in str(e.value)
+    # a network without negative outputs is unchanged by the policy
+    g = load(f"{_zip()}::gold-paint")
+    assert g.meta["source"]["clamped_values"] == 0
+    np.testing.assert_array_equal(
+        np.asarray(g.values), np.asarray(load(f"{_zip()}::gold-paint", negative="keep").values)
+    )
+
+
 @pytest.mark.parametrize(
     "members, needle",
     [
@@ -162,6 +198,10 @@ def test_a_small_synthetic_network_evaluates(tmp_path):
         ({"m.json": _desc(), "m.h5": b"not hdf5"}, "not a readable Keras weights file"),
         ({"m.json": _desc(), "m.h5": _h5_bytes([((6, 5), 5), ((5, 3), 3)])}, "expected (6, 4)"),
         ({"m.json": _desc((4, 2)), "m.h5": b"x"}, "ending in 3 outputs"),
+        (
+            {"m.json": _desc(), "m.h5": _h5_bytes([((6, 4), 4), ((4, 3), 3)], last_bias=-1.0)},
+            "nowhere positive",
+        ),
     ],
 )
 def test_bad_archives_give_one_line(tmp_path, members, needle):

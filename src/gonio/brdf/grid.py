@@ -17,7 +17,6 @@ from typing import Any, Literal
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf import frames
 from gonio.errors import FormatError, ParameterError
 
 PARAMETERIZATIONS = {
@@ -369,15 +368,28 @@ def default_axes(
 
 
 def node_directions(axes: Sequence[Axis], parameterization: str) -> tuple[np.ndarray, ...]:
+    """``(wi, wo)``, each ``(n_nodes, 3)`` float64, of every node in C order: the inverse of
+    :func:`gonio.brdf.frames.half_diff` (``frames.half_diff_to_directions``), evaluated with
+    NumPy (no per-operation compilation on a million-node grid)."""
     nodes = [a.nodes() for a in axes]
     mesh = np.meshgrid(*nodes, indexing="ij")
     if parameterization == "half_diff_iso":
         th, td, pd = (m.reshape(-1) for m in mesh)
-        ph = np.zeros_like(th)
+        ph = None
     else:
         th, ph, td, pd = (m.reshape(-1) for m in mesh)
-    wi, wo = frames.half_diff_to_directions(th, ph, td, pd)
-    return np.asarray(wi, np.float64), np.asarray(wo, np.float64)
+    st = np.sin(td)
+    dx, dy, dz = st * np.cos(pd), st * np.sin(pd), np.cos(td)
+    sh, ch = np.sin(th), np.cos(th)
+    # R_y(theta_h) applied to d = (dx, dy, dz) and to (-dx, -dy, dz)
+    wi = np.stack([ch * dx + sh * dz, dy, -sh * dx + ch * dz], -1)
+    wo = np.stack([-ch * dx + sh * dz, -dy, sh * dx + ch * dz], -1)
+    if ph is not None:  # then R_z(phi_h)
+        c, s = np.cos(ph)[:, None], np.sin(ph)[:, None]
+        for w in (wi, wo):
+            x, y = w[:, 0].copy(), w[:, 1].copy()
+            w[:, 0], w[:, 1] = c[:, 0] * x - s[:, 0] * y, s[:, 0] * x + c[:, 0] * y
+    return wi, wo
 
 
 def numeric_array(x: Any, what: str, dtype: Any) -> np.ndarray:

@@ -23,6 +23,9 @@ from gonio.fit.result import FitResult
 from gonio.fit.uncertainty import laplace, mcmc
 
 UNCERTAINTY_METHODS = (None, "laplace", "mcmc")
+#: Data at least this large (values) is scored after the fit by one compiled pass
+#: (:meth:`~gonio.fit.objective.Problem.scores`), smaller data by NumPy.
+_SCORE_PASS_MIN_VALUES = 1 << 18
 
 
 def information_criteria(
@@ -279,12 +282,16 @@ def _fit_one(
         if restarted:
             opt = again
     fitted = layout.model(opt.u)
-    f = problem.predict(opt.u)
-    if not np.all(np.isfinite(f)):
+    if fd.values.size >= _SCORE_PASS_MIN_VALUES:
+        # one compiled pass: no model values on the host (a MERL table: 2.7e6 of them)
+        metrics, n_bad = problem.scores(opt.u, tuple(LOSSES))
+    else:  # NumPy: no compilation per data size
+        f = problem.predict(opt.u)
+        n_bad = int(np.count_nonzero(~np.isfinite(f)))
+        metrics = evaluate_many(LOSSES, f, fd) if not n_bad else {}
+    if n_bad:
         raise FitError(f"{name}: the fitted model is not finite on the data")
-    metrics = evaluate_many(LOSSES, f, fd)
-    sig = 1.0 if fd.sigma is None else fd.sigma
-    chi2 = float(np.sum(((f - fd.values) / sig) ** 2))
+    chi2 = metrics["wls"]  # with the data's sigma, 1 where there is none
     dof = max(n_res - layout.size, 1)
     statistical = lo.statistical and fd.sigma is not None
     aic, bic = information_criteria(opt.cost, n_res, layout.size, statistical)

@@ -127,6 +127,8 @@ class FitData:
 
 
 def _jsonable(v: Any) -> bool:
+    if isinstance(v, dict):
+        return all(isinstance(k, str) and _jsonable(x) for k, x in v.items())
     return isinstance(v, (str, int, float, bool, type(None), list))
 
 
@@ -176,12 +178,15 @@ def prepare(
     kind = type(data).__name__
     meta = dict(getattr(data, "meta", None) or {})
     if hasattr(data, "to_samples") and not isinstance(data, FitData):
-        data = data.to_samples()
+        data = _table_samples(data) if hasattr(data, "cell_measure") else data.to_samples()
         source.setdefault("kind", kind)
     source.setdefault("kind", type(data).__name__)
     for key in ("name", "material", "source", "path"):
-        if key in meta and _jsonable(meta[key]):
-            source.setdefault("name" if key == "material" else key, meta[key])
+        v = meta.get(key)
+        if isinstance(v, dict):  # e.g. a reader's provenance (what an NBRDF reader clamped)
+            v = {str(k): x for k, x in v.items() if _jsonable(x)}
+        if key in meta and _jsonable(v):
+            source.setdefault("name" if key == "material" else key, v)
     if name is not None:
         source["name"] = name
 
@@ -248,6 +253,36 @@ def prepare(
         weights=np.ascontiguousarray(weights[keep]),
         channel_names=names,
         source=source,
+    )
+
+
+@dataclass(frozen=True)
+class _TableSamples:
+    """A table's valid nodes as flat arrays (what ``to_samples`` gives, without building and
+    re-validating a :class:`~gonio.brdf.measured.MeasuredSamples`: :func:`prepare` checks them)."""
+
+    wi: np.ndarray
+    wo: np.ndarray
+    values: np.ndarray
+    sigma: np.ndarray | None
+    weights: np.ndarray
+    channels: Any
+
+
+def _table_samples(table: Any) -> _TableSamples:
+    """The nodes of a :class:`~gonio.brdf.tabulated.TabulatedBRDF` that ``to_samples`` keeps
+    (valid, both directions above the horizon), weighted by their cell measure (sr^2)."""
+    wi, wo = table.node_directions()
+    keep = np.asarray(table.mask).reshape(-1) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    c = table.n_channels
+    sigma = None if table.sigma is None else np.asarray(table.sigma).reshape(-1, c)[keep]
+    return _TableSamples(
+        wi[keep],
+        wo[keep],
+        np.asarray(table.values).reshape(-1, c)[keep],
+        sigma,
+        table.cell_measure().reshape(-1)[keep],
+        table.channels,
     )
 
 

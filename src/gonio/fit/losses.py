@@ -102,6 +102,26 @@ def _constants(
     return out
 
 
+def constants_of(
+    needs: tuple[str, ...], y: Any, inv_sigma: Any, w: Any, cos_i: Any
+) -> dict[str, Any]:
+    """The constants named in ``needs`` for one chunk of samples (JAX), with ``scale`` left
+    unnormalized: ``sqrt(w)`` instead of ``sqrt(w / (C W))``, so that a loss's sum of squares
+    over the chunks is ``C W`` times its own (the caller divides; the chunked score pass of
+    :meth:`gonio.fit.objective.Problem.scores`).
+
+    ``y`` ``(N, C)``; ``inv_sigma`` ``1 / sigma`` ``(N, C)`` or None (then 1); ``w`` the
+    weights ``(N, 1)``; ``cos_i`` ``(N, 1)``.
+    """
+    rest = tuple(n for n in needs if n not in ("inv_sigma", "scale"))
+    k = _constants(rest, y, None, w[..., 0], cos_i, jnp)
+    if "inv_sigma" in needs:
+        k["inv_sigma"] = jnp.ones_like(y) if inv_sigma is None else inv_sigma
+    if "scale" in needs:
+        k["scale"] = jnp.sqrt(w)
+    return k
+
+
 def _wls(f: Any, k: dict[str, Any], xp: Any) -> Any:
     return (f - k["y"]) * k["inv_sigma"]
 

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.fit.data import FitData
-from gonio.fit.losses import Loss
+from gonio.fit.losses import LOSSES, Loss, constants_of
 from gonio.fit.params import Layout
 
 Array = jnp.ndarray
@@ -65,10 +65,11 @@ class Problem:
             "mask": padded(np.ones((n, 1)), 0.0),
             "k": {key: padded(v, 1.0 if key == "inv_sigma" else 0.0) for key, v in consts.items()},
         }
-        self.arrays = jax.tree_util.tree_map(jnp.asarray, arrays)
+        self.arrays = jax.device_put(arrays)  # (jnp.asarray would compile a copy per shape)
         self.n_chunks, self.chunk_rows = k, size
         self.n_residuals = n * self.data.channels
         self.n_params = self.layout.size
+        self._score_arrays: dict[str, Any] | None = None
         self._build()
 
     # -- compiled functions ---------------------------------------------------------------------
@@ -112,6 +113,34 @@ class Problem:
         )
         f = f.reshape(-1, f.shape[-1])[: self.data.n]
         return np.broadcast_to(f, (self.data.n, self.data.channels))
+
+    def scores(self, u: np.ndarray, names: tuple[str, ...]) -> tuple[dict[str, float], int]:
+        """The reported values of the losses ``names`` at ``u`` on the data, and the number of
+        non-finite model values: one compiled pass over the chunks (no model values on the
+        host; on a MERL table this replaces :meth:`predict` plus
+        :func:`~gonio.fit.losses.evaluate_many`, equal to 1e-10). ``wls`` is the chi-square
+        with the data's sigma (1 when absent)."""
+        if self._score_arrays is None:
+            d, pad = self.data, self.n_chunks * self.chunk_rows - self.data.n
+
+            def padded(a: np.ndarray) -> Any:
+                a = np.concatenate([a, np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a
+                return jax.device_put(a.reshape(self.n_chunks, self.chunk_rows, *a.shape[1:]))
+
+            self._score_arrays = {
+                "y": padded(d.values),
+                "w": padded(d.weights[:, None]),
+                "inv_sigma": None if d.sigma is None else padded(1.0 / d.sigma),
+            }
+        sums, bad = self.fns.scores(names)(
+            jnp.asarray(u, jnp.float64), self.arrays, self._score_arrays, self.layout.template
+        )
+        total_w = float(np.sum(self.data.weights)) * self.data.channels
+        out = {}
+        for name, v in zip(names, np.asarray(sums), strict=True):
+            lo = LOSSES[name]
+            out[name] = lo.value(float(v) / (total_w if "scale" in lo.needs else 1.0))
+        return out, int(bad)
 
     def cluster_scores(self, u: np.ndarray, ids: np.ndarray, n_clusters: int) -> np.ndarray:
         """``J_g^T r_g`` per cluster, ``(G, P)``, for sample cluster indices ``ids`` ``(N,)`` in
@@ -205,6 +234,41 @@ class Compiled:
             model = to_model(u, tmpl)
             return jax.vmap(lambda c: model.f(c["wi"], c["wo"]))(arrays)
 
+        score_fns: dict[tuple[str, ...], Any] = {}
+
+        def scores_fn(names: tuple[str, ...]) -> Any:
+            """Jitted ``(u, arrays, extra, tmpl) -> (sums, n_bad)``: per loss the sum of squared
+            residuals with ``scale`` = sqrt(w) (the caller divides by C W), and the count of
+            non-finite model values at valid samples."""
+            fn = score_fns.get(names)
+            if fn is not None:
+                return fn
+            needs = tuple(dict.fromkeys(k for n in names for k in LOSSES[n].needs))
+
+            def run(u: Array, arrays: dict[str, Any], extra: dict[str, Any], tmpl: Any) -> Any:
+                model = to_model(u, tmpl)
+
+                def step(acc: tuple[Array, Array], xs: Any) -> tuple[Any, None]:
+                    c, e = xs
+                    y = e["y"]
+                    f = jnp.broadcast_to(model.f(c["wi"], c["wo"]), y.shape)
+                    ok = jnp.isfinite(f)
+                    bad = jnp.sum(jnp.where(ok, 0.0, c["mask"]))
+                    f = jnp.where(ok, f, 0.0)
+                    k = constants_of(needs, y, e["inv_sigma"], e["w"], c["wi"][..., 2:3])
+                    sums = jnp.stack(
+                        [jnp.sum((LOSSES[n]._residual(f, k, jnp) * c["mask"]) ** 2) for n in names]
+                    )
+                    return (acc[0] + sums, acc[1] + bad), None
+
+                init = (jnp.zeros(len(names), u.dtype), jnp.zeros((), u.dtype))
+                (sums, bad), _ = jax.lax.scan(step, init, (arrays, extra))
+                return sums, bad
+
+            fn = score_fns[names] = jax.jit(run)
+            return fn
+
+        self.scores = scores_fn
         self.to_model = to_model
         self.chunk_res = chunk_res
         self.cost_raw = cost

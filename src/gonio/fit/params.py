@@ -322,9 +322,23 @@ class Layout:
         starts += [rng.uniform(lo, hi) for _ in range(max(n - 1, 0))]
         return np.stack(starts)
 
+    def theta_np(self, u: np.ndarray) -> np.ndarray:
+        """:meth:`theta` in NumPy (no per-operation compilation outside a trace)."""
+        u = np.asarray(u, dtype=np.float64)
+        parts = []
+        for e in self.entries:
+            ue = u[e.offset : e.offset + e.size]
+            if e.scale == "log":
+                parts.append(np.exp(ue))
+            elif e.scale == "logit":
+                parts.append(e.lo + (e.hi - e.lo) / (1.0 + np.exp(-ue)))
+            else:
+                parts.append(ue)
+        return np.concatenate(parts)
+
     def values(self, u: np.ndarray) -> dict[str, np.ndarray | float]:
         """Physical values by key (float for shared, array (C,) for per-channel)."""
-        th = np.asarray(self.theta(jnp.asarray(u)))
+        th = self.theta_np(u)
         out: dict[str, np.ndarray | float] = {}
         for e in self.entries:
             v = th[e.offset : e.offset + e.size]

@@ -22,7 +22,7 @@ def load(
     *,
     color: str | None = None,
     illuminant: str = "D65",
-    negative: str = "keep",
+    negative: str | None = None,
     merl_cells: str = "centre",
 ) -> Any:
     """Load a BRDF file, detecting its format from its content.
@@ -38,9 +38,13 @@ def load(
         through CIE 1931 XYZ under ``illuminant``; default keeps the spectrum. For
         single-channel ALTA data ``"rgb"`` replicates the channel.
     illuminant : {"D65", "E"}
-    negative : {"keep", "clamp"}
-        RGL files only: keep the file's (few, slightly) negative colour values as the reference
-        reader does, or clamp them at 0 (see :mod:`gonio.io.rgl_measured`).
+    negative : {"keep", "clamp"}, optional
+        Negative values, as each format's reference reader treats them by default. RGL files:
+        keep the file's (few, slightly) negative colour values as Mitsuba does (default), or
+        clamp them at 0 (see :mod:`gonio.io.rgl_measured`). Neural BRDFs: clamp negative
+        network outputs at 0 as the authors' decoder does (default; counted in
+        ``meta["source"]``), or keep the raw output and refuse a network clearly below 0 (see
+        :mod:`gonio.io.nbrdf`).
     merl_cells : {"centre", "start"}
         MERL files only: a cell's node (its sample position) at the cell centre in the warped
         index (default; nearest lookup is then the reference reader's cell) or at its lower
@@ -63,7 +67,7 @@ def load(
     if fmt == "nbrdf":
         from gonio.io.nbrdf import load_nbrdf_table
 
-        return load_nbrdf_table(path)
+        return load_nbrdf_table(path, negative=negative or "clamp")
     if fmt == "native":
         from gonio.io.native import read_native
 
@@ -75,7 +79,7 @@ def load(
     if fmt == "rgl":
         from gonio.io.rgl_measured import load_rgl
 
-        return load_rgl(path, negative=negative, color=color, illuminant=illuminant)
+        return load_rgl(path, negative=negative or "keep", color=color, illuminant=illuminant)
     if fmt == "cornell":
         from gonio.io.cornell import read_cornell
 

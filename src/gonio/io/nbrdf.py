@@ -22,8 +22,22 @@ Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
 * **Layers**: ``Dense`` after ``Dense``, kernels stored ``(in, out)`` (``y = x @ K + b``), ReLU
   between layers, none after the last; evaluated in float32 as Keras does.
 * **Output**: three numbers whose ``expm1`` is ``f_r`` in sr⁻¹ (RGB, no cosine factor) with
-  MERL's channel scales ``(1, 1.15, 1.66) / 1500`` already applied. Values are returned as the
-  network gives them (a network can dip slightly below 0 in dark cells; nothing is clamped).
+  MERL's channel scales ``(1, 1.15, 1.66) / 1500`` already applied.
+* **Negative outputs**: ``expm1`` of a negative output is negative; 31 of the 88 published
+  networks dip below 0 at valid cells of the MERL grid (from one cell to a fifth of them, by
+  -1e-5 to -0.39 sr⁻¹ at the lowest; beige-fabric in 119 cells down to -0.097, pink-plastic in
+  91 down to -0.39, 6 % of its peak). The authors' own decoder clamps them: their Mitsuba
+  plugin's ``nn.h`` returns ``max(expm1(output), 0)`` and their PyTorch training code ends the
+  network with the same ReLU, so the networks were trained and are rendered with those cells
+  at 0. A network is a model of a measurement, not a measurement: gonio decodes it the same
+  way by default
+  (``negative="clamp"``) and records what it clamped in the table's provenance
+  (``meta["source"]["clamped_cells"]``, ``["clamped_values"]``, ``["lowest_output"]``;
+  ``gonio fit`` copies it into the fit JSON's ``data``). ``negative="keep"`` returns the raw
+  output instead, and then a network clearly below 0 (beyond
+  :data:`gonio.io._sanity.NEGATIVE_TOLERANCE` of its peak) is refused in one line as any reader
+  refuses clearly negative values. Either way a network whose output is non-finite, beyond
+  1e10 sr⁻¹ or nowhere positive is refused (corruption, not a material).
 * **MERL grid**: the networks were trained with MERL cell ``i`` placed at the cell's start,
   ``θh = (i/90)² π/2``, ``θd = i/90 · π/2``, ``φd = i/180 · π`` (``merl_axes(cells="start")``);
   :meth:`NBRDF.to_table` evaluates there and stores the values on MERL's own nodes
@@ -47,6 +61,7 @@ import numpy as np
 from gonio._bounded import loads_json
 from gonio.errors import FormatError
 from gonio.io._common import PathLike, check_input_file, fail
+from gonio.io._sanity import check_brdf_values
 from gonio.io.merl import MERL_DIMS, merl_axes
 
 if TYPE_CHECKING:
@@ -61,6 +76,11 @@ MAX_MEMBER_BYTES = 16 << 20
 #: What reading a corrupted member raises (bad deflate data, an unknown or encrypted method).
 _ZIP_ERRORS = (zipfile.BadZipFile, OSError, KeyError, EOFError, zlib.error,
                NotImplementedError, RuntimeError, ValueError)  # fmt: skip
+#: What :meth:`NBRDF.to_table` does with negative network outputs (module docstring).
+NEGATIVE_POLICIES = ("clamp", "keep")
+#: Rows from which :meth:`NBRDF.to_table` evaluates the network as one compiled program.
+_JIT_MIN_ROWS = 1 << 16
+_JIT_FORWARD: Any = None
 #: Grid on which :meth:`NBRDFArchive.read` probes a network (as :meth:`NBRDF.to_table`).
 _PROBE_DIMS = (16, 16, 32)
 
@@ -128,11 +148,41 @@ class NBRDF:
                 np.maximum(a, 0.0, out=a)
         return a.reshape(*shape, a.shape[-1])
 
-    def f(self, wi: Any, wo: Any, chunk: int = 1 << 18) -> np.ndarray:
+    def _forward_many(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`forward` of many rows ``(N, 6)`` float32 at once: one compiled XLA program
+        (the layers fused, about three times NumPy's speed on a MERL grid) whose weights are
+        arguments, so that every network of the same architecture and the same ``N`` shares
+        it (and the persistent compilation cache, :mod:`gonio.compile_cache`). Small inputs
+        go through :meth:`forward` (no compilation)."""
+        if x.shape[0] < _JIT_MIN_ROWS:
+            return self.forward(x)
+        import jax
+        import jax.numpy as jnp
+
+        global _JIT_FORWARD
+        if _JIT_FORWARD is None:
+
+            def dense(x: Any, kernels: Any, biases: Any) -> Any:
+                a = x
+                for i, (k, b) in enumerate(zip(kernels, biases, strict=True)):
+                    a = a @ k + b
+                    if i < len(kernels) - 1:
+                        a = jnp.maximum(a, 0.0)
+                return a
+
+            _JIT_FORWARD = jax.jit(dense)
+        out = _JIT_FORWARD(jnp.asarray(x), self.kernels, self.biases)
+        return np.asarray(out, dtype=np.float32)
+
+    def f(self, wi: Any, wo: Any, chunk: int = 1 << 18, negative: str = "clamp") -> np.ndarray:
         """``f_r(wi, wo)`` in sr⁻¹, ``(..., 3)`` float64, for unit directions in the local frame.
 
-        Pairs with a direction at or below the horizon give 0 (gonio's convention for every BRDF).
+        Pairs with a direction at or below the horizon give 0 (gonio's convention for every BRDF);
+        negative outputs are clamped at 0 as the authors' decoder does, unless ``negative`` is
+        ``"keep"`` (module docstring).
         """
+        if negative not in NEGATIVE_POLICIES:
+            raise ValueError(f"negative must be one of {NEGATIVE_POLICIES}, not {negative!r}")
         wi = np.asarray(wi, dtype=np.float64)
         wo = np.asarray(wo, dtype=np.float64)
         wi, wo = np.broadcast_arrays(wi, wo)
@@ -144,12 +194,27 @@ class NBRDF:
             out[sl] = np.expm1(self.forward(self.features(wi[sl], wo[sl])))
         ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
         out[~ok] = 0.0
+        if negative == "clamp":
+            np.maximum(out, 0.0, out=out)
         return out.reshape(*shape, 3)
 
-    def to_table(self, dims: tuple[int, int, int] = MERL_DIMS) -> TabulatedBRDF:
+    def to_table(
+        self, dims: tuple[int, int, int] = MERL_DIMS, negative: str = "clamp"
+    ) -> TabulatedBRDF:
         """The network on the nodes of a MERL-like ``(θh, θd, φd)`` grid, as a ``half_diff_iso``
         :class:`~gonio.brdf.tabulated.TabulatedBRDF` (RGB, sr⁻¹, nearest-cell lookup like a MERL
-        file); cells with a direction at or below the horizon are invalid."""
+        file); cells with a direction at or below the horizon are invalid.
+
+        Parameters
+        ----------
+        dims : cells along ``(θh, θd, φd)``.
+        negative : {"clamp", "keep"}
+            ``"clamp"`` (default, the authors' decoder): negative outputs become 0 and their
+            count goes into ``meta["source"]``; ``"keep"``: the raw output, refused when
+            clearly negative (see the module docstring).
+        """
+        if negative not in NEGATIVE_POLICIES:
+            raise ValueError(f"negative must be one of {NEGATIVE_POLICIES}, not {negative!r}")
         from gonio.brdf.tabulated import Channels, TabulatedBRDF
 
         # the network was trained with MERL cell i at the cell's start: its value for cell i is
@@ -160,45 +225,41 @@ class NBRDF:
             np.asarray(a.nodes(), dtype=np.float64) for a in merl_axes(dims, cells="start")
         )
         th, td, pd = np.meshgrid(th, td, pd, indexing="ij")
-        # directions of the nodes (phi_h = 0), as in gonio.brdf.frames.half_diff_to_directions
-        st, ct = np.sin(td), np.cos(td)
-        d = np.stack([st * np.cos(pd), st * np.sin(pd), ct], axis=-1)
-        sh, ch = np.sin(th)[..., None], np.cos(th)[..., None]
-
-        def rot_y(v: np.ndarray) -> np.ndarray:
-            return np.stack(
-                [
-                    ch[..., 0] * v[..., 0] + sh[..., 0] * v[..., 2],
-                    v[..., 1],
-                    -sh[..., 0] * v[..., 0] + ch[..., 0] * v[..., 2],
-                ],
-                axis=-1,
-            )
-
-        wi = rot_y(d)
-        wo = rot_y(d * np.array([-1.0, -1.0, 1.0]))
-        mask = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        # the features of a node are known in closed form: no need to recover them from wi, wo
-        feats = np.concatenate([sh, np.zeros_like(sh), ch, d], axis=-1, dtype=np.float32).reshape(
-            -1, 6
-        )
-        vals = np.empty((feats.shape[0], 3), dtype=np.float32)
-        step = 1 << 18
-        for s in range(0, feats.shape[0], step):
-            vals[s : s + step] = np.expm1(self.forward(feats[s : s + step]))
-        vals = vals.reshape(*mask.shape, 3)
-        vals[~mask] = 0.0
-        from gonio.io._sanity import check_brdf_values
-
+        # directions of the nodes (phi_h = 0), as in gonio.brdf.frames.half_diff_to_directions:
+        # d is the difference vector, wi = R_y(theta_h) d and wo = R_y(theta_h) (-d_x, -d_y, d_z),
+        # so their z components are cos(theta_h) d_z -/+ sin(theta_h) d_x
+        st = np.sin(td)
+        dx, dz = st * np.cos(pd), np.cos(td)
+        sh, ch = np.sin(th), np.cos(th)
+        mask = (ch * dz - sh * dx > 0) & (ch * dz + sh * dx > 0)
+        # the features of a node are known in closed form; only valid cells are evaluated
+        feats = np.stack(
+            [sh[mask], np.zeros(int(mask.sum())), ch[mask], dx[mask],
+             (st * np.sin(pd))[mask], dz[mask]],
+            axis=-1,
+        ).astype(np.float32)  # fmt: skip
+        vals = np.zeros((*mask.shape, 3), dtype=np.float32)
+        with np.errstate(over="ignore", invalid="ignore"):  # non-finite output: refused below
+            vals[mask] = np.expm1(self._forward_many(feats))
         where = self.source.get("archive", self.name)
-        check_brdf_values(where, f"{self.name}: network output", vals, mask)
+        what = f"{self.name}: network output"
+        check_brdf_values(where, what, vals, mask, non_negative=negative == "keep")
+        source: dict[str, Any] = {"format": "nbrdf", **self.source, "negative": negative}
+        if negative == "clamp":
+            below = vals < 0  # only valid cells: the others are 0 already
+            source["clamped_values"] = int(np.count_nonzero(below))
+            source["clamped_cells"] = int(np.count_nonzero(below.any(axis=-1)))
+            source["lowest_output"] = float(min(vals.min(), 0.0))
+            np.maximum(vals, 0.0, out=vals)
+        if not np.any(vals[mask] > 0):
+            raise fail(where, f"{what}: nowhere positive at valid cells")
         return TabulatedBRDF(
             values=vals,
             axes=axes,
             parameterization="half_diff_iso",
             mask=mask,
             channels=Channels.rgb(),
-            meta={"name": self.name, "source": {"format": "nbrdf", **self.source}},
+            meta={"name": self.name, "source": source},
             interpolation="nearest",
         )
 
@@ -283,7 +344,7 @@ MAX_WEIGHT = 1e3
 
 def _probe(net: NBRDF, path: Path) -> None:
     """Refuse a network whose output on a MERL-like grid is non-finite, beyond 1e10 1/sr or
-    clearly negative (finite weights can still overflow float32: corruption, not a material)."""
+    nowhere positive (finite weights can still overflow float32: corruption, not a material)."""
     net.to_table(_PROBE_DIMS)  # checks its values (NBRDF.to_table)
 
 
@@ -394,9 +455,12 @@ def read_nbrdf(path: PathLike, name: str | None = None) -> NBRDF:
     return NBRDFArchive(path).read(name)
 
 
-def load_nbrdf_table(path: PathLike) -> TabulatedBRDF:
-    """``io.load`` of ``"ARCHIVE.zip::NAME"``: the network tabulated on MERL's grid."""
-    return read_nbrdf(path).to_table()
+def load_nbrdf_table(path: PathLike, negative: str = "clamp") -> TabulatedBRDF:
+    """``io.load`` of ``"ARCHIVE.zip::NAME"``: the network tabulated on MERL's grid
+    (``negative``: see :meth:`NBRDF.to_table`)."""
+    if negative not in NEGATIVE_POLICIES:
+        raise ValueError(f"negative must be one of {NEGATIVE_POLICIES}, not {negative!r}")
+    return read_nbrdf(path).to_table(negative=negative)
 
 
 def list_materials(path: PathLike) -> list[str]:
