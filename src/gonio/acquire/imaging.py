@@ -281,12 +281,25 @@ class ImagingCamera:
 
     def _pose(self, hdr) -> BoardPose:
         gray = board_gray(hdr.rate, self._cfa)
+        lin = linear_8bit(gray)
         try:
-            return estimate_pose(linear_8bit(gray), self.layout, self.camera_matrix)
+            return estimate_pose(lin, self.layout, self.camera_matrix)
         except DeviceError:
             pass
         # strong light fall-off across the board: the log tone map
-        return estimate_pose(to_8bit(gray), self.layout, self.camera_matrix)
+        log = to_8bit(gray)
+        try:
+            return estimate_pose(log, self.layout, self.camera_matrix)
+        except DeviceError as exc:
+            first = exc
+        # OpenCV's board check rejects sound detections of a steeply foreshortened board
+        # (see estimate_pose); the pose's reprojection error checks them instead
+        for img in (lin, log):
+            try:
+                return estimate_pose(img, self.layout, self.camera_matrix, check_board=False)
+            except DeviceError:
+                pass
+        raise first
 
     def _rescue(self, hdr, exposures: list[float]) -> list[float]:
         """Exposures to add when the board was not found: 8x shorter when more than 1 % of the
