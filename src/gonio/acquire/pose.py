@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from gonio.errors import DeviceError
+from gonio.errors import FrameError
 
 
 @dataclass(frozen=True)
@@ -137,9 +137,9 @@ def estimate_pose(
     the detection is checked by the solved pose instead: after outlier rejection the corners
     must reproject within :data:`UNCHECKED_MAX_REPROJECTION_PX` RMS.
 
-    Raises DeviceError when fewer than ``min_corners`` corners are found (a camera problem
-    that retrying the frame may fix, not bad user input), or when an unchecked detection does
-    not fit one pose.
+    Raises FrameError (a DeviceError) when fewer than ``min_corners`` corners are found (a
+    problem of this frame that retaking it may fix, not bad user input), or when an unchecked
+    detection does not fit one pose.
     """
     import cv2
 
@@ -152,7 +152,7 @@ def estimate_pose(
     n = 0 if ids is None else len(ids)
     if n < min_corners:
         m = 0 if marker_ids is None else len(marker_ids)
-        raise DeviceError(
+        raise FrameError(
             f"ChArUco board not found: {n} corners detected, need {min_corners}"
             f" ({m} markers decoded{'' if check_board else ', board check off'})"
         )
@@ -162,7 +162,7 @@ def estimate_pose(
     dist = np.zeros(5)
     ok, rvec, tvec = cv2.solvePnP(obj, img, camera_matrix, dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
-        raise DeviceError("solvePnP failed on the detected ChArUco corners")
+        raise FrameError("solvePnP failed on the detected ChArUco corners")
     # Corners seen at grazing angles or next to the bright sample are sometimes refined to the
     # wrong sub-pixel position; drop those far off the first solution and solve again.
     keep = np.ones(len(obj), dtype=bool)
@@ -177,7 +177,7 @@ def estimate_pose(
     R, _ = cv2.Rodrigues(rvec)
     rms = float(np.sqrt(np.mean(err[keep] ** 2)))
     if not check_board and rms > UNCHECKED_MAX_REPROJECTION_PX:
-        raise DeviceError(
+        raise FrameError(
             f"ChArUco detection does not fit one board pose: reprojection RMS {rms:.2f} px over"
             f" {int(keep.sum())} corners (board check off; at most"
             f" {UNCHECKED_MAX_REPROJECTION_PX} px)"

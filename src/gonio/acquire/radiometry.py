@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gonio.errors import DeviceError
+from gonio.errors import DeviceError, FrameError
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ def measure_brdf(
         ms, mr = in_s & (plane_index == c), in_r & (plane_index == c)
         ns, nr = int(ms.sum()), int(mr.sum())
         if ns == 0 or nr == 0:
-            raise DeviceError(
+            raise FrameError(
                 f"sample or reference not visible in the frame (plane {c}: {ns} / {nr} pixels)"
             )
         S, vS, grad = _value_at_centre(
