@@ -16,6 +16,9 @@ journaled atomically before any motion; later stages see earlier stages' samples
 are powered every way out parks the rig, or turns torque off when it cannot
 (:mod:`gonio.acquire.stopping`). SIGINT/SIGTERM (:mod:`gonio.interrupts`): the first finishes the
 configuration in progress, parks and stops; a second abandons the configuration and parks.
+A configuration whose frame cannot be measured (:class:`gonio.errors.FrameError`, after the
+camera's one retake) is journaled as ``rejected`` with the reason and skipped; it counts as
+finished for completeness and is not retried on resume.
 """
 
 from __future__ import annotations
