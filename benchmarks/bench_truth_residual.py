@@ -10,6 +10,8 @@ Linearized at the truth (the built-in paint's Lambert + Torrance-Sparrow), per r
   (above 7 only when sigma is too small where the parameters are decided), the part between
   channels of one configuration, and the part between configurations (its mean is 0 for
   independent samples, so a positive mean over seeds means correlated errors or a bias);
+* the mean ``z_i z_j`` over same-channel pairs of configurations whose measured light directions
+  agree within 1 deg (a correlation between configurations sharing a light);
 * with ``--weights-every N``, for every N-th configuration, the sample value re-measured from its
   HDR frame (``RUN/hdr/*.exr``: merged rate, variance, pose) with the spot fit's pixel weights
   taken from the noise model at a locally smoothed rate instead of each pixel's own noisy rate
@@ -68,8 +70,17 @@ def decompose(run: Path) -> dict:
     zz = h * np.outer(z, z)
     diag = float(np.trace(zz))
     cross_channel = float(zz[same_cfg].sum()) - diag
+    # the correlation reported earlier between configurations sharing a light: pairs whose
+    # measured light directions agree within 1 deg, same channel; mean of z_i z_j (0 +- about
+    # 1 / sqrt(pairs) for independent samples)
+    cos1 = np.cos(np.radians(1.0))
+    near = (wi @ wi.T > cos1) & ~np.eye(n, dtype=bool)
+    zc = z.reshape(n, -1)
+    prods = (zc[:, None, :] * zc[None, :, :])[np.triu(near, 1)]
     row = {
         "values": int(z.size),
+        "light_pairs": int(prods.size),
+        "light_pair_corr": float(prods.mean()) if prods.size else float("nan"),
         "delta_chi2_lin": float(u @ u),
         "diag": diag,
         "cross_channel": cross_channel,
@@ -163,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         x = np.array([r[key] for r in rows])
         return x.mean(), (x.std(ddof=1) / np.sqrt(n) if n > 1 else float("nan"))
 
-    for key in ("delta_chi2_lin", "diag", "cross_channel", "cross_config"):
+    for key in ("delta_chi2_lin", "diag", "cross_channel", "cross_config", "light_pair_corr"):
         m, e = mean_sem(key)
         print(f"{key}: {m:.2f} +- {e:.2f}")
     print("signed parameter z, mean over seeds (standard error %.2f):" % (1 / np.sqrt(n)))
