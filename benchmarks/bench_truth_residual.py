@@ -46,18 +46,24 @@ def build(p):
     )  # fmt: skip
 
 
-def decompose(run: Path) -> dict:
-    """The linearized decomposition of one run (see the module docstring)."""
+def whitened(run: Path):
+    """(samples, truth values (N, 3), whitened Jacobian (3N, 7)) of one run at the truth."""
     from gonio import io
 
     s = io.load(run / "table.brdf.h5")
     wi, wo = np.asarray(s.wi), np.asarray(s.wo)
-    v, sg = np.asarray(s.values), np.asarray(s.sigma)
     f = np.asarray(build(P_TRUE).f(wi, wo))
     eps = 1e-7
     jac = np.stack([(np.asarray(build(P_TRUE + eps * np.eye(7)[i]).f(wi, wo)) - f) / eps
                     for i in range(7)], -1)  # fmt: skip
-    jw = (jac / sg[..., None]).reshape(-1, 7)
+    return s, f, (jac / np.asarray(s.sigma)[..., None]).reshape(-1, 7)
+
+
+def decompose(run: Path) -> dict:
+    """The linearized decomposition of one run (see the module docstring)."""
+    s, f, jw = whitened(run)
+    wi = np.asarray(s.wi)
+    v, sg = np.asarray(s.values), np.asarray(s.sigma)
     z = ((v - f) / sg).ravel()
     a = jw.T @ jw
     cov = np.linalg.inv(a)
@@ -140,6 +146,15 @@ def weights_bias(run: Path, every: int) -> dict:
     for ch, name in enumerate("RGB"):
         row[f"bias_{name}"] = float(d[:, ch].mean())
         row[f"sem_{name}"] = float(d[:, ch].std(ddof=1) / np.sqrt(len(d)))
+    # what that bias does to the fit if every sample of the run carries it (values in sigma
+    # lowered by the mean per channel): the parameters' shift in std and its Delta chi2
+    _, f, jw = whitened(run)
+    b = -np.tile(d.mean(axis=0), len(f))
+    a = jw.T @ jw
+    dp = np.linalg.solve(a, jw.T @ b)
+    zshift = dp / np.sqrt(np.diag(np.linalg.inv(a)))
+    row.update({f"shift_z_{k}": float(x) for k, x in zip(NAMES, zshift, strict=True)})
+    row["shift_delta_chi2"] = float(dp @ a @ dp)
     return row
 
 
@@ -191,9 +206,12 @@ def main(argv: list[str] | None = None) -> int:
             run = args.workdir / f"seed{seed}-{args.plan}" / "run"
             wrows.append({"seed": seed, **weights_bias(run, args.weights_every)})
             r = wrows[-1]
-            print(f"seed {seed}: own-rate pixel weights bias f by "
-                  + ", ".join(f"{-r['bias_' + c]:+.3f} +- {r['sem_' + c]:.3f}" for c in "RGB")
-                  + f" sigma (R, G, B; {r['configs']} configurations)", flush=True)  # fmt: skip
+            bias = ", ".join(f"{-r['bias_' + c]:+.3f} +- {r['sem_' + c]:.3f}" for c in "RGB")
+            shift = ", ".join(f"{k} {r['shift_z_' + k]:+.2f}" for k in NAMES)
+            print(f"seed {seed}: own-rate pixel weights bias f by {bias} sigma (R, G, B;"
+                  f" {r['configs']} configurations); as a uniform bias it shifts the parameters"
+                  f" by {shift} std and adds {r['shift_delta_chi2']:.2f} to Delta chi2",
+                  flush=True)  # fmt: skip
         with open(RESULTS / "truth_residual_weights.csv", "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(wrows[0]))
             w.writeheader()
