@@ -44,6 +44,13 @@ class DeviceError(GonioError, RuntimeError):
     exit_code = 3
 
 
+class FrameError(DeviceError):
+    """One configuration's frame cannot be measured although the devices work: the holder's
+    board is not found in it, or the sample or the white reference is outside it. The run
+    engine retakes the frame once, then skips the configuration (journaled as rejected, with
+    this message as the reason) instead of stopping the run."""
+
+
 class FitError(GonioError, RuntimeError):
     """A fit cannot be carried out on this data (too few samples, no valid cells, ...)."""
 

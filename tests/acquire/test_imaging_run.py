@@ -176,3 +176,63 @@ def test_rig_file_sets_the_blooming_guard():
     bad = text.replace("spot_radius_m = 0.002", "spot_radius_m = 0.002\nbloom_guard_px = -1")
     with pytest.raises(RigConfigError, match="bloom_guard_px"):
         parse_rig(bad, "bad.toml")
+
+
+def test_board_at_a_grazing_view_is_found_though_opencv_checks_reject_it(tmp_path):
+    # [sim] seed 8's configuration 110 of the full demo plan (theta_o = 70 deg, the joints the
+    # servos reached): 24 markers decode, but OpenCV's CharucoParameters.checkMarkers test drops
+    # the board once the longer brackets are merged ("0 corners"), which stopped the whole run
+    import re
+
+    from gonio.acquire.imaging import open_imaging_camera
+    from gonio.demo.materials import builtin_material
+    from gonio.demo.pipeline import rig_text
+    from gonio.rigs.devices import Geometry
+
+    text = re.sub(r"(?m)^seed = \d+", "seed = 8", rig_text(builtin_material()), count=1)
+    rig = parse_rig(text, "seed8.toml")
+    kin = Kinematics(rig)
+    joints = {"light_arm": 31.46484375, "camera_arm": -69.2578125, "tilt": 15.8203125,
+              "turntable": 0.0}  # fmt: skip
+    wi, wo = kin.forward(kin.joints_deg_to_pose(joints))
+    cam = open_imaging_camera(rig, tmp_path)
+    cap = cam.capture(Geometry(110, joints, wi, wo, wi * 0.6, wo * 0.8))
+    assert cap.meta["pose_corners"] >= 20 and cap.meta["reprojection_px"] < 0.3
+    _, wo_true = kin.forward(kin.joints_deg_to_pose(joints))
+    assert np.degrees(np.arccos(np.clip(wo_true @ cap.meta["wo"], -1, 1))) < 0.05
+    truth = np.asarray(models.Node.from_dict(rig.sim.sample).f(cap.meta["wi"], cap.meta["wo"]))
+    assert np.all(np.abs(cap.value - truth) < 4 * cap.sigma)
+
+
+def test_a_frame_that_cannot_be_measured_is_retaken_then_rejected(tmp_path, monkeypatch):
+    from gonio.acquire.imaging import ImagingCamera
+    from gonio.errors import FrameError
+
+    (tmp_path / "plan.toml").write_text(PLAN)
+    tags = []
+    measure = ImagingCamera._measure
+
+    def no_board_at_1(self, geometry, exposure_s, tag, times):
+        tags.append(tag)
+        if geometry.index == 1:
+            raise FrameError("ChArUco board not found: 0 corners detected, need 6")
+        return measure(self, geometry, exposure_s, tag, times)
+
+    monkeypatch.setattr(ImagingCamera, "_measure", no_board_at_1)
+    s = acquire(tmp_path / "run", small_rig(), tmp_path / "plan.toml", progress=False)
+    assert s.complete and s.planned == 3 and s.done == 2 and s.rejected == 1
+    assert tags.count("c00001") == 1 and tags.count("c00001_retake") == 1
+    assert "1 configuration(s) rejected" in s.table_note and "board not found" in s.table_note
+    j = Journal(tmp_path / "run")
+    try:
+        rej = [c for c in j.configs() if c.status == "rejected"]
+        assert [c.idx for c in rej] == [1] and "on a retake" in rej[0].reason
+        assert j.counts() == {"planned": 3, "refused": 0, "rejected": 1, "done": 2}
+    finally:
+        j.close()
+    events = [json.loads(x) for x in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
+    assert [e["idx"] for e in events if e["event"] == "rejected"] == [1]
+    assert read_native(tmp_path / "run" / "table.brdf.h5").values.shape == (2, 3)
+    # a resumed run does not measure it again
+    again = acquire(tmp_path / "run", resume=True, progress=False)
+    assert again.complete and again.measured_now == 0 and again.rejected == 1

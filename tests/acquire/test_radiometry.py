@@ -163,3 +163,23 @@ def test_exactly_zero_signal_keeps_its_noise_floor():
         sigmas.append(m.sigma)
     np.testing.assert_allclose(sigmas[0], sigmas[1], rtol=1e-6)
     np.testing.assert_allclose(sigmas[0], sigmas[2], rtol=1e-6)
+
+
+def test_spot_fit_on_two_lines_of_sites_falls_back_to_a_plane():
+    # [sim] seed 20, configuration 157: the R sites of a foreshortened spot lay on two image rows
+    # (two lines on the holder), through which a quadratic is not unique; the fit stopped the run
+    from gonio.acquire.radiometry import _value_at_centre
+
+    x = np.tile(np.linspace(-2e-3, 2e-3, 6), 2)
+    y = np.repeat([-5e-4, 5e-4], 6)
+    pts = np.stack([x, y], -1)
+    vals = 3.0 + 100.0 * x - 40.0 * y
+    a, var_a, grad = _value_at_centre(vals, np.full(12, 0.01), pts, (0.0, 0.0), order=2)
+    np.testing.assert_allclose([a, *grad], [3.0, 100.0, -40.0], rtol=1e-9, atol=1e-9)
+    assert 0 < var_a < 0.01
+    # and a full spot still gets its quadratic: the curvature does not leak into the intercept
+    g = np.linspace(-2e-3, 2e-3, 5)
+    gx, gy = (v.ravel() for v in np.meshgrid(g, g))
+    curved = 3.0 + 1e5 * gx**2
+    a2, _, _ = _value_at_centre(curved, np.full(25, 0.01), np.stack([gx, gy], -1), (0.0, 0.0), 2)
+    assert abs(a2 - 3.0) < 1e-9

@@ -291,6 +291,7 @@ def _acquire(args: argparse.Namespace) -> int:
         "planned": summary.planned,
         "refused": summary.refused,
         "done": summary.done,
+        "rejected": summary.rejected,
         "measured_now": summary.measured_now,
         "complete": summary.complete,
         "table": summary.table,
@@ -304,6 +305,7 @@ def _acquire(args: argparse.Namespace) -> int:
         print(
             f"run {summary.run_dir}: {summary.done}/{summary.planned} samples"
             f" ({summary.measured_now} now), {summary.refused} refused,"
+            f"{f' {summary.rejected} rejected,' if summary.rejected else ''}"
             f" {'complete' if summary.complete else 'incomplete'} in {summary.wall_s:.1f} s"
         )
         print(

@@ -16,6 +16,9 @@ journaled atomically before any motion; later stages see earlier stages' samples
 are powered every way out parks the rig, or turns torque off when it cannot
 (:mod:`gonio.acquire.stopping`). SIGINT/SIGTERM (:mod:`gonio.interrupts`): the first finishes the
 configuration in progress, parks and stops; a second abandons the configuration and parks.
+A configuration whose frame cannot be measured (:class:`gonio.errors.FrameError`, after the
+camera's one retake) is journaled as ``rejected`` with the reason and skipped; it counts as
+finished for completeness and is not retried on resume.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from gonio.acquire import rundir, stopping
 from gonio.acquire.journal import Journal, PlannedConfig
 from gonio.acquire.ordering import move_times, path_time, plan_route
 from gonio.acquire.plans import Plan, Result, load_plan
-from gonio.errors import DeviceError, PlanError
+from gonio.errors import DeviceError, FrameError, PlanError
 from gonio.rigs.config import RigConfig, load_rig
 from gonio.rigs.devices import Geometry
 from gonio.rigs.kinematics import Kinematics, Pose
@@ -222,6 +225,7 @@ class RunSummary:
     table_note: str
     bus: dict = field(default_factory=dict)
     wall_s: float = 0.0
+    rejected: int = 0  # accepted configurations skipped because their frame could not be measured
 
 
 def open_run(run_dir: Path) -> tuple[Journal, RigConfig, Plan]:
@@ -426,20 +430,22 @@ class _Run:
                     )
                     for c in sp.refused:
                         log("refused", idx=c.idx, reason=c.reason)
-                stage_cfgs = [c for c in journal.configs(stage) if c.status == "planned"]
+                stage_cfgs = [
+                    c for c in journal.configs(stage) if c.status in ("planned", "rejected")
+                ]
                 if stage_cfgs:
                     # the next stage starts where this one ends (deterministic on resume)
                     start_deg = dict(stage_cfgs[-1].joints_deg)
                 counts = journal.counts()
-                bar.set(counts["planned"], counts["done"])
+                bar.set(counts["planned"], counts["done"] + counts["rejected"])
                 for cfg in journal.pending(stage):
                     # the flag, not the exception: a library callback may swallow the latter
                     if flag.count >= 2:
                         raise flag.interrupted()
                     if flag.requested:
                         return
-                    _measure(chain, camera, kin, journal, log, cfg, scale)
-                    self.measured_now += 1
+                    if _measure(chain, camera, kin, journal, log, cfg, scale):
+                        self.measured_now += 1
                     bar.advance()
                     if self.on_sample is not None:
                         self.on_sample(self.measured_now, ses)
@@ -458,12 +464,14 @@ class _Run:
         complete = (
             not flag.requested
             and all(journal.stage_planned(s) for s in range(self.plan.n_stages))
-            and counts["done"] == counts["planned"]
+            and counts["done"] + counts["rejected"] == counts["planned"]
         )
         table, note = None, ""
         try:
             if complete and write_table:
                 table, note = write_run_table(journal, self.rig, camera_channels(self.rig))
+                if counts["rejected"]:
+                    note += f"; {rejected_note(journal)}"
                 self.log("table", path=table, note=note)
             self.log(
                 "end", complete=complete, **counts, measured_now=self.measured_now, bus=self.bus
@@ -488,6 +496,7 @@ class _Run:
             note,
             self.bus,
             time.monotonic() - self.t_start,
+            counts["rejected"],
         )
 
 
@@ -515,9 +524,22 @@ def camera_channels(rig: RigConfig) -> tuple[str, ...]:
     return channels(rig)
 
 
+def rejected_note(journal: Journal) -> str:
+    """One line on the configurations a run skipped (FrameError), with the first reason."""
+    rej = [c for c in journal.configs() if c.status == "rejected"]
+    if not rej:
+        return "no configuration rejected"
+    return (
+        f"{len(rej)} configuration(s) rejected, their frame could not be measured"
+        f" (#{rej[0].idx}: {rej[0].reason})"
+    )
+
+
 def _measure(
     chain, camera, kin: Kinematics, journal: Journal, log: RunLog, cfg: PlannedConfig, scale=1.0
-):
+) -> bool:
+    """Move, capture and journal one configuration; False when its frame could not be
+    measured (:class:`gonio.errors.FrameError`): it is journaled as rejected and skipped."""
     t0 = time.monotonic()
     res = chain.move(cfg.joints_deg)
     t1 = time.monotonic()
@@ -532,7 +554,13 @@ def _measure(
         light_pos_m=wi * lay.light_distance_m,
         camera_pos_m=wo * lay.camera_distance_m,
     )
-    cap = camera.capture(geom)
+    try:
+        cap = camera.capture(geom)
+    except FrameError as exc:
+        # the devices work but this frame cannot be measured: skip it, as an operator would
+        journal.reject(cfg.idx, str(exc))
+        log("rejected", idx=cfg.idx, stage=cfg.stage, seq=cfg.seq, reason=str(exc))
+        return False
     t2 = time.monotonic()
     # imaging cameras measure the directions from the holder pose and the light position
     wi = np.asarray(cap.meta.get("wi", wi), dtype=float)
@@ -556,6 +584,7 @@ def _measure(
         **{f"t_{k}": v for k, v in timings.items()},
         **extra,
     )
+    return True
 
 
 def write_run_table(journal: Journal, rig: RigConfig, channels) -> tuple[str | None, str]:

@@ -37,7 +37,7 @@ import numpy as np
 from gonio.acquire.hdr import Bracket, NoiseModel, merge_brackets, plan_exposures
 from gonio.acquire.pose import BoardPose, estimate_pose, mosaic_to_gray, pose_samples, to_8bit
 from gonio.acquire.radiometry import measure_brdf, pixel_rays_to_plane
-from gonio.errors import DeviceError, RigConfigError
+from gonio.errors import DeviceError, FrameError, RigConfigError
 from gonio.io.dng import read_dng
 from gonio.rigs.devices import Capture, Geometry
 
@@ -131,45 +131,31 @@ class ImagingCamera:
 
     # --- the engine's interface ---------------------------------------------------------------
     def capture(self, geometry: Geometry, exposure_s: float | None = None) -> Capture:
+        """Measure one configuration (see the module docstring).
+
+        Raises FrameError when the frame cannot be measured (board not found, sample or
+        reference outside it, exposures inadequate) on the first shots and again on one retake
+        with fresh frames (a real camera's next frame has new noise; a passing obstruction may
+        have gone): the engine then skips the configuration.
+        """
         if geometry.light_pos_m is None or geometry.camera_pos_m is None:
             raise DeviceError("imaging needs the light and camera positions (rig layout)")
         if hasattr(self.raw, "set_geometry"):
             self.raw.set_geometry(geometry.light_pos_m, geometry.camera_pos_m)
         times = FrameTimes()
         tag = f"c{geometry.index:05d}"
-        exposures = self._initial_exposures(exposure_s)
-        frames: dict[float, Path] = {}
-        pose = hdr = None
-        for _round in range(self.settings.max_rounds):
-            for t in exposures:
-                if t not in frames:
-                    frames[t] = self._shoot(t, f"{tag}_t{t:.6g}", times, geometry)
-            t0, c0 = time.monotonic(), time.process_time()
-            hdr = self._merge(frames, times)
+        try:
+            frames, hdr, pose, hint, m = self._measure(geometry, exposure_s, tag, times)
+        except FrameError as first:
             try:
-                pose = self._pose(hdr)
-            except DeviceError:
-                # no board in the frame: a probe far off the right exposure leaves it saturated
-                # or buried in noise; bracket towards the side that is wrong, then give up
-                pose = None
-                more = self._rescue(hdr, sorted(frames))
-                if not more:
-                    raise
-            else:
-                more, hint = self._check(hdr, pose, sorted(frames))
-            times.processing += time.monotonic() - t0
-            times.processing_cpu += time.process_time() - c0
-            if not more:
-                break
-            exposures = sorted(set(frames) | set(more))
-        else:
-            raise DeviceError(
-                f"configuration {geometry.index}: exposures still inadequate after"
-                f" {self.settings.max_rounds} rounds ({sorted(frames)})"
-            )
+                frames, hdr, pose, hint, m = self._measure(
+                    geometry, exposure_s, f"{tag}_retake", times
+                )
+            except FrameError as exc:
+                raise FrameError(
+                    f"configuration {geometry.index}: {first}; on a retake: {exc}"
+                ) from None
         t0, c0 = time.monotonic(), time.process_time()
-        assert hdr is not None and pose is not None
-        m = self._radiometry(hdr, pose, geometry)
         self._hint = hint
         self._write_exr(tag, hdr, pose, geometry, sorted(frames), m, hint)
         times.processing += time.monotonic() - t0
@@ -199,6 +185,46 @@ class ImagingCamera:
             close()
 
     # --- steps ----------------------------------------------------------------------------------
+    def _measure(self, geometry: Geometry, exposure_s: float | None, tag: str, times):
+        """Shoot, merge and check brackets (files named ``tag``) until the sample and the
+        reference are covered; returns (frames, hdr, pose, hint, measurement)."""
+        exposures = self._initial_exposures(exposure_s)
+        frames: dict[float, Path] = {}
+        pose = hdr = None
+        for _round in range(self.settings.max_rounds):
+            for t in exposures:
+                if t not in frames:
+                    frames[t] = self._shoot(t, f"{tag}_t{t:.6g}", times, geometry)
+            t0, c0 = time.monotonic(), time.process_time()
+            hdr = self._merge(frames, times)
+            try:
+                pose = self._pose(hdr)
+            except FrameError:
+                # no board in the frame: a probe far off the right exposure leaves it saturated
+                # or buried in noise; bracket towards the side that is wrong, then give up
+                pose = None
+                more = self._rescue(hdr, sorted(frames))
+                if not more:
+                    raise
+            else:
+                more, hint = self._check(hdr, pose, sorted(frames))
+            times.processing += time.monotonic() - t0
+            times.processing_cpu += time.process_time() - c0
+            if not more:
+                break
+            exposures = sorted(set(frames) | set(more))
+        else:
+            raise FrameError(
+                f"exposures still inadequate after {self.settings.max_rounds} rounds"
+                f" ({sorted(frames)})"
+            )
+        t0, c0 = time.monotonic(), time.process_time()
+        assert hdr is not None and pose is not None
+        m = self._radiometry(hdr, pose, geometry)
+        times.processing += time.monotonic() - t0
+        times.processing_cpu += time.process_time() - c0
+        return frames, hdr, pose, hint, m
+
     def _initial_exposures(self, exposure_s: float | None) -> list[float]:
         s = self.settings
         base = float(exposure_s or s.exposure_s)
@@ -281,12 +307,25 @@ class ImagingCamera:
 
     def _pose(self, hdr) -> BoardPose:
         gray = board_gray(hdr.rate, self._cfa)
+        lin = linear_8bit(gray)
         try:
-            return estimate_pose(linear_8bit(gray), self.layout, self.camera_matrix)
-        except DeviceError:
+            return estimate_pose(lin, self.layout, self.camera_matrix)
+        except FrameError:
             pass
         # strong light fall-off across the board: the log tone map
-        return estimate_pose(to_8bit(gray), self.layout, self.camera_matrix)
+        log = to_8bit(gray)
+        try:
+            return estimate_pose(log, self.layout, self.camera_matrix)
+        except FrameError as exc:
+            first = exc
+        # OpenCV's board check rejects sound detections of a steeply foreshortened board
+        # (see estimate_pose); the pose's reprojection error checks them instead
+        for img in (lin, log):
+            try:
+                return estimate_pose(img, self.layout, self.camera_matrix, check_board=False)
+            except FrameError:
+                pass
+        raise first
 
     def _rescue(self, hdr, exposures: list[float]) -> list[float]:
         """Exposures to add when the board was not found: 8x shorter when more than 1 % of the
@@ -314,7 +353,7 @@ class ImagingCamera:
         s_mask, r_mask = self._regions(hdr.rate.shape, pose)
         roi = s_mask | r_mask
         if not roi.any():
-            raise DeviceError("sample and white reference are outside the frame")
+            raise FrameError("sample and white reference are outside the frame")
         rate = hdr.rate[roi]
         missing = ~np.isfinite(rate)
         e_rate = np.where(missing, np.nan, rate) / self.sensor.gain  # DN/s -> e-/s

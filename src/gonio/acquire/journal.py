@@ -235,6 +235,15 @@ class Journal:
             ),
         )
 
+    def reject(self, idx: int, reason: str) -> None:
+        """Mark a planned configuration whose frame could not be measured as rejected (it is
+        not retried on resume; :meth:`pending` skips it)."""
+        self.db.execute(
+            "UPDATE configs SET status = 'rejected', reason = ? WHERE idx = ? AND status ="
+            " 'planned'",
+            (reason, idx),
+        )
+
     def set_book_time(self, idx: int, t_book: float) -> None:
         self.db.execute("UPDATE samples SET t_book = ? WHERE idx = ?", (t_book, idx))
 
@@ -266,14 +275,18 @@ class Journal:
         return out
 
     def counts(self) -> dict[str, int]:
-        planned = self.db.execute(
-            "SELECT COUNT(*) FROM configs WHERE status = 'planned'"
-        ).fetchone()[0]
-        refused = self.db.execute(
-            "SELECT COUNT(*) FROM configs WHERE status = 'refused'"
-        ).fetchone()[0]
+        """``planned``: configurations the planner accepted (measured, pending or rejected);
+        ``refused``: refused by the planner; ``rejected``: accepted but skipped because their
+        frame could not be measured; ``done``: measured."""
+        by = dict(self.db.execute("SELECT status, COUNT(*) FROM configs GROUP BY status"))
         done = self.db.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
-        return {"planned": planned, "refused": refused, "done": done}
+        rejected = int(by.get("rejected", 0))
+        return {
+            "planned": int(by.get("planned", 0)) + rejected,
+            "refused": int(by.get("refused", 0)),
+            "rejected": rejected,
+            "done": done,
+        }
 
 
 def _planned(r) -> PlannedConfig:

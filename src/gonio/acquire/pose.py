@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from gonio.errors import DeviceError
+from gonio.errors import FrameError
 
 
 @dataclass(frozen=True)
@@ -109,8 +109,18 @@ def refine_corners(gray: np.ndarray, corners: np.ndarray) -> np.ndarray:
     return out.reshape(-1, 2).astype(np.float64)
 
 
+#: Largest reprojection RMS (pixels) a pose found without OpenCV's board check may have: the
+#: check is replaced by this one (a marker decoded with a wrong id puts its corners many pixels
+#: off any single pose; sound detections reproject to 0.03-0.3 px).
+UNCHECKED_MAX_REPROJECTION_PX = 1.0
+
+
 def estimate_pose(
-    gray8: np.ndarray, layout: Any, camera_matrix: np.ndarray, min_corners: int = 6
+    gray8: np.ndarray,
+    layout: Any,
+    camera_matrix: np.ndarray,
+    min_corners: int = 6,
+    check_board: bool = True,
 ) -> BoardPose:
     """Detect the board in an 8-bit grey image and solve for the holder pose.
 
@@ -119,25 +129,40 @@ def estimate_pose(
     shifted to OpenCV's (:func:`opencv_camera_matrix`) for detection and PnP, so the pose is
     consistent with gonio's pixel rays.
 
-    Raises DeviceError when fewer than ``min_corners`` corners are found (a camera problem
-    that retrying the frame may fix, not bad user input).
+    ``check_board`` keeps OpenCV's own test of the detection (``CharucoParameters.checkMarkers``:
+    each chessboard corner must lie nearer to the corners of its two markers than to any other
+    marker's centre, in the image). That test is not perspective-invariant: on a board seen at
+    70 deg from its normal, a corner interpolated 2 px off can fail it although every marker is
+    decoded right, and the whole board is then dropped ("0 corners"). With ``check_board=False``
+    the detection is checked by the solved pose instead: after outlier rejection the corners
+    must reproject within :data:`UNCHECKED_MAX_REPROJECTION_PX` RMS.
+
+    Raises FrameError (a DeviceError) when fewer than ``min_corners`` corners are found (a
+    problem of this frame that retaking it may fix, not bad user input), or when an unchecked
+    detection does not fit one pose.
     """
     import cv2
 
     camera_matrix = opencv_camera_matrix(camera_matrix)
 
-    detector = cv2.aruco.CharucoDetector(layout.board)
-    corners, ids, _, _ = detector.detectBoard(gray8)
+    params = cv2.aruco.CharucoParameters()
+    params.checkMarkers = bool(check_board)
+    detector = cv2.aruco.CharucoDetector(layout.board, params)
+    corners, ids, _, marker_ids = detector.detectBoard(gray8)
     n = 0 if ids is None else len(ids)
     if n < min_corners:
-        raise DeviceError(f"ChArUco board not found: {n} corners detected, need {min_corners}")
+        m = 0 if marker_ids is None else len(marker_ids)
+        raise FrameError(
+            f"ChArUco board not found: {n} corners detected, need {min_corners}"
+            f" ({m} markers decoded{'' if check_board else ', board check off'})"
+        )
     obj, img = layout.board.matchImagePoints(corners, ids)
     obj = layout.board_to_holder(obj)
     img = refine_corners(gray8, np.asarray(img, dtype=np.float64).reshape(-1, 2))
     dist = np.zeros(5)
     ok, rvec, tvec = cv2.solvePnP(obj, img, camera_matrix, dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
-        raise DeviceError("solvePnP failed on the detected ChArUco corners")
+        raise FrameError("solvePnP failed on the detected ChArUco corners")
     # Corners seen at grazing angles or next to the bright sample are sometimes refined to the
     # wrong sub-pixel position; drop those far off the first solution and solve again.
     keep = np.ones(len(obj), dtype=bool)
@@ -151,6 +176,12 @@ def estimate_pose(
         keep = new_keep
     R, _ = cv2.Rodrigues(rvec)
     rms = float(np.sqrt(np.mean(err[keep] ** 2)))
+    if not check_board and rms > UNCHECKED_MAX_REPROJECTION_PX:
+        raise FrameError(
+            f"ChArUco detection does not fit one board pose: reprojection RMS {rms:.2f} px over"
+            f" {int(keep.sum())} corners (board check off; at most"
+            f" {UNCHECKED_MAX_REPROJECTION_PX} px)"
+        )
     _, jac = cv2.projectPoints(obj[keep], rvec, tvec, camera_matrix, dist)
     J = jac[:, :6]
     dof = max(2 * int(keep.sum()) - 6, 1)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gonio.errors import DeviceError
+from gonio.errors import DeviceError, FrameError
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ def measure_brdf(
         ms, mr = in_s & (plane_index == c), in_r & (plane_index == c)
         ns, nr = int(ms.sum()), int(mr.sum())
         if ns == 0 or nr == 0:
-            raise DeviceError(
+            raise FrameError(
                 f"sample or reference not visible in the frame (plane {c}: {ns} / {nr} pixels)"
             )
         S, vS, grad = _value_at_centre(
@@ -213,20 +213,33 @@ def _value_at_centre(
     dy^2``) through pixel values.
 
     Returns ``(a, var(a), (b, c))``; falls back to a plane below 12 pixels and to the weighted
-    mean with a zero gradient below 6.
+    mean with a zero gradient below 6, and one order down wherever the surface is not determined
+    by the pixels (a foreshortened spot can hold one colour plane's sites on two lines only,
+    through which no quadratic is unique).
     """
     w = 1.0 / np.maximum(variances, 1e-300)
+    mean = float(np.sum(w * values) / np.sum(w)), float(1.0 / np.sum(w)), np.zeros(2)
     if values.size < 6:
-        return float(np.sum(w * values) / np.sum(w)), float(1.0 / np.sum(w)), np.zeros(2)
+        return mean
     dx, dy = points[:, 0] - centre[0], points[:, 1] - centre[1]
     cols = [np.ones_like(values), dx, dy]
     if order >= 2 and values.size >= 12:
         cols += [dx * dx, dx * dy, dy * dy]
-    X = np.stack(cols, -1)
-    A = X.T @ (w[:, None] * X)
-    coef = np.linalg.solve(A, X.T @ (w * values))
-    cov = np.linalg.inv(A)
-    return float(coef[0]), float(cov[0, 0]), coef[1:3]
+    while len(cols) > 1:
+        X = np.stack(cols, -1)
+        # the weighted design with unit columns: a surface the pixels (nearly) do not determine
+        # "solves" to an arbitrary intercept with a huge variance, or raises (a well-spread spot
+        # has a condition number of 10-100)
+        xs = np.sqrt(w)[:, None] * X
+        sv = np.linalg.svd(xs / np.maximum(np.linalg.norm(xs, axis=0), 1e-300), compute_uv=False)
+        if sv[-1] < 1e-6 * sv[0]:
+            cols = cols[:3] if len(cols) > 3 else []
+            continue
+        A = X.T @ (w[:, None] * X)
+        coef = np.linalg.solve(A, X.T @ (w * values))
+        cov = np.linalg.inv(A)
+        return float(coef[0]), float(cov[0, 0]), coef[1:3]
+    return mean
 
 
 def _direction_jacobian(
