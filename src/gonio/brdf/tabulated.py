@@ -565,15 +565,23 @@ class TabulatedBRDF:
         ``weights`` are the cell measures of :meth:`cell_measure` (sr^2), so that sums over the
         samples approximate integrals over direction pairs.
         """
-        wi, wo = self.node_directions()
-        keep = self.mask.reshape(-1) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
-        C = self.n_channels
-        vals = self.values.reshape(-1, C)[keep]
-        sig = None if self.sigma is None else self.sigma.reshape(-1, C)[keep]
-        weights = self.cell_measure().reshape(-1)[keep]
+        wi, wo, vals, sig, weights = self.valid_nodes()
         meta = dict(self.meta)
         meta["converted_from"] = f"TabulatedBRDF {self.parameterization} {self.shape}"
-        return MeasuredSamples(wi[keep], wo[keep], vals, sig, self.channels, weights, meta)
+        return MeasuredSamples(wi, wo, vals, sig, self.channels, weights, meta)
+
+    def valid_nodes(
+        self,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+        """The nodes :meth:`to_samples` keeps as flat NumPy arrays, without building a
+        :class:`MeasuredSamples`: ``(wi, wo, values, sigma, weights)``, directions ``(N, 3)``,
+        values and sigma (or None) ``(N, C)``, weights the cell measures ``(N,)`` in sr^2."""
+        wi, wo = self.node_directions()
+        keep = np.asarray(self.mask).reshape(-1) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        C = self.n_channels
+        vals = np.asarray(self.values).reshape(-1, C)[keep]
+        sig = None if self.sigma is None else np.asarray(self.sigma).reshape(-1, C)[keep]
+        return wi[keep], wo[keep], vals, sig, self.cell_measure().reshape(-1)[keep]
 
     # -- pytree --------------------------------------------------------------------------------
     def _tree_flatten(self) -> tuple[tuple[Array, Array | None], tuple[Any, ...]]:

@@ -178,7 +178,7 @@ def prepare(
     kind = type(data).__name__
     meta = dict(getattr(data, "meta", None) or {})
     if hasattr(data, "to_samples") and not isinstance(data, FitData):
-        data = _table_samples(data) if hasattr(data, "cell_measure") else data.to_samples()
+        data = _table_samples(data) if hasattr(data, "valid_nodes") else data.to_samples()
         source.setdefault("kind", kind)
     source.setdefault("kind", type(data).__name__)
     for key in ("name", "material", "source", "path"):
@@ -272,18 +272,7 @@ class _TableSamples:
 def _table_samples(table: Any) -> _TableSamples:
     """The nodes of a :class:`~gonio.brdf.tabulated.TabulatedBRDF` that ``to_samples`` keeps
     (valid, both directions above the horizon), weighted by their cell measure (sr^2)."""
-    wi, wo = table.node_directions()
-    keep = np.asarray(table.mask).reshape(-1) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    c = table.n_channels
-    sigma = None if table.sigma is None else np.asarray(table.sigma).reshape(-1, c)[keep]
-    return _TableSamples(
-        wi[keep],
-        wo[keep],
-        np.asarray(table.values).reshape(-1, c)[keep],
-        sigma,
-        table.cell_measure().reshape(-1)[keep],
-        table.channels,
-    )
+    return _TableSamples(*table.valid_nodes(), table.channels)
 
 
 def _channel_names(channels: Any, c: int) -> tuple[str, ...]:
