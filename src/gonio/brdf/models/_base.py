@@ -304,6 +304,31 @@ def as_float(x: Any, dtype: Any = None) -> Array:
     return x.astype(dtype)
 
 
+def on_channel_axis(p: Array, batch_ndim: int) -> Array:
+    """A ``(C,)`` per-channel parameter shaped ``(C, 1, ..., 1)`` to broadcast against a
+    channels-first ``(C, ...)`` array with ``batch_ndim`` batch axes."""
+    return p.reshape(p.shape + (1,) * batch_ndim)
+
+
+def channels_last(x: Array) -> Array:
+    """``(C, ...) -> (..., C)``, the same values, with ``x`` computed in a loop of its own.
+
+    XLA:CPU emits a loop over an ``(n, C)`` array with the short channel axis innermost, so
+    whatever is fused into it runs one element at a time (no vector instructions in the
+    compiled loop), re-reading each per-lane input C times; a ``(C, n)`` loop is vectorized
+    along ``n``. A plain transpose (``moveaxis``) would be fused with the whole channels-first
+    computation back into an ``(n, C)`` loop (``optimization_barrier`` does not stop that on
+    CPU), so the axis is moved by a product with the identity: a dot is never fused, and
+    ``x * 1 + 0 * y`` is exact for finite values (an inf or NaN in one channel would spread
+    to the others; the models that use this return finite values). Used where a same-run A/B
+    says so (Torrance-Sparrow; a Lambert ``f``, a broadcast constant, is faster without).
+    """
+    c = x.shape[0]
+    if c == 1:
+        return x[0][..., None]
+    return jnp.einsum("c...,cd->...d", x, jnp.eye(c, dtype=x.dtype))
+
+
 def clamp_u(u: Array) -> Array:
     """Clamp uniform numbers to ``[0, 1 - eps]`` so warps never see exactly 1."""
     return jnp.clip(u, 0.0, ONE_MINUS_EPS)
@@ -332,9 +357,17 @@ class BRDFModel(Node):
 
     #: True for lobes that are Dirac deltas (perfect mirror, smooth glass).
     is_delta: ClassVar[bool] = False
+    #: True for models that implement ``_f_channels_first``; ``f`` and the sample weight are
+    #: then computed channels first and moved to channels last once (see :func:`channels_last`).
+    CHANNELS_FIRST: ClassVar[bool] = False
 
     # -- to implement --------------------------------------------------------------------------
     def _f(self, wi: Array, wo: Array) -> Array:
+        raise NotImplementedError
+
+    def _f_channels_first(self, wi: Array, wo: Array) -> Array:
+        """``_f`` with the channel axis first, ``(C, ...)`` or ``(1, ...)`` (the same values),
+        for models with ``CHANNELS_FIRST``."""
         raise NotImplementedError
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
@@ -357,6 +390,9 @@ class BRDFModel(Node):
         C = self.channels
         ok = upper(wi) & upper(wo)
         wi_s, wo_s = safe_pair(wi, wo, ok)
+        if self.CHANNELS_FIRST:
+            val = jnp.broadcast_to(self._f_channels_first(wi_s, wo_s), (C, *ok.shape))
+            return channels_last(jnp.where(ok, val, 0.0).astype(wi.dtype))
         val = self._f(wi_s, wo_s)
         shape = (*ok.shape, C)
         val = jnp.broadcast_to(val, shape)
@@ -386,9 +422,13 @@ class BRDFModel(Node):
         pdf = jnp.where(ok, self._pdf(wi_s, wo), 0.0)
         ok = ok & (pdf > 0)
         pdf = jnp.where(ok, pdf, 0.0)
-        val = jnp.broadcast_to(self._f(wi_s, wo), (*ok.shape, self.channels))
-        weight = safe_div(val * wi_s[..., 2:3], pdf[..., None])
-        weight = jnp.where(ok[..., None], weight, 0.0)
+        if self.CHANNELS_FIRST:
+            val = jnp.broadcast_to(self._f_channels_first(wi_s, wo), (self.channels, *ok.shape))
+            weight = channels_last(jnp.where(ok, safe_div(val * wi_s[..., 2], pdf), 0.0))
+        else:
+            val = jnp.broadcast_to(self._f(wi_s, wo), (*ok.shape, self.channels))
+            weight = safe_div(val * wi_s[..., 2:3], pdf[..., None])
+            weight = jnp.where(ok[..., None], weight, 0.0)
         return BRDFSample(wi, pdf.astype(wo.dtype), weight.astype(wo.dtype), jnp.zeros_like(ok))
 
     def directional_albedo(self, wo: Array, n: int = 128) -> Array:

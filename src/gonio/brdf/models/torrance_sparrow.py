@@ -14,8 +14,10 @@ from gonio.brdf.models._base import (
     BRDFSample,
     Param,
     channel_mean,
+    channels_last,
     is_concrete,
     mixture_sample,
+    on_channel_axis,
 )
 from gonio.brdf.models.fresnel import Fresnel, Schlick
 from gonio.errors import ParameterError
@@ -100,6 +102,10 @@ class TorranceSparrow(BRDFModel):
     # -- evaluation -----------------------------------------------------------------------------
     def specular(self, wi: Array, wo: Array) -> Array:
         """The specular term ``D G F / (4 cos_i cos_o)`` alone, ``(..., C)`` (both upper)."""
+        return channels_last(self._specular_channels_first_of(wi, wo))
+
+    def _specular_channels_first_of(self, wi: Array, wo: Array) -> Array:
+        """:meth:`specular` as ``(C, ...)``."""
         h = normalize(wi + wo)
         d = mf.ndf(h, self.alpha, self.distribution)
         v = mf.visibility(wi, wo, h, self.alpha, self.distribution, self.shadowing)
@@ -109,16 +115,27 @@ class TorranceSparrow(BRDFModel):
         # Same-run A/B of f at 1e6 float32 lanes, load average 11: GGX conductor 13.3 -> 14.7,
         # GGX dielectric 120 -> 161, Beckmann conductor 10.2 -> 10.8 M/s.
         packed = jax.lax.optimization_barrier(jnp.stack([d * v, dot(wi, h)], -1))
-        return packed[..., :1] * self.fresnel.eval(packed[..., 1])
+        return self._specular_channels_first(packed)
+
+    def _specular_channels_first(self, packed: Array) -> Array:
+        """``packed[..., 0] F(packed[..., 1])`` as ``(C, ...)``: the channels' loop runs along
+        the lanes (see :meth:`~.fresnel.Fresnel.eval_channels_first`); the caller moves the
+        channel axis last once (:func:`~._base.channels_last`)."""
+        return packed[..., 0][None] * self.fresnel.eval_channels_first(packed[..., 1])
 
     def _diffuse_free(self) -> bool:
         """True where ``rho_d`` is a concrete zero (not traced): no diffuse lobe to sample."""
         rho = self.rho_d
         return is_concrete(rho) and not np.any(np.asarray(rho))
 
+    CHANNELS_FIRST = True
+
     def _f(self, wi: Array, wo: Array) -> Array:
-        rho = jnp.atleast_1d(self.rho_d).astype(wi.dtype)
-        return rho / jnp.pi + self.specular(wi, wo)
+        return channels_last(self._f_channels_first(wi, wo))
+
+    def _f_channels_first(self, wi: Array, wo: Array) -> Array:
+        rho = on_channel_axis(jnp.atleast_1d(self.rho_d).astype(wi.dtype), wi.ndim - 1)
+        return rho / jnp.pi + self._specular_channels_first_of(wi, wo)
 
     # -- sampling -------------------------------------------------------------------------------
     def _weights(self, wo: Array) -> tuple[Array, Array]:
@@ -192,7 +209,7 @@ class TorranceSparrow(BRDFModel):
         pdf = jnp.where(ok, pdf, 0.0)
         # Stored once before the channels' Fresnel loop (as in specular()).
         packed = jax.lax.optimization_barrier(jnp.stack([jnp.where(ok, g, 0.0), dot(wi_s, h)], -1))
-        weight = jnp.where(ok[..., None], packed[..., :1] * self.fresnel.eval(packed[..., 1]), 0.0)
+        weight = channels_last(jnp.where(ok, self._specular_channels_first(packed), 0.0))
         return BRDFSample(wi, pdf.astype(wo.dtype), weight.astype(wo.dtype), jnp.zeros_like(ok))
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
