@@ -320,8 +320,14 @@ def channels_last(x: Array) -> Array:
     computation back into an ``(n, C)`` loop (``optimization_barrier`` does not stop that on
     CPU), so the axis is moved by a product with the identity: a dot is never fused, and
     ``x * 1 + 0 * y`` is exact for finite values (an inf or NaN in one channel would spread
-    to the others; the models that use this return finite values). Used where a same-run A/B
-    says so (Torrance-Sparrow; a Lambert ``f``, a broadcast constant, is faster without).
+    to the others; the models that use this return finite values). The move costs a pass over
+    the output (1e6 RGB values: 2.4 ms here against 1.3 ms for a cheap value computed in
+    place, ``benchmarks/ab_kernels.py --layout``), so it is used only where the per-channel
+    work is large and a same-run A/B says so: Torrance-Sparrow ``f`` with a conductor Fresnel
+    term (1e6 float32 lanes, two runs at load average 5-7: Beckmann 1.6x, GGX 1.7x and 4.5x
+    faster than with a plain transpose, ``ab_kernels.py`` variant ``no-dot``). With a
+    dielectric term (1.2x and 1.7x slower), in the sample weight (Beckmann 1.1x and 1.5x
+    slower) and for Lambert the output stays channels last.
     """
     c = x.shape[0]
     if c == 1:
@@ -357,18 +363,16 @@ class BRDFModel(Node):
 
     #: True for lobes that are Dirac deltas (perfect mirror, smooth glass).
     is_delta: ClassVar[bool] = False
-    #: True for models that implement ``_f_channels_first``; ``f`` and the sample weight are
-    #: then computed channels first and moved to channels last once (see :func:`channels_last`).
-    CHANNELS_FIRST: ClassVar[bool] = False
 
     # -- to implement --------------------------------------------------------------------------
     def _f(self, wi: Array, wo: Array) -> Array:
         raise NotImplementedError
 
-    def _f_channels_first(self, wi: Array, wo: Array) -> Array:
+    def _f_channels_first(self, wi: Array, wo: Array) -> Array | None:
         """``_f`` with the channel axis first, ``(C, ...)`` or ``(1, ...)`` (the same values),
-        for models with ``CHANNELS_FIRST``."""
-        raise NotImplementedError
+        or None (the default) where ``f`` is computed channels last. Where given, ``f`` moves
+        it to channels last once (:func:`channels_last`)."""
+        return None
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
         raise NotImplementedError
@@ -390,8 +394,9 @@ class BRDFModel(Node):
         C = self.channels
         ok = upper(wi) & upper(wo)
         wi_s, wo_s = safe_pair(wi, wo, ok)
-        if self.CHANNELS_FIRST:
-            val = jnp.broadcast_to(self._f_channels_first(wi_s, wo_s), (C, *ok.shape))
+        first = self._f_channels_first(wi_s, wo_s)
+        if first is not None:
+            val = jnp.broadcast_to(first, (C, *ok.shape))
             return channels_last(jnp.where(ok, val, 0.0).astype(wi.dtype))
         val = self._f(wi_s, wo_s)
         shape = (*ok.shape, C)
@@ -422,13 +427,9 @@ class BRDFModel(Node):
         pdf = jnp.where(ok, self._pdf(wi_s, wo), 0.0)
         ok = ok & (pdf > 0)
         pdf = jnp.where(ok, pdf, 0.0)
-        if self.CHANNELS_FIRST:
-            val = jnp.broadcast_to(self._f_channels_first(wi_s, wo), (self.channels, *ok.shape))
-            weight = channels_last(jnp.where(ok, safe_div(val * wi_s[..., 2], pdf), 0.0))
-        else:
-            val = jnp.broadcast_to(self._f(wi_s, wo), (*ok.shape, self.channels))
-            weight = safe_div(val * wi_s[..., 2:3], pdf[..., None])
-            weight = jnp.where(ok[..., None], weight, 0.0)
+        val = jnp.broadcast_to(self._f(wi_s, wo), (*ok.shape, self.channels))
+        weight = safe_div(val * wi_s[..., 2:3], pdf[..., None])
+        weight = jnp.where(ok[..., None], weight, 0.0)
         return BRDFSample(wi, pdf.astype(wo.dtype), weight.astype(wo.dtype), jnp.zeros_like(ok))
 
     def directional_albedo(self, wo: Array, n: int = 128) -> Array:
