@@ -321,13 +321,14 @@ def channels_last(x: Array) -> Array:
     CPU), so the axis is moved by a product with the identity: a dot is never fused, and
     ``x * 1 + 0 * y`` is exact for finite values (an inf or NaN in one channel would spread
     to the others; the models that use this return finite values). The move costs a pass over
-    the output (1e6 RGB values: 2.4 ms here against 1.3 ms for a cheap value computed in
-    place, ``benchmarks/ab_kernels.py --layout``), so it is used only where the per-channel
-    work is large and a same-run A/B says so: Torrance-Sparrow ``f`` with a conductor Fresnel
-    term (1e6 float32 lanes, two runs at load average 5-7: Beckmann 1.6x, GGX 1.7x and 4.5x
-    faster than with a plain transpose, ``ab_kernels.py`` variant ``no-dot``). With a
-    dielectric term (1.2x and 1.7x slower), in the sample weight (Beckmann 1.1x and 1.5x
-    slower) and for Lambert the output stays channels last.
+    the output (1e6 RGB values of a cheap per-lane value: 2.4-3.1 ms, against 1.3-2.7 ms
+    computed in place, ``benchmarks/ab_kernels.py --layout``), so it is used only where the
+    per-channel work is large and a same-run A/B says so: Torrance-Sparrow ``f`` with a
+    conductor Fresnel term (1e6 float32 lanes, four runs at load average 5-13: Beckmann
+    1.4-2.4x, GGX 1.7-4.5x faster than with a plain transpose, ``ab_kernels.py`` variant
+    ``no-dot``). With the cheaper dielectric term, in the sample weight and for Lambert no gain
+    showed above the run-to-run noise, so their outputs stay channels last (bit for bit as
+    before).
     """
     c = x.shape[0]
     if c == 1:
