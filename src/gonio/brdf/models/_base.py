@@ -333,7 +333,10 @@ def channels_last(x: Array) -> Array:
     c = x.shape[0]
     if c == 1:
         return x[0][..., None]
-    return jnp.einsum("c...,cd->...d", x, jnp.eye(c, dtype=x.dtype))
+    # HIGHEST: the default float32 dot precision on GPUs may round the operands to TF32
+    return jnp.einsum(
+        "c...,cd->...d", x, jnp.eye(c, dtype=x.dtype), precision=jax.lax.Precision.HIGHEST
+    )
 
 
 def clamp_u(u: Array) -> Array:
