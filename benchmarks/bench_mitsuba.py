@@ -17,9 +17,14 @@ bit-identical: Mitsuba's Smith term is the separable ``G1 G1``, gonio's the heig
 one, so the ratio is "the same job", not "the same arithmetic".
 
 Each round times every pair and operation on both sides, in an order that alternates between
-rounds (ABBA); a figure is the median of ``--repeats`` calls after a warm-up (compilation and
-Dr.Jit's kernel cache excluded). The ratio is gonio's throughput over Mitsuba's in the same
-round; the table gives the median ratio over rounds (>1: gonio faster).
+rounds (ABBA); a figure is the fastest (``--stat min``, the default) or the median of
+``--repeats`` calls after a warm-up (compilation and Dr.Jit's kernel cache excluded). On the
+shared 2-core machine other processes preempt either side at random; the fastest call is the
+one least disturbed, for both sides alike, while a median of a few calls varied 2-5x between
+runs. The ratio is gonio's throughput over Mitsuba's in the same round; the table gives the
+median ratio over rounds (>1: gonio faster). The CSV also gives the minor page faults per call
+of each side (``getrusage``): XLA:CPU allocates its outputs and temporaries per call and the
+first touch of fresh pages is part of its time; Dr.Jit reuses its cached allocations.
 
 Both sides use the machine's cores: Dr.Jit's thread pool (``drjit.thread_count()``, in the
 CSV) and XLA:CPU, which splits every loop over the batch into one task per core (its
@@ -28,6 +33,8 @@ its result (``block_until_ready`` / ``drjit.sync_thread``) inside the timed call
 
 Writes benchmarks/results/mitsuba_kernels.csv and mitsuba_kernels.png and prints a Markdown
 table. Run: PYTHONPATH=src python benchmarks/bench_mitsuba.py [--rounds K] [--quick]
+[--stat min|median] [--csv NAME] (``--csv`` names another CSV in benchmarks/results, e.g. for a
+run against an older ``src/``; the plot is then not written).
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ import argparse
 import csv
 import math
 import os
+import resource
 import statistics
 import time
 from collections.abc import Callable
@@ -87,14 +95,17 @@ def pairs() -> list[tuple[str, models.BRDFModel, dict]]:
     ]  # fmt: skip
 
 
-def median_time(fn: Callable[[], None], repeats: int) -> float:
+def timed(fn: Callable[[], None], repeats: int, stat: str) -> tuple[float, float]:
+    """(fastest or median seconds per call, minor page faults per call) after one warm-up."""
     fn()
     ts = []
+    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     for _ in range(repeats):
         t0 = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
+    faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / repeats
+    return (min(ts) if stat == "min" else statistics.median(ts)), faults
 
 
 def gonio_ops(model, wi, wo, u) -> dict[str, Callable[[], None]]:
@@ -142,7 +153,18 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("--quick", action="store_true", help="3 rounds of 3 repeats")
+    ap.add_argument(
+        "--stat",
+        choices=("min", "median"),
+        default="min",
+        help="figure per side and round: fastest or median call",
+    )
+    ap.add_argument("--csv", default="mitsuba_kernels.csv", help="CSV name in benchmarks/results")
     args = ap.parse_args()
+    if "/" in args.csv or not args.csv.endswith(".csv"):
+        raise SystemExit(
+            f"bench_mitsuba.py: --csv must be a file name ending in .csv, got {args.csv!r}"
+        )
     rounds, repeats = (3, 3) if args.quick else (args.rounds, args.repeats)
 
     import drjit as dr
@@ -162,13 +184,16 @@ def main() -> None:
         for op in ("f", "pdf", "sample"):
             jobs.append((label, op, g[op], m[op]))
     res: dict[tuple[str, str], dict[str, list[float]]] = {
-        (j[0], j[1]): {"gonio": [], "mitsuba": []} for j in jobs
+        (j[0], j[1]): {"gonio": [], "mitsuba": [], "gonio_faults": [], "mitsuba_faults": []}
+        for j in jobs
     }
     for r in range(rounds):
         for label, op, g, m in jobs:
             sides = [("gonio", g), ("mitsuba", m)]
             for side, fn in sides if r % 2 == 0 else sides[::-1]:
-                res[(label, op)][side].append(median_time(fn, repeats))
+                t, faults = timed(fn, repeats, args.stat)
+                res[(label, op)][side].append(t)
+                res[(label, op)][f"{side}_faults"].append(faults)
         print(f"round {r + 1}/{rounds} done", flush=True)
 
     load = os.getloadavg()[0]
@@ -180,14 +205,20 @@ def main() -> None:
             "gonio_M_per_s": f"{n / statistics.median(d['gonio']) / 1e6:.3g}",
             "mitsuba_M_per_s": f"{n / statistics.median(d['mitsuba']) / 1e6:.3g}",
             "ratio_gonio_over_mitsuba": f"{ratio:.3f}",
+            "gonio_page_faults_per_call": f"{statistics.median(d['gonio_faults']):.0f}",
+            "mitsuba_page_faults_per_call": f"{statistics.median(d['mitsuba_faults']):.0f}",
+            "stat": args.stat, "repeats": repeats,
             "variant": args.variant, "rounds": rounds, "load_avg_1min": f"{load:.1f}",
             "drjit_threads": dr.thread_count(), "cpus": os.cpu_count(),
         })  # fmt: skip
     RESULTS.mkdir(exist_ok=True)
-    with open(RESULTS / "mitsuba_kernels.csv", "w", newline="") as fh:
+    with open(RESULTS / args.csv, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
+    if args.csv != "mitsuba_kernels.csv":
+        print_table(rows, n, args, rounds, repeats, load, dr.thread_count())
+        return
 
     import matplotlib
 
@@ -206,8 +237,14 @@ def main() -> None:
     fig.tight_layout()
     fig.savefig(RESULTS / "mitsuba_kernels.png", dpi=120)
 
-    print(f"\nbatch {n:.0e}, Mitsuba {args.variant} ({dr.thread_count()} threads), {rounds} rounds "
-          f"x {repeats} calls, {os.cpu_count()} CPUs, load average {load:.1f}\n")  # fmt: skip
+    print_table(rows, n, args, rounds, repeats, load, dr.thread_count())
+
+
+def print_table(rows, n, args, rounds, repeats, load, threads) -> None:
+    print(
+        f"\nbatch {n:.0e}, Mitsuba {args.variant} ({threads} threads), {rounds} rounds x "
+        f"{repeats} calls ({args.stat}), {os.cpu_count()} CPUs, load average {load:.1f}\n"
+    )
     print("| gonio model / Mitsuba BSDF | op | gonio M/s | Mitsuba M/s | gonio / Mitsuba |")
     print("|---|---|---:|---:|---:|")
     for r in rows:

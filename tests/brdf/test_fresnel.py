@@ -115,6 +115,22 @@ def test_range_dtype_and_gradients(term, dtype):
         assert np.all(np.isfinite(g)), f"{term!r}: gradient w.r.t. {name}"
 
 
+@pytest.mark.parametrize("term", TERMS, ids=repr)
+def test_channels_first_is_eval_with_the_axis_moved(term):
+    from gonio.brdf.models._base import channels_last
+
+    c = jnp.asarray(np.concatenate([COS, -COS]).astype(np.float32))
+    first = jax.jit(term.eval_channels_first)(c)
+    assert first.shape[0] == np.asarray(term.eval(c)).shape[-1]
+    # the same formula, compiled in another loop order: equal to within float32 rounding
+    want = np.asarray(jax.jit(term.eval)(c))
+    np.testing.assert_allclose(np.moveaxis(np.asarray(first), 0, -1), want, rtol=2e-6, atol=0)
+    # the identity product moves the axis exactly, the smallest normal and huge values included
+    # (XLA:CPU flushes subnormals to zero in any computation)
+    x = np.array([[1.2e-38, 3.0e38, -2.5], [7.0, -1.2e-38, 0.0], [1.0, -3.0e38, 1e-7]], np.float32)
+    np.testing.assert_array_equal(np.asarray(jax.jit(channels_last)(x)), x.T)
+
+
 def test_bad_parameters():
     with pytest.raises(ParameterError, match="k"):
         models.Conductor(eta=0.2, k=-1.0)

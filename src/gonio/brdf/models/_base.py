@@ -304,6 +304,41 @@ def as_float(x: Any, dtype: Any = None) -> Array:
     return x.astype(dtype)
 
 
+def on_channel_axis(p: Array, batch_ndim: int) -> Array:
+    """A ``(C,)`` per-channel parameter shaped ``(C, 1, ..., 1)`` to broadcast against a
+    channels-first ``(C, ...)`` array with ``batch_ndim`` batch axes."""
+    return p.reshape(p.shape + (1,) * batch_ndim)
+
+
+def channels_last(x: Array) -> Array:
+    """``(C, ...) -> (..., C)``, the same values, with ``x`` computed in a loop of its own.
+
+    XLA:CPU emits a loop over an ``(n, C)`` array with the short channel axis innermost, so
+    whatever is fused into it runs one element at a time (no vector instructions in the
+    compiled loop), re-reading each per-lane input C times; a ``(C, n)`` loop is vectorized
+    along ``n``. A plain transpose (``moveaxis``) would be fused with the whole channels-first
+    computation back into an ``(n, C)`` loop (``optimization_barrier`` does not stop that on
+    CPU), so the axis is moved by a product with the identity: a dot is never fused, and
+    ``x * 1 + 0 * y`` is exact for finite values (an inf or NaN in one channel would spread
+    to the others; the models that use this return finite values). The move costs a pass over
+    the output (1e6 RGB values of a cheap per-lane value: 2.4-3.1 ms, against 1.3-2.7 ms
+    computed in place, ``benchmarks/ab_kernels.py --layout``), so it is used only where the
+    per-channel work is large and a same-run A/B says so: Torrance-Sparrow ``f`` with a
+    conductor Fresnel term (1e6 float32 lanes, four runs at load average 5-13: Beckmann
+    1.4-2.4x, GGX 1.7-4.5x faster than with a plain transpose, ``ab_kernels.py`` variant
+    ``no-dot``). With the cheaper dielectric term, in the sample weight and for Lambert no gain
+    showed above the run-to-run noise, so their outputs stay channels last (bit for bit as
+    before).
+    """
+    c = x.shape[0]
+    if c == 1:
+        return x[0][..., None]
+    # HIGHEST: the default float32 dot precision on GPUs may round the operands to TF32
+    return jnp.einsum(
+        "c...,cd->...d", x, jnp.eye(c, dtype=x.dtype), precision=jax.lax.Precision.HIGHEST
+    )
+
+
 def clamp_u(u: Array) -> Array:
     """Clamp uniform numbers to ``[0, 1 - eps]`` so warps never see exactly 1."""
     return jnp.clip(u, 0.0, ONE_MINUS_EPS)
@@ -337,6 +372,12 @@ class BRDFModel(Node):
     def _f(self, wi: Array, wo: Array) -> Array:
         raise NotImplementedError
 
+    def _f_channels_first(self, wi: Array, wo: Array) -> Array | None:
+        """``_f`` with the channel axis first, ``(C, ...)`` or ``(1, ...)`` (the same values),
+        or None (the default) where ``f`` is computed channels last. Where given, ``f`` moves
+        it to channels last once (:func:`channels_last`)."""
+        return None
+
     def _pdf(self, wi: Array, wo: Array) -> Array:
         raise NotImplementedError
 
@@ -357,6 +398,10 @@ class BRDFModel(Node):
         C = self.channels
         ok = upper(wi) & upper(wo)
         wi_s, wo_s = safe_pair(wi, wo, ok)
+        first = self._f_channels_first(wi_s, wo_s)
+        if first is not None:
+            val = jnp.broadcast_to(first, (C, *ok.shape))
+            return channels_last(jnp.where(ok, val, 0.0).astype(wi.dtype))
         val = self._f(wi_s, wo_s)
         shape = (*ok.shape, C)
         val = jnp.broadcast_to(val, shape)

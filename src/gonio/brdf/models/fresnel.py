@@ -15,10 +15,12 @@ All formulas stay finite, with finite parameter gradients, from normal incidence
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax.numpy as jnp
 
 from gonio.brdf.frames import safe_div, safe_sqrt
-from gonio.brdf.models._base import Node, Param, channel_mean
+from gonio.brdf.models._base import Node, Param, channel_mean, on_channel_axis
 
 Array = jnp.ndarray
 
@@ -28,6 +30,22 @@ class Fresnel(Node):
 
     def eval(self, cos_theta: Array) -> Array:
         """Reflectance in [0, 1] for incidence cosine ``cos_theta`` (...) -> (..., C)."""
+        return self._reflectance(jnp.asarray(cos_theta)[..., None], lambda p: p)
+
+    def eval_channels_first(self, cos_theta: Array) -> Array:
+        """:meth:`eval` with the channel axis first: ``(...) -> (C, ...)``, the same values.
+
+        For kernels whose outputs are ``(..., C)``: XLA:CPU compiles a loop over a ``(n, C)``
+        array fed by ``(n,)`` values to scalar code (one lane at a time, the per-lane input
+        re-indexed per element), while the ``(C, n)`` loop is vectorized along ``n``. The
+        caller transposes once at the end.
+        """
+        c = jnp.asarray(cos_theta)
+        return self._reflectance(c[None], lambda p: on_channel_axis(p, c.ndim))
+
+    def _reflectance(self, c: Array, place: Callable[[Array], Array]) -> Array:
+        """The formula on ``c`` (cosines with a size-1 channel axis in place) and the
+        per-channel parameters as ``(C,)`` arrays put on that axis by ``place``."""
         raise NotImplementedError
 
     def mean(self, cos_theta: Array) -> Array:
@@ -75,10 +93,10 @@ class Conductor(Fresnel):
     def __init__(self, eta: Array | float = 0.2, k: Array | float = 3.9) -> None:
         self._set_params(eta=eta, k=k)
 
-    def eval(self, cos_theta: Array) -> Array:
-        c = jnp.clip(jnp.abs(jnp.asarray(cos_theta)), 0.0, 1.0)[..., None]
-        n = _per_channel(self.eta, c)
-        k = _per_channel(self.k, c)
+    def _reflectance(self, c: Array, place: Callable[[Array], Array]) -> Array:
+        c = jnp.clip(jnp.abs(c), 0.0, 1.0)
+        n = place(_per_channel(self.eta, c))
+        k = place(_per_channel(self.k, c))
         c2 = c * c
         s2 = 1.0 - c2
         t = n * n - k * k - s2
@@ -116,9 +134,8 @@ class Dielectric(Fresnel):
     def __init__(self, eta: Array | float = 1.5) -> None:
         self._set_params(eta=eta)
 
-    def eval(self, cos_theta: Array) -> Array:
-        cos_theta = jnp.asarray(cos_theta)
-        return dielectric_reflectance(cos_theta[..., None], _per_channel(self.eta, cos_theta))
+    def _reflectance(self, c: Array, place: Callable[[Array], Array]) -> Array:
+        return dielectric_reflectance(c, place(_per_channel(self.eta, c)))
 
 
 def dielectric_reflectance(cos_theta: Array, eta: Array) -> Array:
@@ -156,9 +173,9 @@ class Schlick(Fresnel):
     def __init__(self, f0: Array | float = 0.04) -> None:
         self._set_params(f0=f0)
 
-    def eval(self, cos_theta: Array) -> Array:
-        c = jnp.clip(jnp.abs(jnp.asarray(cos_theta)), 0.0, 1.0)[..., None]
-        f0 = _per_channel(self.f0, c)
+    def _reflectance(self, c: Array, place: Callable[[Array], Array]) -> Array:
+        c = jnp.clip(jnp.abs(c), 0.0, 1.0)
+        f0 = place(_per_channel(self.f0, c))
         m = 1.0 - c
         m2 = m * m
         return f0 + (1.0 - f0) * (m2 * m2 * m)
@@ -179,3 +196,6 @@ class NoFresnel(Fresnel):
         c = jnp.asarray(cos_theta)
         dtype = c.dtype if jnp.issubdtype(c.dtype, jnp.floating) else jnp.float64
         return jnp.ones((*c.shape, 1), dtype=dtype)
+
+    def eval_channels_first(self, cos_theta: Array) -> Array:
+        return jnp.moveaxis(self.eval(cos_theta), -1, 0)
