@@ -84,6 +84,8 @@ def test_outputs_exist_and_are_readable(demo):
     samples = io.load(out / "run" / "table.brdf.h5")
     assert isinstance(samples, MeasuredSamples)
     assert len(samples.values) == summary.acquisition["measured"] > 40
+    acq = summary.acquisition
+    assert acq["planned"] == acq["measured"] + acq["rejected"]
     for stem in ("measured", "lambert", "oren-nayar", "lambert-ward", "lambert-ts"):
         img = read_exr(out / "renders" / f"{stem}.exr")
         assert img.shape == (64, 64, 3) and np.isfinite(img).all() and img.max() > 0

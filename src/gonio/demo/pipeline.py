@@ -346,12 +346,14 @@ def _acquire(
         else prune_images(run_dir)
     )
     console.print(
-        f"{s.done} configurations measured ({s.refused} refused by the safety checks) in"
+        f"{s.done} configurations measured ({s.refused} refused by the safety checks"
+        f"{f', {s.rejected} rejected as unmeasurable' if s.rejected else ''}) in"
         f" {s.wall_s:.0f} s; {s.table_note}"
     )
     return {
         "planned": s.planned,
         "refused": s.refused,
+        "rejected": s.rejected,
         "measured": s.done,
         "wall_s": s.wall_s,
         "table_note": s.table_note,

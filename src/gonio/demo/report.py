@@ -131,7 +131,9 @@ def render_html(summary: Any) -> str:
         f"<p>{_e(mat['description'])}</p>",
         "<h2>Acquisition</h2>",
         f"<p>{acq['measured']} configurations measured on the simulated 4-axis rig"
-        f" ({acq['refused']} refused by its safety checks) in {acq['wall_s']:.0f}&nbsp;s;"
+        f" ({acq['refused']} refused by its safety checks"
+        f"{f', {r} rejected as unmeasurable' if (r := acq.get('rejected')) else ''})"
+        f" in {acq['wall_s']:.0f}&nbsp;s;"
         f' {_e(acq["table_note"])}. Rig file: <a href="{_e(files["rig"])}">rig.toml</a>;'
         f' samples and gridded table: <a href="{_e(files["table"])}">table.brdf.h5</a>'
         f' (<a href="run/log.jsonl">run log</a>).</p>',
