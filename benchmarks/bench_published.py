@@ -254,11 +254,21 @@ def _warm_proc(name: str, preset: str, loss: str, src: str, n: int) -> list[list
 
 def batch(names: list[str], jobs: int = 1) -> list[dict[str, Any]]:
     """Wall and CPU seconds of one ``gonio fit`` batch process over ``names`` (archive members)
-    with the three families (default loss, no plots), and per material."""
+    with the three families (default loss, no plots), per material, the materials fitted and
+    failed (from the batch's ``batch.jsonl``) and the 1-minute load average at the start, the
+    end and sampled every 10 s in between (mean, max)."""
     import resource
     import subprocess
     import sys
     import tempfile
+    import threading
+
+    loads: list[float] = []
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.wait(10.0):
+            loads.append(os.getloadavg()[0])
 
     with tempfile.TemporaryDirectory() as out:
         cmd = [sys.executable, "-m", "gonio", "fit", *[f"{ARCHIVE}::{n}" for n in names]]
@@ -267,16 +277,28 @@ def batch(names: list[str], jobs: int = 1) -> list[dict[str, Any]]:
         cmd += ["--no-plots", "-j", str(jobs), "-o", out]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         load0 = os.getloadavg()[0]
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
         t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, capture_output=True)
+        done = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.perf_counter() - t0
+        stop.set()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        journal = Path(out) / "batch.jsonl"
+        records = (
+            [json.loads(x) for x in journal.read_text().splitlines()] if journal.exists() else []
+        )
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    ok = [r["material"] for r in records if r.get("status") == "ok"]
+    failed = [f"{r['material']}: {r.get('error', '?')}" for r in records if r.get("status") != "ok"]
     n = len(names)
     row = {"materials": n, "families": len(FAMILIES), "jobs": jobs, "wall_s": wall,
            "cpu_s": cpu, "wall_per_material_s": wall / n, "cpu_per_material_s": cpu / n,
+           "fitted": len(ok), "failed": len(failed), "returncode": done.returncode,
            "load1_start": load0, "load1_end": os.getloadavg()[0],
-           "names": " ".join(names)}  # fmt: skip
+           "load1_mean": float(np.mean(loads)) if loads else load0,
+           "load1_max": float(np.max(loads)) if loads else load0,
+           "failures": " | ".join(failed), "names": " ".join(names)}  # fmt: skip
     print(row, flush=True)
     return [row]
 
@@ -489,8 +511,9 @@ def main() -> None:
                     help="only the timing and optimum checks, on these materials (the first "
                     "one timed)")  # fmt: skip
     ap.add_argument("--batch", metavar="MATERIAL,...",
-                    help="only time one `gonio fit` batch process over these materials, three "
-                    "families (results/OUT_batch.csv)")  # fmt: skip
+                    help="only time one `gonio fit` batch process over these materials ('all': "
+                    "every network of the archive), three families "
+                    "(results/OUT_batch.csv)")  # fmt: skip
     ap.add_argument("--baseline", metavar="SRC",
                     help="with --speed: also time cold processes of this source tree (e.g. an "
                     "earlier commit's src), alternated with the current code")  # fmt: skip
@@ -555,7 +578,13 @@ def main() -> None:
         return
     if args.batch:
         RESULTS.mkdir(parents=True, exist_ok=True)
-        _write_csv(batch(args.batch.split(","), args.jobs), RESULTS / f"{args.out}_batch.csv")
+        if args.batch == "all":
+            from gonio.io.nbrdf import list_materials
+
+            names = list_materials(ARCHIVE)
+        else:
+            names = args.batch.split(",")
+        _write_csv(batch(names, args.jobs), RESULTS / f"{args.out}_batch.csv")
         return
     if args.plot_speed:
         with open(RESULTS / f"{args.out}_speed.csv", newline="") as fh:
