@@ -311,12 +311,14 @@ def optimize(
     timings["starts"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    mid, curvature = None, None
+    mid, curvature, polish_ftol = None, None, 1e-10
     if refine and problem.data.n > 2 * refine and method == "lm":
         mid = problem.with_data(problem.data.stratified_subset(int(refine), seed))
         best = run_lm(mid, best, max_iter=max_iter, ftol=_STAGE_FTOL)[0]
         hess = subset_hessian(mid, best)
         curvature = subset_curvature(problem, mid, hess)
+        if hess is not None:  # (with J^T J, convergence is linear: keep the tight test)
+            polish_ftol = _POLISH_FTOL
     timings["refine"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -324,8 +326,7 @@ def optimize(
     u = best
     for _ in range(max_restarts + 1):
         if method == "lm":
-            ftol = _POLISH_FTOL if curvature is not None else 1e-10
-            u, cost_a, it, status = run_lm(problem, u, max_iter, ftol, normal=curvature)
+            u, cost_a, it, status = run_lm(problem, u, max_iter, polish_ftol, normal=curvature)
             cost = float(cost_a)
             n_iter += int(it)
             message = STATUS_TEXT[int(status)]
