@@ -225,13 +225,50 @@ def _cold_cli(
         return wall, cpu
 
 
+_WARM_CHILD = """
+import json, os, sys, time
+from gonio import fit as gf, io
+from gonio.fit.data import prepare
+data = prepare(io.load(sys.argv[1]))
+gf.fit(data, sys.argv[2], loss=sys.argv[3])
+out = []
+for _ in range(int(sys.argv[4])):
+    t0, c0 = time.perf_counter(), time.process_time()
+    r = gf.fit(data, sys.argv[2], loss=sys.argv[3])
+    out.append([time.perf_counter() - t0, time.process_time() - c0, r.loss])
+print(json.dumps(out))
+"""
+
+
+def _warm_proc(name: str, preset: str, loss: str, src: str, n: int) -> list[list[float]]:
+    """``[wall, CPU, loss]`` of ``n`` warm fits (after one that compiles) in one fresh process
+    running the source tree ``src``."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-c", _WARM_CHILD, f"{ARCHIVE}::{name}", preset, loss, str(n)]
+    env = {**os.environ, "PYTHONPATH": src}
+    done = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
 def batch(names: list[str], jobs: int = 1) -> list[dict[str, Any]]:
     """Wall and CPU seconds of one ``gonio fit`` batch process over ``names`` (archive members)
-    with the three families (default loss, no plots), and per material."""
+    with the three families (default loss, no plots), per material, the materials fitted and
+    failed (from the batch's ``batch.jsonl``) and the 1-minute load average at the start, the
+    end and sampled every 10 s in between (mean, max)."""
     import resource
     import subprocess
     import sys
     import tempfile
+    import threading
+
+    loads: list[float] = []
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.wait(10.0):
+            loads.append(os.getloadavg()[0])
 
     with tempfile.TemporaryDirectory() as out:
         cmd = [sys.executable, "-m", "gonio", "fit", *[f"{ARCHIVE}::{n}" for n in names]]
@@ -240,16 +277,28 @@ def batch(names: list[str], jobs: int = 1) -> list[dict[str, Any]]:
         cmd += ["--no-plots", "-j", str(jobs), "-o", out]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         load0 = os.getloadavg()[0]
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
         t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, capture_output=True)
+        done = subprocess.run(cmd, capture_output=True, text=True)
         wall = time.perf_counter() - t0
+        stop.set()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        journal = Path(out) / "batch.jsonl"
+        records = (
+            [json.loads(x) for x in journal.read_text().splitlines()] if journal.exists() else []
+        )
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    ok = [r["material"] for r in records if r.get("status") == "ok"]
+    failed = [f"{r['material']}: {r.get('error', '?')}" for r in records if r.get("status") != "ok"]
     n = len(names)
     row = {"materials": n, "families": len(FAMILIES), "jobs": jobs, "wall_s": wall,
            "cpu_s": cpu, "wall_per_material_s": wall / n, "cpu_per_material_s": cpu / n,
+           "fitted": len(ok), "failed": len(failed), "returncode": done.returncode,
            "load1_start": load0, "load1_end": os.getloadavg()[0],
-           "names": " ".join(names)}  # fmt: skip
+           "load1_mean": float(np.mean(loads)) if loads else load0,
+           "load1_max": float(np.max(loads)) if loads else load0,
+           "failures": " | ".join(failed), "names": " ".join(names)}  # fmt: skip
     print(row, flush=True)
     return [row]
 
@@ -265,6 +314,8 @@ def speed(
       empty persistent compilation cache and again with the cache it filled; with ``baseline``
       (another source tree, e.g. the previous commit's ``src``), ``repeats`` cold processes of
       each, alternated, both with a filled cache, and the ratio of the medians;
+    - warm against ``baseline``: ``repeats`` alternated pairs of fresh processes, one per
+      code, each timing 3 warm fits after one that compiles, and the ratio of the medians;
     - warm: in process, the default staged fit (multi-start on 4000 random cells, refinement on
       a stratified 65,536-cell subset, polish on every cell with the subset's curvature) against
       the earlier path (``refine=0``: every polish step on every cell), alternated ``repeats``
@@ -314,6 +365,25 @@ def speed(
                     med["baseline"][0] / med["current"][0])  # fmt: skip
                 row("cold speed-up, same run (baseline / current), CPU",
                     med["baseline"][1] / med["current"][1])  # fmt: skip
+    if baseline is not None:
+        # warm fits, each code in its own process, alternated: the gain independent of the load
+        warm: dict[str, list[list[float]]] = {"current": [], "baseline": []}
+        for _ in range(repeats):
+            for k, src in (("current", str(ROOT / "src")), ("baseline", baseline)):
+                got = _warm_proc(names[0], preset, loss, src, 3)
+                warm[k] += got
+                for w, c, lo in got:
+                    row(f"warm fit in a fresh process, {k} code", w, cpu_s=round(c, 3), loss=lo)
+        for k in warm:
+            med = np.median(np.array(warm[k]), axis=0)
+            row(f"warm fit median, {k} code", med[0], cpu_s=round(med[1], 3), loss=med[2])
+        wmed = {k: np.median(np.array(v)[:, :2], axis=0) for k, v in warm.items()}
+        row("warm speed-up, same run (baseline / current), wall",
+            wmed["baseline"][0] / wmed["current"][0])  # fmt: skip
+        row("warm speed-up, same run (baseline / current), CPU",
+            wmed["baseline"][1] / wmed["current"][1])  # fmt: skip
+        lo_new, lo_old = warm["current"][0][2], warm["baseline"][0][2]
+        row("warm optimum: (current - baseline) / baseline, final loss", (lo_new - lo_old) / lo_old)
     t0, c0 = time.perf_counter(), time.process_time()
     tables = {n: prepare(io.load(f"{ARCHIVE}::{n}")) for n in names}
     row("tabulate the networks + prepare cells", (time.perf_counter() - t0) / len(names),
@@ -363,6 +433,36 @@ def speed(
     return rows
 
 
+def compare_runs(new: str, old: str) -> list[dict[str, Any]]:
+    """Per shared (material, family, metric) row of two benchmark runs: gonio's score in each,
+    ``(new - old) / old`` and both win flags; writes ``results/NEW_vs_OLD.csv`` and prints the
+    largest increase and decrease and the number of wins lost."""
+
+    def load(stem: str) -> dict[tuple[str, str, str], dict[str, str]]:
+        with open(RESULTS / f"{stem}.csv", newline="") as fh:
+            return {(r["material"], r["family"], r["metric"]): r for r in csv.DictReader(fh)}
+
+    a, b = load(new), load(old)
+    rows = []
+    for key in sorted(set(a) & set(b)):
+        g_new, g_old = float(a[key]["gonio"]), float(b[key]["gonio"])
+        win_new, win_old = a[key]["win"] == "True", b[key]["win"] == "True"
+        rows.append({"material": key[0], "family": key[1], "metric": key[2], "gonio_new": g_new,
+                     "gonio_old": g_old, "rel_change": (g_new - g_old) / g_old,
+                     "win_new": win_new, "win_old": win_old})  # fmt: skip
+    _write_csv(rows, RESULTS / f"{new}_vs_{old}.csv")
+    rel = np.array([r["rel_change"] for r in rows])
+    lost = sum(r["win_old"] and not r["win_new"] for r in rows)
+    print(f"{len(rows)} shared rows ({len({r['material'] for r in rows})} materials): wins "
+          f"{sum(r['win_new'] for r in rows)} (new) / {sum(r['win_old'] for r in rows)} (old), "
+          f"{lost} lost; largest increase {rel.max():+.2e}, largest decrease {rel.min():+.2e}, "
+          f"median |change| {np.median(np.abs(rel)):.1e}; "
+          f"{int(np.sum(np.abs(rel) > 1e-6))} rows changed by more than 1e-6")  # fmt: skip
+    for r in sorted(rows, key=lambda r: -abs(r["rel_change"]))[:6]:
+        print(f"  {r['rel_change']:+.3e} {r['material']} {r['family']} {r['metric']}")
+    return rows
+
+
 def _plot_speed(rows: list[dict[str, Any]], path: Path) -> None:
     """Bar chart of the speed section's timings (seconds) and the optimum check."""
     import matplotlib
@@ -370,8 +470,9 @@ def _plot_speed(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    timed = [r for r in rows if not str(r["what"]).startswith(("optimum", "warm speed-up"))
-             and not str(r["what"]).startswith("warm fit, refine")]  # fmt: skip
+    skip = ("optimum", "warm speed-up", "warm optimum", "warm fit, refine", "warm fit in a",
+            "cold speed-up")  # fmt: skip
+    timed = [r for r in rows if not str(r["what"]).startswith(skip)]
     opt = [r for r in rows if str(r["what"]).startswith("optimum")]
     fig, axes = plt.subplots(1, 2, figsize=(14, 5), gridspec_kw={"width_ratios": [3, 2]})
     ax = axes[0]
@@ -410,8 +511,9 @@ def main() -> None:
                     help="only the timing and optimum checks, on these materials (the first "
                     "one timed)")  # fmt: skip
     ap.add_argument("--batch", metavar="MATERIAL,...",
-                    help="only time one `gonio fit` batch process over these materials, three "
-                    "families (results/OUT_batch.csv)")  # fmt: skip
+                    help="only time one `gonio fit` batch process over these materials ('all': "
+                    "every network of the archive), three families "
+                    "(results/OUT_batch.csv)")  # fmt: skip
     ap.add_argument("--baseline", metavar="SRC",
                     help="with --speed: also time cold processes of this source tree (e.g. an "
                     "earlier commit's src), alternated with the current code")  # fmt: skip
@@ -435,7 +537,14 @@ def main() -> None:
                     help="fit nothing: merge results/STEM.csv of earlier runs (STEM_partial: the "
                     "streamed rows of a stopped run; a material in several takes the rows of "
                     "the first stem listed) into results/OUT.csv, .png, _summary.csv")  # fmt: skip
+    ap.add_argument("--compare-runs", metavar="NEW,OLD",
+                    help="fit nothing: gonio's scores of results/NEW.csv against OLD.csv on their "
+                    "shared (material, family, metric) rows: relative change, wins kept "
+                    "(results/NEW_vs_OLD.csv)")  # fmt: skip
     args = ap.parse_args()
+    if args.compare_runs:
+        compare_runs(*args.compare_runs.split(","))
+        return
     if args.combine:
         rows = []
         for stem in args.combine.split(","):
@@ -469,7 +578,13 @@ def main() -> None:
         return
     if args.batch:
         RESULTS.mkdir(parents=True, exist_ok=True)
-        _write_csv(batch(args.batch.split(","), args.jobs), RESULTS / f"{args.out}_batch.csv")
+        if args.batch == "all":
+            from gonio.io.nbrdf import list_materials
+
+            names = list_materials(ARCHIVE)
+        else:
+            names = args.batch.split(",")
+        _write_csv(batch(names, args.jobs), RESULTS / f"{args.out}_batch.csv")
         return
     if args.plot_speed:
         with open(RESULTS / f"{args.out}_speed.csv", newline="") as fh:

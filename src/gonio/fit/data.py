@@ -14,6 +14,7 @@ reliable part of every gonioreflectometer measurement and the literature's fits 
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -85,9 +86,14 @@ class FitData:
         )
 
     def random_subset(self, max_samples: int, seed: int = 0) -> FitData:
-        """At most ``max_samples`` samples drawn without replacement (fixed seed); self if fewer."""
+        """At most ``max_samples`` samples drawn without replacement (fixed seed); self if fewer.
+        The same call on the same data returns the same object (a fit of several models to one
+        table draws its subsets once)."""
         if self.n <= max_samples:
             return self
+        return _memo(self, ("random", max_samples, seed), self._random_subset)
+
+    def _random_subset(self, max_samples: int, seed: int) -> FitData:
         rng = np.random.default_rng(seed)
         idx = np.sort(rng.choice(self.n, size=max_samples, replace=False))
         return self.subset(idx)
@@ -96,9 +102,13 @@ class FitData:
         """At most ``max_samples`` samples, one drawn at random (fixed seed) from each of
         ``max_samples`` strata of equal count along the half-vector polar angle theta_h; self if
         fewer. Unlike a plain random subset, the few cells near the specular peak (small theta_h)
-        are represented in proportion, never missed by chance."""
+        are represented in proportion, never missed by chance. Memoized like
+        :meth:`random_subset`."""
         if self.n <= max_samples:
             return self
+        return _memo(self, ("stratified", max_samples, seed), self._stratified_subset)
+
+    def _stratified_subset(self, max_samples: int, seed: int) -> FitData:
         h = self.wi + self.wo
         cos_h = h[:, 2] / np.linalg.norm(h, axis=1)
         order = np.argsort(-cos_h, kind="stable")  # theta_h ascending
@@ -124,6 +134,24 @@ class FitData:
             "channels": list(self.channel_names),
             "has_sigma": self.sigma is not None,
         }
+
+
+#: Subsets of the last few data sets: ``(id(data), kind, size, seed) -> (weak reference to the
+#: data, subset)``.
+_SUBSETS: dict[tuple[Any, ...], tuple[Any, FitData]] = {}
+
+
+def _memo(data: FitData, key: tuple[Any, ...], make: Any) -> FitData:
+    """``make(*key[1:])`` for ``data``, computed once while ``data`` lives."""
+    full = (id(data), *key)
+    hit = _SUBSETS.get(full)
+    if hit is not None and hit[0]() is data:
+        return hit[1]
+    out = make(*key[1:])
+    if len(_SUBSETS) >= 16:
+        _SUBSETS.clear()
+    _SUBSETS[full] = (weakref.ref(data), out)
+    return out
 
 
 def _jsonable(v: Any) -> bool:

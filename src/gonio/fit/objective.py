@@ -10,6 +10,7 @@ All arithmetic is float64.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.fit.data import FitData
-from gonio.fit.losses import LOSSES, Loss, constants_of
+from gonio.fit.losses import LOSSES, Loss, constants_of, data_constants
 from gonio.fit.params import Layout
 
 Array = jnp.ndarray
@@ -121,17 +122,7 @@ class Problem:
         :func:`~gonio.fit.losses.evaluate_many`, equal to 1e-10). ``wls`` is the chi-square
         with the data's sigma (1 when absent)."""
         if self._score_arrays is None:
-            d, pad = self.data, self.n_chunks * self.chunk_rows - self.data.n
-
-            def padded(a: np.ndarray) -> Any:
-                a = np.concatenate([a, np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a
-                return jax.device_put(a.reshape(self.n_chunks, self.chunk_rows, *a.shape[1:]))
-
-            self._score_arrays = {
-                "y": padded(d.values),
-                "w": padded(d.weights[:, None]),
-                "inv_sigma": None if d.sigma is None else padded(1.0 / d.sigma),
-            }
+            self._score_arrays = _score_arrays(self.data, self.n_chunks, self.chunk_rows)
         sums, bad = self.fns.scores(names)(
             jnp.asarray(u, jnp.float64), self.arrays, self._score_arrays, self.layout.template
         )
@@ -255,7 +246,8 @@ class Compiled:
                     ok = jnp.isfinite(f)
                     bad = jnp.sum(jnp.where(ok, 0.0, c["mask"]))
                     f = jnp.where(ok, f, 0.0)
-                    k = constants_of(needs, y, e["inv_sigma"], e["w"], c["wi"][..., 2:3])
+                    k = {**constants_of(needs, y, e["inv_sigma"], e["w"], c["wi"][..., 2:3],
+                                        skip=tuple(e["k"])), **e["k"]}  # fmt: skip
                     sums = jnp.stack(
                         [jnp.sum((LOSSES[n]._residual(f, k, jnp) * c["mask"]) ** 2) for n in names]
                     )
@@ -280,6 +272,38 @@ class Compiled:
         self.predict = jax.jit(predict)
         self.hessian = jax.jit(jax.hessian(cost))
         self.cluster_scores = jax.jit(cluster_scores, static_argnums=4)
+
+
+#: Data-side constants of the score pass that cost a transcendental per value (computed once
+#: per data set, not in every pass: about half of the pass's time with ``cube-root``).
+_SCORE_CONSTANTS = ("log_y_cos", "log_y", "cbrt_y")
+#: The score pass's padded data arrays of the last few data sets: ``id(data) -> (weak
+#: reference to the data, chunking, arrays)`` (fits of several models to one table share them).
+_SCORE_DATA: dict[int, tuple[Any, tuple[int, int], dict[str, Any]]] = {}
+
+
+def _score_arrays(data: FitData, n_chunks: int, rows: int) -> dict[str, Any]:
+    """The score pass's device arrays for ``data`` in ``n_chunks`` chunks of ``rows`` rows."""
+    hit = _SCORE_DATA.get(id(data))
+    if hit is not None and hit[0]() is data and hit[1] == (n_chunks, rows):
+        return hit[2]
+    pad = n_chunks * rows - data.n
+
+    def padded(a: np.ndarray) -> Any:
+        a = np.concatenate([a, np.zeros((pad, *a.shape[1:]), a.dtype)]) if pad else a
+        return jax.device_put(a.reshape(n_chunks, rows, *a.shape[1:]))
+
+    k = data_constants(_SCORE_CONSTANTS, data)
+    arrays = {
+        "y": padded(data.values),
+        "w": padded(data.weights[:, None]),
+        "inv_sigma": None if data.sigma is None else padded(1.0 / data.sigma),
+        "k": {key: padded(k[key]) for key in _SCORE_CONSTANTS},
+    }
+    if len(_SCORE_DATA) >= 4:
+        _SCORE_DATA.clear()
+    _SCORE_DATA[id(data)] = (weakref.ref(data), (n_chunks, rows), arrays)
+    return arrays
 
 
 _CACHE: dict[Any, Compiled] = {}
