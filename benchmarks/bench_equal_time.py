@@ -1,17 +1,19 @@
 """Equal-time error under an environment alone: gonio's integrator against Mitsuba 3's ``direct``.
 
 Scene: the unit sphere seen orthographically from +z, ``--res``² pixels, lit only by the studio
-environment (the same lat-long EXR on both sides), made of a Lambertian (albedo 0.5) or a GGX
-conductor (alpha 0.2, Smith, gold-like eta and k; Mitsuba ``roughconductor`` with visible-normal
-sampling; Mitsuba's ``--sampler`` default ``multijitter``, since gonio uses scrambled Sobol'
-points). Each renderer is scored against its own converged image (``--ref-spp``), so the
-two need not agree on environment orientation or pixel filtering: the figure is
-``time x MSE`` at ``--spp`` (the inverse of the usual efficiency), over the pixels inside 0.9 of
-the sphere's radius (away from the silhouette, where Mitsuba's pixel filter mixes in the
-background). Times are the second render call (compilation and Dr.Jit's kernel cache
-excluded); MSE is relative (divided by the mean squared reference value) and averaged over
-channels. Rounds alternate the order; the table gives medians and the ratio gonio / Mitsuba of
-``time x MSE`` (< 1: gonio reaches a given error in less time).
+environment (the same lat-long EXR on both sides), made of a Lambertian (albedo 0.5), a GGX
+conductor (alpha 0.2, glossy, and 0.02, near mirror; Smith, gold-like eta and k; Mitsuba
+``roughconductor`` with visible-normal sampling), or an RGL tensor file (``--rgl``, gonio's
+exact evaluator and sampler against Mitsuba's ``measured``); Mitsuba's ``--sampler`` is by
+default ``multijitter``, stratified as gonio's Sobol' points are. Each renderer is scored
+against its own converged image (``--ref-spp``), so the two need not agree on environment
+orientation or pixel filtering: the figure is ``time x MSE`` at ``--spp`` (the inverse of the
+usual efficiency), over the pixels inside 0.9 of the sphere's radius (away from the silhouette,
+where Mitsuba's pixel filter mixes in the background). Times are the second render call
+(compilation and Dr.Jit's kernel cache excluded); MSE is relative (divided by the mean squared
+reference value) and averaged over channels. Rounds alternate the order; the table gives
+medians and the ratio gonio / Mitsuba of ``time x MSE`` (< 1: gonio reaches a given error in
+less time).
 
 Writes benchmarks/results/equal_time.csv and equal_time.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_equal_time.py [--quick]
@@ -57,6 +59,12 @@ def main() -> None:
         default="multijitter",
         help="Mitsuba sampler (default multijitter: stratified like gonio's Sobol' points)",
     )
+    ap.add_argument(
+        "--rgl",
+        type=Path,
+        default=Path(__file__).resolve().parents[1].parent / "shared/data/rgl/paper_white_rgb.bsdf",
+        help="RGL tensor file for the measured row (skipped when missing)",
+    )
     ap.add_argument("--quick", action="store_true", help="64², 16 spp, reference 512 spp, 2 rounds")
     args = ap.parse_args()
     if args.quick:
@@ -75,17 +83,31 @@ def main() -> None:
     env_file = write_exr(tmp / "env.exr", studio_environment())
     env = [Environment(str(env_file))]
     gold = models.Conductor(eta=GOLD_ETA, k=GOLD_K)
+
+    def ggx(alpha: float) -> tuple:
+        return (
+            models.TorranceSparrow(
+                alpha=alpha, distribution="ggx", shadowing="smith", fresnel=gold
+            ),
+            {"type": "roughconductor", "distribution": "ggx", "alpha": alpha,
+             "eta": {"type": "rgb", "value": GOLD_ETA}, "k": {"type": "rgb", "value": GOLD_K}},
+        )  # fmt: skip
+
     cases = {
         "Lambert / diffuse": (
             models.Lambert([0.5, 0.5, 0.5]),
             {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}},
         ),
-        "GGX conductor / roughconductor": (
-            models.TorranceSparrow(alpha=0.2, distribution="ggx", shadowing="smith", fresnel=gold),
-            {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2,
-             "eta": {"type": "rgb", "value": GOLD_ETA}, "k": {"type": "rgb", "value": GOLD_K}},
-        ),
-    }  # fmt: skip
+        "GGX conductor / roughconductor": ggx(0.2),
+        "near-mirror GGX conductor (alpha 0.02) / roughconductor": ggx(0.02),
+    }
+    if args.rgl is not None and args.rgl.is_file():
+        from gonio.io.rgl_measured import load_rgl
+
+        cases[f"RGL {args.rgl.stem} / measured"] = (
+            load_rgl(args.rgl),
+            {"type": "measured", "filename": str(args.rgl)},
+        )
     mask = disk_mask(args.res)
 
     def mitsuba_scene(bsdf: dict):
@@ -162,7 +184,7 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 2.2))
+    fig, ax = plt.subplots(figsize=(7, 0.5 + 0.45 * len(rows)))
     ax.barh([r["case"] for r in rows], [float(r["time_x_mse_ratio_gonio_over_mitsuba"])
                                         for r in rows])  # fmt: skip
     ax.axvline(1.0, color="gray", ls="--", lw=0.8)

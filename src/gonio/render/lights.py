@@ -439,9 +439,12 @@ class Environment(Light):
         xy = direction_to_latlong(wi)
         # sin(theta) from the direction itself: no trigonometry needed.
         sin_t = jnp.sqrt(jnp.maximum(0.0, 1.0 - wi[..., 1] ** 2))
-        pdf_uv = self._dist.pdf(xy)
+        # one cell index for the density and the texel (xy is inside [0, 1]^2, clamped)
+        cell = self._dist.cell_of(xy)
+        pdf_uv = self._dist.cell_density(cell, xy.dtype)
         pdf = jnp.where(sin_t > 0, pdf_uv / (2.0 * jnp.pi**2 * jnp.maximum(sin_t, 1e-30)), 0.0)
-        return self._texel(xy), pdf
+        texel = jnp.take(self.image.reshape(-1, self.image.shape[-1]), cell, axis=0, mode="clip")
+        return texel, pdf
 
 
 def _read_env_file(path: Path) -> np.ndarray:

@@ -197,6 +197,10 @@ class HierarchicalWarp2D:
         xy = jnp.asarray(xy)
         return bin_of(xy[..., 1], self.ny) * self.nx + bin_of(xy[..., 0], self.nx)
 
+    def cell_density(self, cell: Array, dtype: Any = jnp.float32) -> Array:
+        """Density on the unit square inside the flat cells ``cell`` (as :meth:`cell_of`)."""
+        return jnp.take(self._density, cell, mode="clip").astype(dtype)
+
     def pdf(self, xy: Array) -> Array:
         """Density at ``xy (..., 2)`` on the unit square, as :meth:`sample` realizes it (0
         outside)."""
