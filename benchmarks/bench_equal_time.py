@@ -13,7 +13,9 @@ where Mitsuba's pixel filter mixes in the background). Times are the second rend
 (compilation and Dr.Jit's kernel cache excluded); MSE is relative (divided by the mean squared
 reference value) and averaged over channels. Rounds alternate the order; the table gives
 medians and the ratio gonio / Mitsuba of ``time x MSE`` (< 1: gonio reaches a given error in
-less time).
+less time), in wall time and in CPU time (the process's user + system time over all threads
+during the render: both renderers run two threads; on a machine shared with other work the wall
+time also counts waiting for a core).
 
 Writes benchmarks/results/equal_time.csv and equal_time.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_equal_time.py [--quick]
@@ -52,7 +54,7 @@ def main() -> None:
     ap.add_argument("--res", type=int, default=128)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--ref-spp", type=int, default=1024)
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument(
         "--sampler",
@@ -135,32 +137,32 @@ def main() -> None:
     for name, (model, bsdf) in cases.items():
         scene = mitsuba_scene(bsdf)
 
-        def g_render(spp: int, seed: int, model=model) -> tuple[np.ndarray, float]:
-            t0 = time.perf_counter()
+        def g_render(spp: int, seed: int, model=model) -> tuple[np.ndarray, float, float]:
+            t0, c0 = time.perf_counter(), time.process_time()
             img = render_sphere(model, env, resolution=args.res, spp=spp, seed=seed)
-            return img, time.perf_counter() - t0
+            return img, time.perf_counter() - t0, time.process_time() - c0
 
-        def m_render(spp: int, seed: int, scene=scene) -> tuple[np.ndarray, float]:
-            t0 = time.perf_counter()
+        def m_render(spp: int, seed: int, scene=scene) -> tuple[np.ndarray, float, float]:
+            t0, c0 = time.perf_counter(), time.process_time()
             img = mi.render(scene, spp=spp, seed=seed)
             dr.eval(img)
             dr.sync_thread()
             out = np.asarray(img)[..., :3]
-            return out, time.perf_counter() - t0
+            return out, time.perf_counter() - t0, time.process_time() - c0
 
-        g_ref, _ = g_render(args.ref_spp, 1000)
-        m_ref, _ = m_render(args.ref_spp, 1000)
+        g_ref = g_render(args.ref_spp, 1000)[0]
+        m_ref = m_render(args.ref_spp, 1000)[0]
         g_render(args.spp, 0)  # compile
         m_render(args.spp, 0)
         res = {"gonio": [], "mitsuba": []}
         for r in range(args.rounds):
             sides = [("gonio", g_render, g_ref), ("mitsuba", m_render, m_ref)]
             for side, fn, ref in sides if r % 2 == 0 else sides[::-1]:
-                img, sec = fn(args.spp, r + 1)
-                res[side].append((sec, rel_mse(img, ref, mask)))
-        ratio = statistics.median(
-            (g[0] * g[1]) / (m[0] * m[1]) for g, m in zip(res["gonio"], res["mitsuba"], strict=True)
-        )
+                img, sec, cpu = fn(args.spp, r + 1)
+                res[side].append((sec, rel_mse(img, ref, mask), cpu))
+        pairs = list(zip(res["gonio"], res["mitsuba"], strict=True))
+        ratio = statistics.median((g[0] * g[1]) / (m[0] * m[1]) for g, m in pairs)
+        cpu_ratio = statistics.median((g[2] * g[1]) / (m[2] * m[1]) for g, m in pairs)
         row = {"case": name, "res": args.res, "spp": args.spp, "ref_spp": args.ref_spp,
                "mitsuba_sampler": args.sampler,
                "gonio_ref_mean": f"{g_ref[mask].mean():.4g}",
@@ -168,7 +170,9 @@ def main() -> None:
         for side in ("gonio", "mitsuba"):
             row[f"{side}_s"] = f"{statistics.median(x[0] for x in res[side]):.3f}"
             row[f"{side}_rel_mse"] = f"{statistics.median(x[1] for x in res[side]):.3g}"
+            row[f"{side}_cpu_s"] = f"{statistics.median(x[2] for x in res[side]):.3f}"
         row["time_x_mse_ratio_gonio_over_mitsuba"] = f"{ratio:.3g}"
+        row["cpu_time_x_mse_ratio_gonio_over_mitsuba"] = f"{cpu_ratio:.3g}"
         row["load_avg_1min"] = f"{os.getloadavg()[0]:.1f}"
         rows.append(row)
         print(row, flush=True)
@@ -195,13 +199,14 @@ def main() -> None:
     fig.tight_layout()
     fig.savefig(RESULTS / "equal_time.png", dpi=120)
 
-    print("\n| material | gonio s | gonio rel. MSE | Mitsuba s | Mitsuba rel. MSE "
-          "| time × MSE, gonio / Mitsuba |")  # fmt: skip
-    print("|---|---:|---:|---:|---:|---:|")
+    print("\n| material | gonio s (CPU s) | gonio rel. MSE | Mitsuba s (CPU s) | Mitsuba rel. MSE "
+          "| time × MSE, gonio / Mitsuba | CPU time × MSE |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['case']} | {r['gonio_s']} | {r['gonio_rel_mse']} | {r['mitsuba_s']} "
-              f"| {r['mitsuba_rel_mse']} "
-              f"| {r['time_x_mse_ratio_gonio_over_mitsuba']} |")  # fmt: skip
+        print(f"| {r['case']} | {r['gonio_s']} ({r['gonio_cpu_s']}) | {r['gonio_rel_mse']} "
+              f"| {r['mitsuba_s']} ({r['mitsuba_cpu_s']}) | {r['mitsuba_rel_mse']} "
+              f"| {r['time_x_mse_ratio_gonio_over_mitsuba']} "
+              f"| {r['cpu_time_x_mse_ratio_gonio_over_mitsuba']} |")  # fmt: skip
 
 
 if __name__ == "__main__":
