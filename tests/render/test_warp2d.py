@@ -103,6 +103,14 @@ def test_chi_square_detects_a_wrong_density():
     assert _chi2_pvalue(counts[probs > 0], probs[probs > 0], u.shape[0]) < ALPHA
 
 
+def test_u_at_one_never_reaches_an_empty_cell():
+    w = np.array([[1.0, 0.0], [0.0, 0.0]])  # every split has probability 1 on one side
+    u = np.array([[1.0, 1.0], [0.0, 1.0], [1.0, 0.0], [0.0, 0.0]], np.float32)
+    xy, dens, cell = HierarchicalWarp2D(w).sample(u)
+    assert np.all(np.asarray(cell) == 0) and np.all(np.asarray(dens) == 4.0)
+    assert np.all(np.asarray(xy) < 0.5)
+
+
 def test_small_squares_of_u_land_in_compact_patches():
     """The point of the tree: a 1/8 x 1/8 square of u maps into a patch of a few cells in
     both axes (row-then-column inversion smears such a square along rows)."""

@@ -153,7 +153,12 @@ class HierarchicalWarp2D:
         """``u (..., 2)`` float in ``[0, 1)`` (``u[..., 0]`` for rows, ``u[..., 1]`` for columns)
         -> ``(xy (..., 2) in [0, 1)^2, density on the unit square, flat cell iy * nx + ix)``."""
         u = jnp.asarray(u)
+        if not jnp.issubdtype(u.dtype, jnp.floating):
+            u = u.astype(jnp.float64)
         dt = u.dtype
+        one = float(np.nextafter(np.array(1.0, dt), np.array(0.0, dt)))
+        # u = 1 would pass a split of probability 1 into its empty side
+        u = jnp.clip(u, 0.0, one)
         uy, ux = u[..., 0], u[..., 1]
         node = jnp.zeros(uy.shape, jnp.int32)
         for kind, off in zip(self.kinds, self.offsets, strict=True):
@@ -181,7 +186,6 @@ class HierarchicalWarp2D:
         cell = jnp.take(self._leaf, node, mode="clip")
         iy = cell // self.nx
         ix = cell - iy * self.nx
-        one = float(np.nextafter(np.array(1.0, dt), np.array(0.0, dt)))
         x = bin_position(ix, jnp.clip(ux, 0.0, one), self.nx)
         y = bin_position(iy, jnp.clip(uy, 0.0, one), self.ny)
         density = jnp.take(self._density, cell, mode="clip").astype(dt)
