@@ -1,17 +1,21 @@
 """Equal-time error under an environment alone: gonio's integrator against Mitsuba 3's ``direct``.
 
 Scene: the unit sphere seen orthographically from +z, ``--res``² pixels, lit only by the studio
-environment (the same lat-long EXR on both sides), made of a Lambertian (albedo 0.5) or a GGX
-conductor (alpha 0.2, Smith, gold-like eta and k; Mitsuba ``roughconductor`` with visible-normal
-sampling; Mitsuba's ``--sampler`` default ``multijitter``, since gonio uses scrambled Sobol'
-points). Each renderer is scored against its own converged image (``--ref-spp``), so the
-two need not agree on environment orientation or pixel filtering: the figure is
-``time x MSE`` at ``--spp`` (the inverse of the usual efficiency), over the pixels inside 0.9 of
-the sphere's radius (away from the silhouette, where Mitsuba's pixel filter mixes in the
-background). Times are the second render call (compilation and Dr.Jit's kernel cache
-excluded); MSE is relative (divided by the mean squared reference value) and averaged over
-channels. Rounds alternate the order; the table gives medians and the ratio gonio / Mitsuba of
-``time x MSE`` (< 1: gonio reaches a given error in less time).
+environment (the same lat-long EXR on both sides), made of a Lambertian (albedo 0.5), a GGX
+conductor (alpha 0.2, glossy, and 0.02, near mirror; Smith, gold-like eta and k; Mitsuba
+``roughconductor`` with visible-normal sampling), or an RGL tensor file (``--rgl``, gonio's
+exact evaluator and sampler against Mitsuba's ``measured``); Mitsuba's ``--sampler`` is by
+default ``multijitter``, stratified as gonio's Sobol' points are. Each renderer is scored
+against its own converged image (``--ref-spp``), so the two need not agree on environment
+orientation or pixel filtering: the figure is ``time x MSE`` at ``--spp`` (the inverse of the
+usual efficiency), over the pixels inside 0.9 of the sphere's radius (away from the silhouette,
+where Mitsuba's pixel filter mixes in the background). Times are the second render call
+(compilation and Dr.Jit's kernel cache excluded); MSE is relative (divided by the mean squared
+reference value) and averaged over channels. Rounds alternate the order; the table gives
+medians and the ratio gonio / Mitsuba of ``time x MSE`` (< 1: gonio reaches a given error in
+less time), in wall time and in CPU time (the process's user + system time over all threads
+during the render: both renderers run two threads; on a machine shared with other work the wall
+time also counts waiting for a core).
 
 Writes benchmarks/results/equal_time.csv and equal_time.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_equal_time.py [--quick]
@@ -50,12 +54,18 @@ def main() -> None:
     ap.add_argument("--res", type=int, default=128)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--ref-spp", type=int, default=1024)
-    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument(
         "--sampler",
         default="multijitter",
         help="Mitsuba sampler (default multijitter: stratified like gonio's Sobol' points)",
+    )
+    ap.add_argument(
+        "--rgl",
+        type=Path,
+        default=Path(__file__).resolve().parents[1].parent / "shared/data/rgl/paper_white_rgb.bsdf",
+        help="RGL tensor file for the measured row (skipped when missing)",
     )
     ap.add_argument("--quick", action="store_true", help="64², 16 spp, reference 512 spp, 2 rounds")
     args = ap.parse_args()
@@ -75,17 +85,31 @@ def main() -> None:
     env_file = write_exr(tmp / "env.exr", studio_environment())
     env = [Environment(str(env_file))]
     gold = models.Conductor(eta=GOLD_ETA, k=GOLD_K)
+
+    def ggx(alpha: float) -> tuple:
+        return (
+            models.TorranceSparrow(
+                alpha=alpha, distribution="ggx", shadowing="smith", fresnel=gold
+            ),
+            {"type": "roughconductor", "distribution": "ggx", "alpha": alpha,
+             "eta": {"type": "rgb", "value": GOLD_ETA}, "k": {"type": "rgb", "value": GOLD_K}},
+        )  # fmt: skip
+
     cases = {
         "Lambert / diffuse": (
             models.Lambert([0.5, 0.5, 0.5]),
             {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}},
         ),
-        "GGX conductor / roughconductor": (
-            models.TorranceSparrow(alpha=0.2, distribution="ggx", shadowing="smith", fresnel=gold),
-            {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2,
-             "eta": {"type": "rgb", "value": GOLD_ETA}, "k": {"type": "rgb", "value": GOLD_K}},
-        ),
-    }  # fmt: skip
+        "GGX conductor / roughconductor": ggx(0.2),
+        "near-mirror GGX conductor (alpha 0.02) / roughconductor": ggx(0.02),
+    }
+    if args.rgl is not None and args.rgl.is_file():
+        from gonio.io.rgl_measured import load_rgl
+
+        cases[f"RGL {args.rgl.stem} / measured"] = (
+            load_rgl(args.rgl),
+            {"type": "measured", "filename": str(args.rgl)},
+        )
     mask = disk_mask(args.res)
 
     def mitsuba_scene(bsdf: dict):
@@ -113,32 +137,32 @@ def main() -> None:
     for name, (model, bsdf) in cases.items():
         scene = mitsuba_scene(bsdf)
 
-        def g_render(spp: int, seed: int, model=model) -> tuple[np.ndarray, float]:
-            t0 = time.perf_counter()
+        def g_render(spp: int, seed: int, model=model) -> tuple[np.ndarray, float, float]:
+            t0, c0 = time.perf_counter(), time.process_time()
             img = render_sphere(model, env, resolution=args.res, spp=spp, seed=seed)
-            return img, time.perf_counter() - t0
+            return img, time.perf_counter() - t0, time.process_time() - c0
 
-        def m_render(spp: int, seed: int, scene=scene) -> tuple[np.ndarray, float]:
-            t0 = time.perf_counter()
+        def m_render(spp: int, seed: int, scene=scene) -> tuple[np.ndarray, float, float]:
+            t0, c0 = time.perf_counter(), time.process_time()
             img = mi.render(scene, spp=spp, seed=seed)
             dr.eval(img)
             dr.sync_thread()
             out = np.asarray(img)[..., :3]
-            return out, time.perf_counter() - t0
+            return out, time.perf_counter() - t0, time.process_time() - c0
 
-        g_ref, _ = g_render(args.ref_spp, 1000)
-        m_ref, _ = m_render(args.ref_spp, 1000)
+        g_ref = g_render(args.ref_spp, 1000)[0]
+        m_ref = m_render(args.ref_spp, 1000)[0]
         g_render(args.spp, 0)  # compile
         m_render(args.spp, 0)
         res = {"gonio": [], "mitsuba": []}
         for r in range(args.rounds):
             sides = [("gonio", g_render, g_ref), ("mitsuba", m_render, m_ref)]
             for side, fn, ref in sides if r % 2 == 0 else sides[::-1]:
-                img, sec = fn(args.spp, r + 1)
-                res[side].append((sec, rel_mse(img, ref, mask)))
-        ratio = statistics.median(
-            (g[0] * g[1]) / (m[0] * m[1]) for g, m in zip(res["gonio"], res["mitsuba"], strict=True)
-        )
+                img, sec, cpu = fn(args.spp, r + 1)
+                res[side].append((sec, rel_mse(img, ref, mask), cpu))
+        pairs = list(zip(res["gonio"], res["mitsuba"], strict=True))
+        ratio = statistics.median((g[0] * g[1]) / (m[0] * m[1]) for g, m in pairs)
+        cpu_ratio = statistics.median((g[2] * g[1]) / (m[2] * m[1]) for g, m in pairs)
         row = {"case": name, "res": args.res, "spp": args.spp, "ref_spp": args.ref_spp,
                "mitsuba_sampler": args.sampler,
                "gonio_ref_mean": f"{g_ref[mask].mean():.4g}",
@@ -146,7 +170,9 @@ def main() -> None:
         for side in ("gonio", "mitsuba"):
             row[f"{side}_s"] = f"{statistics.median(x[0] for x in res[side]):.3f}"
             row[f"{side}_rel_mse"] = f"{statistics.median(x[1] for x in res[side]):.3g}"
+            row[f"{side}_cpu_s"] = f"{statistics.median(x[2] for x in res[side]):.3f}"
         row["time_x_mse_ratio_gonio_over_mitsuba"] = f"{ratio:.3g}"
+        row["cpu_time_x_mse_ratio_gonio_over_mitsuba"] = f"{cpu_ratio:.3g}"
         row["load_avg_1min"] = f"{os.getloadavg()[0]:.1f}"
         rows.append(row)
         print(row, flush=True)
@@ -162,7 +188,7 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 2.2))
+    fig, ax = plt.subplots(figsize=(7, 0.5 + 0.45 * len(rows)))
     ax.barh([r["case"] for r in rows], [float(r["time_x_mse_ratio_gonio_over_mitsuba"])
                                         for r in rows])  # fmt: skip
     ax.axvline(1.0, color="gray", ls="--", lw=0.8)
@@ -173,13 +199,14 @@ def main() -> None:
     fig.tight_layout()
     fig.savefig(RESULTS / "equal_time.png", dpi=120)
 
-    print("\n| material | gonio s | gonio rel. MSE | Mitsuba s | Mitsuba rel. MSE "
-          "| time × MSE, gonio / Mitsuba |")  # fmt: skip
-    print("|---|---:|---:|---:|---:|---:|")
+    print("\n| material | gonio s (CPU s) | gonio rel. MSE | Mitsuba s (CPU s) | Mitsuba rel. MSE "
+          "| time × MSE, gonio / Mitsuba | CPU time × MSE |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['case']} | {r['gonio_s']} | {r['gonio_rel_mse']} | {r['mitsuba_s']} "
-              f"| {r['mitsuba_rel_mse']} "
-              f"| {r['time_x_mse_ratio_gonio_over_mitsuba']} |")  # fmt: skip
+        print(f"| {r['case']} | {r['gonio_s']} ({r['gonio_cpu_s']}) | {r['gonio_rel_mse']} "
+              f"| {r['mitsuba_s']} ({r['mitsuba_cpu_s']}) | {r['mitsuba_rel_mse']} "
+              f"| {r['time_x_mse_ratio_gonio_over_mitsuba']} "
+              f"| {r['cpu_time_x_mse_ratio_gonio_over_mitsuba']} |")  # fmt: skip
 
 
 if __name__ == "__main__":

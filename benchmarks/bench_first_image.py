@@ -18,7 +18,10 @@ kernel compilation or cache load, rendering and writing.
   ``~/.drjit``), Mitsuba warm: that folder kept from an earlier run.
 
 Rounds alternate the order of the configurations (ABBA), so that a drift of the machine's speed
-favours none; the table reports medians and the ratios gonio / Mitsuba of each round's figures.
+favours none; the table reports medians and the ratios gonio / Mitsuba of each round's figures,
+and the median CPU time of each process (user + system over all its threads, from
+``getrusage``): on a machine shared with other work the wall time includes waiting for a core,
+the CPU time does not.
 
 Writes benchmarks/results/first_image.csv and first_image.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_first_image.py [--rounds K] [--quick]
@@ -30,6 +33,7 @@ import argparse
 import csv
 import json
 import os
+import resource
 import shutil
 import statistics
 import subprocess
@@ -67,12 +71,23 @@ mi.util.write_bitmap(out, img)
 """
 
 
+#: CPU seconds (user + system, all threads) of each child run, in the order they ran.
+CPU: dict[str, list[float]] = {}
+
+
+def _child_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def _run(cmd: list[str], env: dict[str, str]) -> float:
+    c0 = _child_cpu()
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
     dt = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"{cmd[:4]} failed: {proc.stderr.strip().splitlines()[-1:]}")
+    _run.last_cpu = _child_cpu() - c0  # type: ignore[attr-defined]
     return dt
 
 
@@ -85,6 +100,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="2 rounds")
     args = ap.parse_args()
     rounds = 2 if args.quick else args.rounds
+    load0 = os.getloadavg()[0]
 
     from gonio.brdf.models import Lambert
     from gonio.render.lights import studio_environment
@@ -141,11 +157,14 @@ def main() -> None:
             "Mitsuba warm": lambda: _run(mi_cmd, {**base, "HOME": str(warm_home)}),
         }
         times: dict[str, list[float]] = {k: [] for k in configs}
+        cpu: dict[str, list[float]] = {k: [] for k in configs}
         order = list(configs)
         for r in range(rounds):
             for name in order if r % 2 == 0 else order[::-1]:
                 times[name].append(configs[name]())
-                print(f"round {r}: {name} {times[name][-1]:.2f} s", flush=True)
+                cpu[name].append(_run.last_cpu)  # type: ignore[attr-defined]
+                print(f"round {r}: {name} {times[name][-1]:.2f} s, CPU {cpu[name][-1]:.2f} s",
+                      flush=True)  # fmt: skip
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -155,11 +174,14 @@ def main() -> None:
     for name, ts in times.items():
         ref = times["Mitsuba warm" if "warm" in name else "Mitsuba cold"]
         ratio = statistics.median(a / b for a, b in zip(ts, ref, strict=True))
-        rows.append((name, statistics.median(ts), min(ts), max(ts), ratio))
+        rows.append((name, statistics.median(ts), min(ts), max(ts), ratio,
+                     statistics.median(cpu[name])))  # fmt: skip
     with open(RESULTS / "first_image.csv", "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["config", "median_s", "min_s", "max_s", "ratio_to_mitsuba", "load_avg_1min"])
-        w.writerow(["# res", args.res, "spp", args.spp, args.variant, f"rounds {rounds}"])
+        w.writerow(["config", "median_s", "min_s", "max_s", "ratio_to_mitsuba", "median_cpu_s",
+                    "load_avg_1min"])  # fmt: skip
+        w.writerow(["# res", args.res, "spp", args.spp, args.variant, f"rounds {rounds}",
+                    f"load at start {load0:.1f}"])  # fmt: skip
         for row in rows:
             w.writerow([row[0], *(f"{x:.3f}" for x in row[1:]), f"{load:.1f}"])
 
@@ -181,10 +203,10 @@ def main() -> None:
 
     print(f"\n{args.res}² Lambert sphere, {args.spp} spp, Mitsuba {args.variant}, "
           f"{rounds} rounds, load average {load:.1f}\n")  # fmt: skip
-    print("| process | median (s) | range (s) | / Mitsuba (same cache state) |")
-    print("|---|---:|---:|---:|")
-    for name, med, lo, hi, ratio in rows:
-        print(f"| {name} | {med:.2f} | {lo:.2f}–{hi:.2f} | {ratio:.2f} |")
+    print("| process | median (s) | range (s) | / Mitsuba (same cache state) | CPU (s) |")
+    print("|---|---:|---:|---:|---:|")
+    for name, med, lo, hi, ratio, c in rows:
+        print(f"| {name} | {med:.2f} | {lo:.2f}–{hi:.2f} | {ratio:.2f} | {c:.2f} |")
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -69,3 +70,24 @@ def test_render_path_does_not_import_scipy_stats_or_matplotlib():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.slow  # a fresh process compiling the render kernels: 15-40 s on a loaded machine
+def test_cli_render_imports_neither_fit_nor_scipy_stats_nor_rich(tmp_path):
+    """What a second process pays for before its first image: `gonio render` of a fit, output
+    piped (no progress bar), imports neither the fitting package, scipy.stats, matplotlib nor
+    rich."""
+    from gonio.brdf.models import Lambert
+
+    fit = tmp_path / "lambert.json"
+    fit.write_text(json.dumps(Lambert(albedo=0.5).to_dict()))
+    code = (
+        "import sys; from gonio.cli import main;"
+        f"rc = main(['render', '--fitted', {str(fit)!r}, '--resolution', '8', '--spp', '1',"
+        f" '--no-images', '--no-compile-cache', '--out', {str(tmp_path / 'g.png')!r}]);"
+        "print(rc, sorted(m for m in ('gonio.fit', 'scipy.stats', 'matplotlib', 'rich')"
+        " if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "0 []"
+    assert (tmp_path / "g.png").is_file()

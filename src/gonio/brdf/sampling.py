@@ -74,6 +74,12 @@ def _bin_of(x: Array, n: int) -> Array:
     return jnp.where((x >= (kf + 1) / n) & (k < n - 1), k + 1, k)
 
 
+#: Public names of the two bin helpers, for samplers outside this module that must agree with
+#: these distributions on bin edges (:mod:`gonio.render.warp2d`).
+bin_position = _bin_position
+bin_of = _bin_of
+
+
 def _check_weights(weights: Any, what: str, min_dims: int = 1) -> np.ndarray:
     try:
         w = np.asarray(weights, dtype=np.float64)
@@ -593,6 +599,8 @@ __all__ = [
     "alias_arrays",
     "alias_sample",
     "alias_sample_2d",
+    "bin_of",
+    "bin_position",
     "find_interval",
     "hash_uniform",
     "normalized_cdf",

@@ -306,11 +306,41 @@ def check_environment_file(path: str | Path) -> None:
         )
 
 
-def run(args: argparse.Namespace) -> int:
-    """Execute ``gonio render``; returns the exit status."""
+class _NoBar:
+    """The progress bar's interface, doing nothing (stderr is not a terminal)."""
+
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def add_task(self, *args: Any, **kwargs: Any) -> int:
+        return 0
+
+    def update(self, *args: Any, **kwargs: Any) -> None:
+        return None
+
+
+def _progress_bar() -> Any:
+    """A rich progress bar on a terminal; otherwise :class:`_NoBar`, without importing rich
+    (its import is ~40 ms of a second process's time to its first image)."""
+    if not sys.stderr.isatty():
+        return _NoBar()
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from gonio.render.compare import compare_images, comparison_figure
+    return Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeRemainingColumn(),
+        transient=True,
+        console=None,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``gonio render``; returns the exit status."""
     from gonio.render.integrator import render_sphere
     from gonio.render.output import auto_exposure, write_exr, write_png
 
@@ -340,15 +370,7 @@ def run(args: argparse.Namespace) -> int:
         items.append((label, model))
 
     images: dict[str, np.ndarray] = {}
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>3.0f}%"),
-        TimeRemainingColumn(),
-        transient=True,
-        disable=not sys.stderr.isatty(),
-        console=None,
-    ) as bar:
+    with _progress_bar() as bar:
         for label, material in items:
             task = bar.add_task(f"render {label}", total=1.0)
 
@@ -380,6 +402,8 @@ def run(args: argparse.Namespace) -> int:
             write_png(stem.with_suffix(".png"), img, exposure)
             report["images"][label] = str(stem.with_suffix(".exr"))
     if reference is not None and len(images) > 1:
+        from gonio.render.compare import compare_images, comparison_figure
+
         fitted = [(k, v) for k, v in images.items() if k != "measured"]
         exp, comps = compare_images(reference, fitted)
         comparison_figure(out, reference, comps, exp, title=f"{Path(args.measured).name}")

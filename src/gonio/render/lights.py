@@ -34,8 +34,8 @@ import numpy as np
 
 from gonio.brdf._trig import cos_sin_turns
 from gonio.brdf.lookup import atan2
-from gonio.brdf.sampling import Distribution2D
 from gonio.errors import ParameterError
+from gonio.render.warp2d import HierarchicalWarp2D
 
 Array = jnp.ndarray
 
@@ -311,12 +311,17 @@ def latlong_to_direction(xy: Array) -> Array:
     ``x = 0.5`` faces the way the camera looks (-z, the backdrop behind the sphere); ``x = 0.75``
     is +x (image right) and ``x = 0`` / ``1`` is +z (behind the camera).
     """
+    return _latlong_direction_sin(xy)[0]
+
+
+def _latlong_direction_sin(xy: Array) -> tuple[Array, Array]:
+    """:func:`latlong_to_direction` and sin(theta) (..., the solid angle's Jacobian)."""
     xy = jnp.asarray(xy)
     # theta = pi y and phi = 2 pi (x - 1/2) in turns, through the exact-reduction polynomial
     # (XLA's float32 sin/cos cost ~50x an exp; gonio.brdf._trig)
     ct, st = cos_sin_turns(0.5 * xy[..., 1])
     cp, sp = cos_sin_turns(xy[..., 0] - 0.5)
-    return jnp.stack([st * sp, ct, -st * cp], -1)
+    return jnp.stack([st * sp, ct, -st * cp], -1), st
 
 
 def direction_to_latlong(w: Array) -> Array:
@@ -344,8 +349,9 @@ class Environment(Light):
     scale : multiplies the radiance.
 
     The importance map (a 2-D piecewise-constant distribution proportional to the channel mean
-    times sin(theta)) is built the first time the light is sampled, so a render that never
-    samples the environment (BRDF sampling only) never builds it.
+    times sin(theta), sampled down a quadtree: :class:`gonio.render.warp2d.HierarchicalWarp2D`)
+    is built the first time the light is sampled, so a render that never samples the
+    environment (BRDF sampling only) never builds it.
     """
 
     _LEAVES = ("image", "_dist")
@@ -403,18 +409,18 @@ class Environment(Light):
             lum = img.mean(axis=-1) * sin_t[:, None]
             if not np.any(lum > 0):
                 raise ParameterError("environment is black everywhere; nothing to sample")
-            self._dist = Distribution2D(lum)  # rows: latitude (y), columns: longitude (x)
+            self._dist = HierarchicalWarp2D(lum)  # rows: latitude (y), columns: longitude (x)
         return self
 
     def sample(self, p: Array, u: Array) -> LightSample:
         if self._dist is None:
             raise ParameterError("Environment.importance() must be called before sampling")
         # u[..., 1] picks the row (y), u[..., 0] the column (x)
-        xy, pdf_uv, _ = self._dist.sample(jnp.asarray(u)[..., ::-1])
-        wi = latlong_to_direction(xy)
-        sin_t = cos_sin_turns(0.5 * xy[..., 1])[1]  # the same as inside latlong_to_direction
+        xy, pdf_uv, cell = self._dist.sample(jnp.asarray(u)[..., ::-1])
+        wi, sin_t = _latlong_direction_sin(xy)
         pdf = jnp.where(sin_t > 0, pdf_uv / (2.0 * jnp.pi**2 * jnp.maximum(sin_t, 1e-30)), 0.0)
-        value = jnp.where((pdf > 0)[..., None], self._texel(xy), 0.0)
+        texel = jnp.take(self.image.reshape(-1, self.image.shape[-1]), cell, axis=0, mode="clip")
+        value = jnp.where((pdf > 0)[..., None], texel, 0.0)
         return LightSample(wi, value, pdf)
 
     def _texel(self, xy: Array) -> Array:
@@ -433,9 +439,12 @@ class Environment(Light):
         xy = direction_to_latlong(wi)
         # sin(theta) from the direction itself: no trigonometry needed.
         sin_t = jnp.sqrt(jnp.maximum(0.0, 1.0 - wi[..., 1] ** 2))
-        pdf_uv = self._dist.pdf(xy)
+        # one cell index for the density and the texel (xy is inside [0, 1]^2, clamped)
+        cell = self._dist.cell_of(xy)
+        pdf_uv = self._dist.cell_density(cell, xy.dtype)
         pdf = jnp.where(sin_t > 0, pdf_uv / (2.0 * jnp.pi**2 * jnp.maximum(sin_t, 1e-30)), 0.0)
-        return self._texel(xy), pdf
+        texel = jnp.take(self.image.reshape(-1, self.image.shape[-1]), cell, axis=0, mode="clip")
+        return texel, pdf
 
 
 def _read_env_file(path: Path) -> np.ndarray:
