@@ -5,6 +5,9 @@ from __future__ import annotations
 import collections
 import inspect
 import os
+import shutil
+import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -16,6 +19,37 @@ os.environ.setdefault("GONIO_COMPILE_CACHE", "0")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
+
+# ------------------------------------------------------------------ one compilation cache per run
+# Many tests compile the same XLA programs again: a new closure or model object is a new jit cache
+# entry in memory, each xdist worker compiles for itself, and every ``python -m gonio`` child
+# starts from nothing. One JAX persistent compilation cache in a temporary folder, made by the
+# controlling process and handed to the workers and their children through JAX's own environment
+# variables, lets each distinct program compile once per run. It holds nothing between runs (a
+# fresh run compiles everything, as CI does) and it changes no result: JAX keys an entry by the
+# program, the compile options, the JAX/XLA versions and the device. GONIO_TEST_COMPILE_CACHE=0
+# turns it off. Tests that count compilations count cache hits too (tests/render/
+# test_device_resident.py); tests/test_compile_cache.py gives its children a clean environment.
+TEST_CACHE_VAR = "GONIO_TEST_COMPILE_CACHE"
+JAX_CACHE_VARS = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")
+#: Programs that compile faster than this are not written (reading one back costs ~10 ms).
+CACHE_MIN_COMPILE_S = "0.1"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    if os.environ.get("PYTEST_XDIST_WORKER") or os.environ.get(JAX_CACHE_VARS[0]):
+        return  # a worker (its controller made the folder) or a cache chosen by the caller
+    if os.environ.get(TEST_CACHE_VAR, "").strip().lower() in ("0", "false", "no", "off"):
+        return
+    folder = tempfile.mkdtemp(prefix="gonio-test-jax-cache-")
+    config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
+    os.environ[JAX_CACHE_VARS[0]] = folder
+    os.environ[JAX_CACHE_VARS[1]] = CACHE_MIN_COMPILE_S
+    if "jax" in sys.modules:  # imported by a plugin already: the variables were read
+        import jax
+
+        jax.config.update("jax_compilation_cache_dir", folder)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", float(CACHE_MIN_COMPILE_S))
 
 
 def shared_file(*parts: str) -> Path:

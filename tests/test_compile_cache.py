@@ -12,6 +12,7 @@ import pytest
 
 from gonio import compile_cache
 from gonio.brdf.models import Lambert
+from tests.conftest import JAX_CACHE_VARS
 
 
 @pytest.mark.parametrize("value", ["0", "false", "OFF", "no"])
@@ -32,7 +33,9 @@ def test_directory_follows_xdg_and_the_variable(monkeypatch, tmp_path):
 def _render(tmp_path: Path, cache_home: Path, *flags: str, **env: str) -> None:
     fit = tmp_path / "lambert.json"
     fit.write_text(json.dumps(Lambert(albedo=0.5).to_dict()))
-    child_env = {k: v for k, v in os.environ.items() if k != compile_cache.ENV_VAR}
+    # without the test run's own cache (tests/conftest.py): the child sees a user's environment
+    drop = {compile_cache.ENV_VAR, *JAX_CACHE_VARS}
+    child_env = {k: v for k, v in os.environ.items() if k not in drop}
     child_env.update(XDG_CACHE_HOME=str(cache_home), JAX_PLATFORMS="cpu", **env)
     cmd = [sys.executable, "-m", "gonio", "render", "--fitted", str(fit), "--resolution", "8"]
     cmd += ["--light", "dir:20,0", "--no-images", "--out", str(tmp_path / "x.png"), *flags]

@@ -173,15 +173,16 @@ class Jitted:
     def __init__(self, model) -> None:
         self.model = model
 
-    # the model is an argument (a pytree), so models of one class and shape share a compile
+    # the model is an argument (a pytree), so models of one class and shape share a compile; the
+    # rows are padded to a few fixed counts (_padded), so the checks' many batch sizes share it too
     def f(self, wi, wo):
-        return _jit_f(self.model, wi, wo)
+        return _padded(_jit_f, self.model, wi, wo)
 
     def pdf(self, wi, wo):
-        return _jit_pdf(self.model, wi, wo)
+        return _padded(_jit_pdf, self.model, wi, wo)
 
     def sample(self, wo, u):
-        return _jit_sample(self.model, wo, u)
+        return _padded(_jit_sample, self.model, wo, u)
 
     def directional_albedo(self, wo, n):
         return _jit_albedo(self.model, wo, n)
@@ -191,6 +192,24 @@ class Jitted:
 
     def __repr__(self) -> str:
         return repr(self.model)
+
+
+#: Batches of up to this many rows are evaluated as this many (then as the next power of two).
+PAD_ROWS = 4096
+
+
+def _padded(fn, model, a, b):
+    """``fn(model, a, b)`` on ``(n, k)`` arrays padded with copies of their first row to
+    :data:`PAD_ROWS` rows (or the next power of two), cut back to ``n`` rows. Each row is
+    evaluated on its own, so padding changes no value, only the number of compiled shapes."""
+    a, b = jnp.asarray(a), jnp.asarray(b)
+    n = a.shape[0] if a.ndim == 2 else 0
+    if n == 0 or b.ndim != 2 or b.shape[0] != n:
+        return fn(model, a, b)
+    rows = max(PAD_ROWS, 1 << (n - 1).bit_length())
+    pad = [(0, rows - n), (0, 0)]
+    out = fn(model, jnp.pad(a, pad, mode="edge"), jnp.pad(b, pad, mode="edge"))
+    return jax.tree_util.tree_map(lambda x: x[:n], out)
 
 
 _jit_f = jax.jit(lambda model, wi, wo: model.f(wi, wo))

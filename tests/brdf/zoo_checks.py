@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf import frames
 from gonio.brdf.chi2 import chi2_test
+from tests.brdf import model_checks
+from tests.brdf.model_checks import check_param_gradients
 
 
 def jit_sampler(model, wo, drop_delta: bool = False):
@@ -15,28 +19,29 @@ def jit_sampler(model, wo, drop_delta: bool = False):
 
     With ``drop_delta`` delta samples are reported as failed (pdf 0): the chi-square test then
     expects exactly the missing mass ``1 - integral of pdf`` to be lost, which checks the delta
-    lobe's selection probability too.
+    lobe's selection probability too. The model and ``wo`` are arguments of the jitted functions,
+    so every ``theta_o`` of a model (and models of one class and shape) share their compiles.
     """
     wo = jnp.asarray(wo, jnp.float64)
 
-    @jax.jit
-    def _sample(m, u):
-        s = m.sample(wo, u)
-        pdf = jnp.where(s.delta, 0.0, s.pdf) if drop_delta else s.pdf
-        return s.wi, pdf
-
-    @jax.jit
-    def _pdf(m, wi):
-        return m.pdf(wi, wo)
-
     def sample(u):
-        wi, pdf = _sample(model, jnp.asarray(u))
+        wi, pdf = _jit_sampler_sample(model, wo, jnp.asarray(u), drop_delta)
         return np.asarray(wi), np.asarray(pdf)
 
     def pdf(wi):
-        return np.asarray(_pdf(model, jnp.asarray(wi)))
+        return np.asarray(_jit_sampler_pdf(model, jnp.asarray(wi), wo))
 
     return sample, pdf
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _jit_sampler_sample(m, wo, u, drop_delta):
+    s = m.sample(wo, u)
+    pdf = jnp.where(s.delta, 0.0, s.pdf) if drop_delta else s.pdf
+    return s.wi, pdf
+
+
+_jit_sampler_pdf = jax.jit(lambda m, wi, wo: m.pdf(wi, wo))
 
 
 def check_chi2_jit(model, theta_o_deg, n_tests: int, drop_delta: bool = False, **kw) -> None:
@@ -50,52 +55,18 @@ def check_chi2_jit(model, theta_o_deg, n_tests: int, drop_delta: bool = False, *
 
 def albedo_jit(model, wo, n: int = 128) -> np.ndarray:
     """``model.directional_albedo(wo, n)`` evaluated under ``jax.jit``."""
-    return np.asarray(jax.jit(lambda m, w: m.directional_albedo(w, n=n))(model, jnp.asarray(wo)))
+    return np.asarray(_jit_albedo(model, jnp.asarray(wo), n))
+
+
+_jit_albedo = jax.jit(lambda m, w, n: m.directional_albedo(w, n=n), static_argnums=2)
 
 
 def check_param_gradients_jit(model) -> None:
-    """``model_checks.check_param_gradients`` with the loss and its gradient jitted."""
-    from tests.brdf.model_checks import stress_directions
-
-    d = stress_directions()
-    wi = jnp.asarray(np.repeat(d, len(d), axis=0))
-    wo = jnp.asarray(np.tile(d, (len(d), 1)))
-    u = jnp.asarray(np.random.default_rng(0).random((wi.shape[0], 2)))
-
-    @jax.jit
-    def grads(params):
-        def loss(p):
-            m = model.replace(**p)
-            s = m.sample(wo, u)
-            return (
-                jnp.sum(m.f(wi, wo)) + jnp.sum(m.pdf(wi, wo)) + jnp.sum(s.weight) + jnp.sum(s.pdf)
-            )
-
-        return jax.grad(loss)(params)
-
-    for name, g in grads(model.params()).items():
-        assert np.all(np.isfinite(np.asarray(g))), f"{model!r}: non-finite gradient w.r.t. {name}"
+    """``model_checks.check_param_gradients`` (the loss and its gradient jitted, the model an
+    argument: models of one class and shape share the compile)."""
+    check_param_gradients(model)
 
 
-class Jitted:
-    """A model whose ``f``, ``pdf`` and ``sample`` run under ``jax.jit`` (one compile per input
-    shape instead of op-by-op dispatch), for the ``model_checks`` property checks."""
-
-    def __init__(self, model) -> None:
-        self.model = model
-        self.channels = model.channels
-        self._f = jax.jit(lambda m, wi, wo: m.f(wi, wo))
-        self._pdf = jax.jit(lambda m, wi, wo: m.pdf(wi, wo))
-        self._sample = jax.jit(lambda m, wo, u: m.sample(wo, u))
-
-    def f(self, wi, wo):
-        return self._f(self.model, jnp.asarray(wi), jnp.asarray(wo))
-
-    def pdf(self, wi, wo):
-        return self._pdf(self.model, jnp.asarray(wi), jnp.asarray(wo))
-
-    def sample(self, wo, u):
-        return self._sample(self.model, jnp.asarray(wo), jnp.asarray(u))
-
-    def __repr__(self) -> str:
-        return repr(self.model)
+#: ``f``, ``pdf`` and ``sample`` under ``jax.jit`` with the model an argument and the rows padded
+#: to a few fixed counts, so that one compile per class and shape serves every check and test.
+Jitted = model_checks.Jitted

@@ -2,11 +2,16 @@
 
 A fresh interpreter per case would spend most of its time importing JAX; instead each worker
 (:mod:`tests.fuzz.worker`) serves cases one after another. The parent gives every case
-:data:`CASE_TIMEOUT_S` seconds and polls the worker's resident set size (``VmRSS`` in
-``/proc/PID/status``) every :data:`POLL_S` seconds; a worker over :data:`RSS_BUDGET_BYTES` or past
-its time is killed (SIGKILL: libhdf5 loops do not answer SIGINT), the case is recorded as
-``memory`` or ``hang``, and a new worker is started. RLIMIT_AS is not used: JAX reserves far more
-address space than it ever touches, and an address-space limit breaks it at import.
+:data:`CASE_TIMEOUT_S` seconds of the worker's CPU time (user + system, all threads, from
+``/proc/PID/stat``), and :data:`CASE_WALL_S` seconds of wall time for a case that waits without
+computing; it polls those and the worker's resident set size (``VmRSS`` in ``/proc/PID/status``)
+every :data:`POLL_S` seconds. A worker over :data:`RSS_BUDGET_BYTES` or past either time is
+killed (SIGKILL: libhdf5 loops do not answer SIGINT), the case is recorded as ``memory`` or
+``hang``, and a new worker is started. The limit is on work, not on wall time, because a case
+that compiles new kernels (an RGL mutant with other tensor shapes: about 5 CPU s) takes three to
+four times that on a machine loaded by other work, and a wall-time limit then fails it.
+RLIMIT_AS is not used: JAX reserves far more address space than it ever touches, and an
+address-space limit breaks it at import.
 """
 
 from __future__ import annotations
@@ -22,8 +27,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-#: Seconds a case may take (a load takes well under a second; a loaded machine gets slack).
+#: CPU seconds a case may use (a load takes well under one; a compile about 5).
 CASE_TIMEOUT_S = float(os.environ.get("GONIO_FUZZ_TIMEOUT_S", "20"))
+#: Wall seconds a case may take whatever CPU it used (a case blocked on a lock or a sleep).
+CASE_WALL_S = float(os.environ.get("GONIO_FUZZ_WALL_S", "180"))
 #: Resident memory a worker may reach (JAX and gonio take about 0.4 GiB of it).
 RSS_BUDGET_BYTES = int(float(os.environ.get("GONIO_FUZZ_RSS_GIB", "2")) * (1 << 30))
 POLL_S = 0.05
@@ -42,12 +49,26 @@ def rss_bytes(pid: int) -> int:
     return 0
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of ``pid`` and all its threads, s, from /proc (0 if gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            fields = fh.read().rpartition(")")[2].split()
+    except (FileNotFoundError, ProcessLookupError):
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / _CLOCK_TICKS  # utime, stime (fields 14, 15)
+
+
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
 @dataclass
 class Verdict:
     outcome: str  # "error", "load", "fail", "hang", "memory", "crash"
     detail: str
     seconds: float
     peak_rss: int
+    cpu_seconds: float = 0.0  # the worker's CPU time on the case (not set for a restart)
 
 
 class Worker:
@@ -58,9 +79,11 @@ class Worker:
         warm: list[tuple[str, str]],
         timeout_s: float = CASE_TIMEOUT_S,
         rss_budget: int = RSS_BUDGET_BYTES,
+        wall_timeout_s: float = CASE_WALL_S,
     ) -> None:
         self.warm = warm
-        self.timeout_s = timeout_s
+        self.timeout_s = timeout_s  # CPU seconds per case
+        self.wall_timeout_s = wall_timeout_s
         self.rss_budget = rss_budget
         self.proc: subprocess.Popen | None = None
         self.restarts = 0
@@ -94,6 +117,7 @@ class Worker:
     def run(self, kind: str, path: str) -> Verdict:
         assert self.proc is not None and self.proc.stdin is not None
         t0 = time.monotonic()
+        cpu0 = cpu_seconds(self.proc.pid)
         peak = 0
         try:
             self.proc.stdin.write(json.dumps({"kind": kind, "path": path}) + "\n")
@@ -110,14 +134,20 @@ class Worker:
                     return self._restart("crash", f"worker died (exit {code})", t0, peak)
                 v = json.loads(line)
                 peak = max(peak, rss_bytes(self.proc.pid))
-                return Verdict(v["outcome"], v["detail"], time.monotonic() - t0, peak)
+                cpu = cpu_seconds(self.proc.pid) - cpu0
+                return Verdict(v["outcome"], v["detail"], time.monotonic() - t0, peak, cpu)
             peak = max(peak, rss_bytes(self.proc.pid))
             if peak > self.rss_budget:
                 return self._restart(
                     "memory", f"worker RSS {peak / 2**30:.2f} GiB over the budget", t0, peak
                 )
-            if time.monotonic() - t0 > self.timeout_s:
-                return self._restart("hang", f"no answer in {self.timeout_s:.0f} s", t0, peak)
+            cpu = cpu_seconds(self.proc.pid) - cpu0
+            if cpu > self.timeout_s:
+                return self._restart("hang", f"no answer after {cpu:.0f} s of CPU time", t0, peak)
+            if time.monotonic() - t0 > self.wall_timeout_s:
+                return self._restart(
+                    "hang", f"no answer in {self.wall_timeout_s:.0f} s (CPU {cpu:.1f} s)", t0, peak
+                )
 
     def _restart(self, outcome: str, detail: str, t0: float, peak: int) -> Verdict:
         self.close()

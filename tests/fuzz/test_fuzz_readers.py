@@ -73,24 +73,29 @@ def test_oracle_refuses_what_cannot_be_right():
 
 
 def test_pool_kills_a_hung_and_a_swelling_worker_and_carries_on(corpus, tmp_path):
-    """The watchdog: a case that never answers is a hang, one that keeps allocating is a
-    memory failure; the worker is restarted and judges the next case normally."""
+    """The watchdog: a case that computes without answering is a hang by its CPU time, one that
+    waits without computing a hang by its wall time, one that keeps allocating a memory failure;
+    the worker is restarted and judges the next case normally."""
     from tests.fuzz.pool import rss_bytes
 
     seed = next(s for s in corpus if s.kind == "cornell")
-    w = Worker([("cornell", str(seed.path))], timeout_s=3.0, rss_budget=1 << 40)
+    w = Worker([("cornell", str(seed.path))], timeout_s=1.0, rss_budget=1 << 40, wall_timeout_s=120)
     try:
         base = rss_bytes(w.proc.pid)
         w.rss_budget = base + (384 << 20)
+        v = w.run("selftest-spin", str(seed.path))
+        assert v.outcome == "hang" and "CPU time" in v.detail, v
+        w.wall_timeout_s = 3.0
         v = w.run("selftest-hang", str(seed.path))
-        assert v.outcome == "hang" and v.seconds < 10
-        w.timeout_s = 120.0  # a loaded machine allocates slowly; the budget must decide
+        assert v.outcome == "hang" and "no answer in 3 s" in v.detail and v.seconds < 10, v
+        # a loaded machine allocates slowly; the budget must decide
+        w.timeout_s = w.wall_timeout_s = 120.0
         v = w.run("selftest-memory", str(seed.path))
         assert v.outcome == "memory", v
         assert v.peak_rss > base + (384 << 20)
         v = w.run("cornell", str(seed.path))
         assert v.outcome == "load", v
-        assert w.restarts == 2
+        assert w.restarts == 3
     finally:
         w.close()
 

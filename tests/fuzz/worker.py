@@ -327,6 +327,16 @@ def c_selftest_hang(path: str) -> str:
         time.sleep(1)
 
 
+def c_selftest_spin(path: str) -> str:
+    """Harness self-test: a case that computes forever (and ignores SIGINT)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    x = 0
+    while True:
+        x = (x * 1103515245 + 12345) % (1 << 31)
+
+
 def c_selftest_memory(path: str) -> str:
     """Harness self-test: a case that keeps allocating (touching every page) until killed."""
     import time
@@ -350,6 +360,7 @@ CHECKS = {
     "plan": c_plan,
     "fit": c_fit,
     "selftest-hang": c_selftest_hang,
+    "selftest-spin": c_selftest_spin,
     "selftest-memory": c_selftest_memory,
 }
 
