@@ -56,8 +56,8 @@ def _float_u(u: Any) -> Array:
     return jnp.clip(u, 0.0, _one_minus_eps(u.dtype))
 
 
-def _bin_position(k: Array, r: Array, n: int) -> Array:
-    """``(k + r) / n`` kept inside bin ``k`` as :func:`_bin_of` sees it, despite rounding."""
+def bin_position(k: Array, r: Array, n: int) -> Array:
+    """``(k + r) / n`` kept inside bin ``k`` as :func:`bin_of` sees it, despite rounding."""
     dt = r.dtype
     kf = k.astype(dt)
     x = (kf + r) / n
@@ -65,19 +65,16 @@ def _bin_position(k: Array, r: Array, n: int) -> Array:
     return jnp.clip(x, kf / n, hi)
 
 
-def _bin_of(x: Array, n: int) -> Array:
-    """Bin ``k`` of ``x`` with the edges ``k / n`` computed in ``x``'s dtype (int32, clamped)."""
+def bin_of(x: Array, n: int) -> Array:
+    """Bin ``k`` of ``x`` with the edges ``k / n`` computed in ``x``'s dtype (int32, clamped).
+
+    Public with :func:`bin_position` for samplers outside this module that must agree with these
+    distributions on bin edges (:mod:`gonio.render.warp2d`)."""
     k = jnp.clip(jnp.floor(x * n).astype(jnp.int32), 0, n - 1)
     kf = k.astype(x.dtype)
     k = jnp.where((x < kf / n) & (k > 0), k - 1, k)
     kf = k.astype(x.dtype)
     return jnp.where((x >= (kf + 1) / n) & (k < n - 1), k + 1, k)
-
-
-#: Public names of the two bin helpers, for samplers outside this module that must agree with
-#: these distributions on bin edges (:mod:`gonio.render.warp2d`).
-bin_position = _bin_position
-bin_of = _bin_of
 
 
 def _check_weights(weights: Any, what: str, min_dims: int = 1) -> np.ndarray:
@@ -194,14 +191,14 @@ class Distribution1D:
     def sample(self, u: Any, which: Any = None) -> tuple[Array, Array, Array]:
         """Draw ``x in [0, 1)``: ``(x, density at x, bin index)``."""
         k, r, p = self.sample_discrete(u, which)
-        return _bin_position(k, r, self.n), p * self.n, k
+        return bin_position(k, r, self.n), p * self.n, k
 
     def pdf(self, x: Any, which: Any = None) -> Array:
         """Density at ``x in [0, 1)`` (0 outside)."""
         x = jnp.asarray(x)
         if not jnp.issubdtype(x.dtype, jnp.floating):
             x = x.astype(jnp.float64)
-        k = _bin_of(x, self.n)
+        k = bin_of(x, self.n)
         cdf = self._arrays(x.dtype)
         base = self._base(which, x.shape)
         p = jnp.take(cdf, base + k + 1, mode="clip") - jnp.take(cdf, base + k, mode="clip")
@@ -262,8 +259,8 @@ class Distribution2D:
         """``u (..., 2) -> (xy (..., 2) in [0, 1)^2, density on the unit square, (iy, ix))``."""
         cells, (ry, rx), p = self.sample_cell(u, which)
         iy, ix = cells
-        x = _bin_position(ix, rx, self.nx)
-        y = _bin_position(iy, ry, self.ny)
+        x = bin_position(ix, rx, self.nx)
+        y = bin_position(iy, ry, self.ny)
         return jnp.stack([x, y], -1), p * (self.nx * self.ny), (iy, ix)
 
     def sample_cell(
@@ -294,8 +291,8 @@ class Distribution2D:
         if not jnp.issubdtype(xy.dtype, jnp.floating):
             xy = xy.astype(jnp.float64)
         x, y = xy[..., 0], xy[..., 1]
-        ix = _bin_of(x, self.nx)
-        iy = _bin_of(y, self.ny)
+        ix = bin_of(x, self.nx)
+        iy = bin_of(y, self.ny)
         p = self.cell_prob(iy, ix, which, xy.dtype) * (self.nx * self.ny)
         inside = (x >= 0) & (x < 1) & (y >= 0) & (y < 1)
         return jnp.where(inside, p, 0.0)
