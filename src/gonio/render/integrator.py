@@ -444,7 +444,7 @@ def render_sphere(
     spp : samples per pixel for area and environment lights (delta lights are exact and take
         none; a scene of delta lights only is rendered with one evaluation per pixel).
     sampler : BRDF sampling strategy, see the module docstring.
-    seed : seeds the per-pixel digital shifts of the Sobol' points (and through them a table's
+    seed : seeds the per-pixel rotations of the lattice points (and through them a table's
         rejection sampler, whose extra numbers hash each sample's uniforms).
     channels : ``None`` for all channels, or indices / names of the channels to render; only
         those are evaluated.
