@@ -11,7 +11,9 @@ over the pixels inside 0.9 of the radius, averaged over ``--seeds`` seeds:
   stratification is worth);
 - ``light``: environment samples alone (gonio ``sampler="light"``; Mitsuba ``bsdf_samples=0``);
 - ``brdf``: BRDF samples alone, no MIS (gonio ``sampler="brdf", mis=False``;
-  Mitsuba ``emitter_samples=0``).
+  Mitsuba ``emitter_samples=0``), at ``--spp`` and at 4 x ``--spp``;
+- ``brdf-independent``: the same in Mitsuba with the ``independent`` sampler (its error with no
+  stratification, to compare with ``ab_point_sets.py``'s random points in gonio).
 
 Error only, no timing (``bench_equal_time.py`` times the renders). To compare gonio's code with
 an older revision, run this script with ``PYTHONPATH`` at that revision's ``src/`` and
@@ -144,6 +146,13 @@ def main() -> None:
                 gonio_mse(model, gref, n, sampler="brdf", mis=False),
                 mitsuba_mse(scene(bsdf, 0, 1), mref, n),
             ),
+            (
+                "brdf",
+                4 * n,
+                gonio_mse(model, gref, 4 * n, sampler="brdf", mis=False),
+                mitsuba_mse(scene(bsdf, 0, 1), mref, 4 * n),
+            ),
+            ("brdf-independent", n, None, mitsuba_mse(scene(bsdf, 0, 1, "independent"), mref, n)),
         ]
         for strategy, spp, g, m in strategies:
             rows.append(

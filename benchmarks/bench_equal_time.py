@@ -59,7 +59,7 @@ def main() -> None:
     ap.add_argument(
         "--sampler",
         default="multijitter",
-        help="Mitsuba sampler (default multijitter: stratified like gonio's Sobol' points)",
+        help="Mitsuba sampler (default multijitter: stratified, like gonio's lattice points)",
     )
     ap.add_argument(
         "--rgl",

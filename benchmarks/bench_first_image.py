@@ -23,6 +23,10 @@ and the median CPU time of each process (user + system over all its threads, fro
 ``getrusage``): on a machine shared with other work the wall time includes waiting for a core,
 the CPU time does not.
 
+``--compare-python PATH`` adds, in the same rounds, a warm gonio process and ``import jax`` run
+by another interpreter (another environment, e.g. one with another ``ml_dtypes``), labelled by
+its ``ml_dtypes`` version; the CSV's second line names the version of the main one.
+
 Writes benchmarks/results/first_image.csv and first_image.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_first_image.py [--rounds K] [--quick]
 """
@@ -80,6 +84,13 @@ def _child_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def _ml_dtypes(python: str) -> str:
+    """The ml_dtypes version an interpreter imports (its cost is most of `import jax`)."""
+    code = "import importlib.metadata as m; print(m.version('ml_dtypes'))"
+    out = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True)
+    return out.stdout.strip()
+
+
 def _run(cmd: list[str], env: dict[str, str]) -> float:
     c0 = _child_cpu()
     t0 = time.perf_counter()
@@ -98,7 +109,15 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (llvm_ad_rgb)")
     ap.add_argument("--quick", action="store_true", help="2 rounds")
+    ap.add_argument(
+        "--compare-python",
+        type=Path,
+        help="a second interpreter (another environment, e.g. another ml_dtypes): adds its warm "
+        "gonio process and its `import jax` to the same rounds",
+    )
     args = ap.parse_args()
+    if args.compare_python is not None and not args.compare_python.is_file():
+        raise SystemExit(f"bench_first_image: no such interpreter: {args.compare_python}")
     rounds = 2 if args.quick else args.rounds
     load0 = os.getloadavg()[0]
 
@@ -125,6 +144,11 @@ def main() -> None:
         # Fill the warm caches once (not timed).
         _run(gonio_cmd, {**base, "XDG_CACHE_HOME": str(warm_cache)})
         _run(mi_cmd, {**base, "HOME": str(warm_home)})
+        alt = None
+        if args.compare_python is not None:
+            alt_cmd = [str(args.compare_python), *gonio_cmd[1:]]
+            alt = (_ml_dtypes(str(args.compare_python)), alt_cmd)
+            _run(alt_cmd, {**base, "XDG_CACHE_HOME": str(warm_cache)})
 
         def gonio_cold() -> float:
             d = Path(tempfile.mkdtemp(dir=work))
@@ -156,6 +180,14 @@ def main() -> None:
             "Mitsuba cold": mitsuba_cold,
             "Mitsuba warm": lambda: _run(mi_cmd, {**base, "HOME": str(warm_home)}),
         }
+        if alt is not None:
+            version, alt_cmd = alt
+            configs[f"gonio warm cache, ml_dtypes {version}"] = lambda: _run(
+                alt_cmd, {**base, "XDG_CACHE_HOME": str(warm_cache)}
+            )
+            configs[f"import jax alone, ml_dtypes {version}"] = lambda: _run(
+                [alt_cmd[0], "-c", "import jax, jax.numpy"], {**base}
+            )
         times: dict[str, list[float]] = {k: [] for k in configs}
         cpu: dict[str, list[float]] = {k: [] for k in configs}
         order = list(configs)
@@ -181,7 +213,8 @@ def main() -> None:
         w.writerow(["config", "median_s", "min_s", "max_s", "ratio_to_mitsuba", "median_cpu_s",
                     "load_avg_1min"])  # fmt: skip
         w.writerow(["# res", args.res, "spp", args.spp, args.variant, f"rounds {rounds}",
-                    f"load at start {load0:.1f}"])  # fmt: skip
+                    f"load at start {load0:.1f}",
+                    f"ml_dtypes {_ml_dtypes(sys.executable)}"])  # fmt: skip
         for row in rows:
             w.writerow([row[0], *(f"{x:.3f}" for x in row[1:]), f"{load:.1f}"])
 
@@ -192,7 +225,8 @@ def main() -> None:
 
     fig, ax = plt.subplots(figsize=(6.5, 3))
     names = [r[0] for r in rows]
-    ax.barh(names, [r[1] for r in rows], xerr=None, color=["C0"] * 3 + ["C2"] + ["C1"] * 2)
+    colors = ["C0"] * 3 + ["C2"] + ["C1"] * 2 + ["C0", "C2"][: len(rows) - 6]
+    ax.barh(names, [r[1] for r in rows], xerr=None, color=colors)
     for i, ts in enumerate(times.values()):
         ax.plot(ts, [i] * len(ts), "k.", ms=4)
     ax.invert_yaxis()

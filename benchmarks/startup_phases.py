@@ -9,7 +9,8 @@ passed as ``XDG_CACHE_HOME``); the rounds after it are what a second process see
 ``bench_first_image.py`` times the whole command (``gonio render``) against Mitsuba; this script
 says which part of it is which.
 
-Writes benchmarks/results/startup_phases.csv (one row per round) and prints a Markdown table.
+Writes benchmarks/results/OUT.csv (default ``startup_phases``; one row per round, with the
+``ml_dtypes`` version the interpreter imports) and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/startup_phases.py [--rounds 4]
 """
 
@@ -47,6 +48,8 @@ render_sphere(model, env, resolution=128, spp=16)
 mark("first_render")
 render_sphere(model, env, resolution=128, spp=16, seed=1)
 mark("second_render")
+import importlib.metadata
+marks["ml_dtypes"] = importlib.metadata.version("ml_dtypes")
 print(json.dumps(marks))
 """
 
@@ -55,6 +58,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rounds", type=int, default=4, help="processes (the first fills the cache)")
     ap.add_argument("--cache", type=Path, help="XDG_CACHE_HOME for the children (default: new)")
+    ap.add_argument("--out", default="startup_phases", help="CSV name under benchmarks/results")
     args = ap.parse_args()
     cache = args.cache or Path(tempfile.mkdtemp(prefix="gonio-phases-"))
     env = {**os.environ, "XDG_CACHE_HOME": str(cache)}
@@ -72,10 +76,11 @@ def main() -> None:
             row[f"{name}_wall_s"] = round(wall - prev[0], 3)
             row[f"{name}_cpu_s"] = round(cpu - prev[1], 3)
             prev = (wall, cpu)
+        row["ml_dtypes"] = marks["ml_dtypes"]
         row["load_avg_1min"] = round(load, 1)
         rows.append(row)
     RESULTS.mkdir(exist_ok=True)
-    path = RESULTS / "startup_phases.csv"
+    path = RESULTS / f"{args.out}.csv"
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()

@@ -164,3 +164,33 @@ def test_latlong_inverse_in_float32_matches_float64_trigonometry():
     ref_y = np.arccos(np.clip(w64[:, 1], -1, 1)) / np.pi
     np.testing.assert_allclose(got[:, 0], ref_x, atol=3e-7)
     np.testing.assert_allclose(got[:, 1], ref_y, atol=3e-7)
+
+
+def test_latlong_pixel_directions_are_latlong_to_direction_at_pixel_centres():
+    from gonio.render.lights import latlong_pixel_directions
+
+    h, w = 9, 14
+    x, y = np.meshgrid((np.arange(w) + 0.5) / w, (np.arange(h) + 0.5) / h)
+    expect = np.asarray(latlong_to_direction(np.stack([x, y], -1).astype(np.float64)))
+    got = latlong_pixel_directions(h, w)
+    assert got.shape == (h, w, 3) and got.dtype == np.float64
+    np.testing.assert_allclose(got, expect, atol=1e-12)
+
+
+def test_studio_environment_is_built_without_tracing_jax():
+    """A second process builds the studio on every start: NumPy only (tracing and compiling
+    its JAX ops one by one cost 0.5 s of CPU with a warm compilation cache)."""
+    from jax import monitoring
+
+    traced = []
+
+    def listener(event, duration, **kw):
+        if event == "/jax/core/compile/jaxpr_trace_duration":
+            traced.append(event)
+
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        img = studio_environment(32, 64)
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    assert img.shape == (32, 64, 3) and not traced

@@ -471,6 +471,21 @@ STUDIO_BOXES: tuple[tuple[tuple[float, float, float], float, float, tuple[float,
 )
 
 
+def latlong_pixel_directions(height: int, width: int) -> np.ndarray:
+    """:func:`latlong_to_direction` at the pixel centres of an ``(height, width)`` lat-long
+    image, computed on the host in NumPy float64 -> ``(height, width, 3)`` unit vectors.
+
+    For images built on the host (:func:`studio_environment`): the JAX function, called
+    outside a trace, compiles and runs its ops one by one, which cost 0.5 s of CPU per process
+    with a warm compilation cache (1.6 s without) for an image that NumPy builds in a few ms.
+    """
+    theta = np.pi * (np.arange(height) + 0.5) / height
+    phi = 2.0 * np.pi * ((np.arange(width) + 0.5) / width - 0.5)
+    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    sp, cp = np.sin(phi)[None, :], np.cos(phi)[None, :]
+    return np.stack(np.broadcast_arrays(st * sp, ct, -st * cp), -1)
+
+
 def studio_environment(height: int = 128, width: int = 256) -> np.ndarray:
     """The built-in procedural studio: soft boxes on a dim gradient, lat-long ``(H, W, 3)``.
 
@@ -478,10 +493,7 @@ def studio_environment(height: int = 128, width: int = 256) -> np.ndarray:
     (about 0.06); each soft box is a rectangle in angle with smooth 2-degree edges. Computed at
     pixel centres, so the image is exactly what the renderer samples.
     """
-    y = (np.arange(height) + 0.5) / height
-    x = (np.arange(width) + 0.5) / width
-    xx, yy = np.meshgrid(x, y)
-    d = np.asarray(latlong_to_direction(jnp.asarray(np.stack([xx, yy], -1))), dtype=np.float64)
+    d = latlong_pixel_directions(height, width)
     up = d[..., 1]
     t = _smoothstep(-0.3, 1.0, up)[..., None]
     floor = np.array([0.01, 0.01, 0.01])
@@ -565,6 +577,7 @@ __all__ = [
     "PointLight",
     "SphereLight",
     "direction_to_latlong",
+    "latlong_pixel_directions",
     "latlong_to_direction",
     "merge_environments",
     "studio_environment",

@@ -8,7 +8,7 @@ node's four children are chosen by two binary splits, top/bottom by ``u[..., 0]`
 left/right by ``u[..., 1]``, and each number is rescaled to [0, 1) by the split it went
 through. The map from the unit square to the grid is then local in both axes: a small square
 of ``u`` lands in a compact patch of cells, where row-then-column inversion smears it along a
-row, each row with its own conditional CDF. Stratified points (the renderer's Sobol' nets) keep
+row, each row with its own conditional CDF. Stratified points (the renderer's lattice points) keep
 their stratification through it. Same-run measurement, 64² sphere under the studio environment
 at 16 spp, relative MSE (mean of 4 seeds): Lambert light sampling alone 0.0058 by inversion,
 0.0026 by this warp; with MIS 0.0045 and 0.0026; GGX (alpha 0.2) with MIS 0.0085 and 0.0067.
