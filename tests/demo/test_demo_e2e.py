@@ -202,10 +202,7 @@ def test_demo_refuses_a_foreign_non_empty_folder(tmp_path, capsys):
     keep = tmp_path / "mine" / "notes.txt"
     keep.parent.mkdir()
     keep.write_text("precious")
-    # the built-in material: "auto" would first load an RGL file (seconds) that the refusal
-    # does not need
-    rc = main(["demo", "--out", str(keep.parent), "--force", "--no-progress", "--material",
-               "builtin"])  # fmt: skip
+    rc = main(["demo", "--out", str(keep.parent), "--force", "--no-progress"])
     err = capsys.readouterr().err
     assert rc != 0 and err.count("\n") == 1 and "refusing to delete" in err
     assert keep.read_text() == "precious"
