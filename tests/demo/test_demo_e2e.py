@@ -196,9 +196,14 @@ def test_report_opens_in_headless_chromium_without_console_errors(demo, tmp_path
         driver.quit()
 
 
-def test_demo_refuses_a_foreign_non_empty_folder(tmp_path, capsys):
+def test_demo_refuses_a_foreign_non_empty_folder(tmp_path, capsys, monkeypatch):
+    import gonio.demo.materials
     from gonio.cli import main
 
+    def no_material(spec):  # the folder is checked first: no material is loaded for a refusal
+        raise AssertionError(f"material {spec!r} loaded before the output folder was checked")
+
+    monkeypatch.setattr(gonio.demo.materials, "find_material", no_material)
     keep = tmp_path / "mine" / "notes.txt"
     keep.parent.mkdir()
     keep.write_text("precious")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 
@@ -62,7 +63,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gonio.demo.materials import find_material
-    from gonio.demo.pipeline import DemoSettings, run_demo
+    from gonio.demo.pipeline import DemoSettings, check_out, run_demo
     from gonio.errors import ParameterError
 
     extra: dict[str, Any] = {"uncertainty": args.uncertainty, "keep_images": args.keep_images}
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
             raise ParameterError(f"--spp must be >= 1, got {args.spp}")
         extra["spp"] = args.spp
     settings = DemoSettings.quick(**extra) if args.quick else DemoSettings(**extra)
+    check_out(Path(args.out), args.force)  # before loading the material, which can take seconds
     material = find_material(args.material)
     progress = not args.no_progress
     summary = run_demo(args.out, material, settings, force=args.force, progress=progress)

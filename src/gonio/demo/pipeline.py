@@ -131,8 +131,9 @@ def rig_text(material: DemoMaterial) -> str:
     return header + new
 
 
-def prepare_out(out: Path, force: bool) -> None:
-    """Create the output folder; refuse a non-empty one unless it is an earlier demo's."""
+def check_out(out: Path, force: bool) -> None:
+    """Refuse an output folder that the demo may not use (a file, or a non-empty folder that is
+    not an earlier demo's, or one that is without ``force``); touches nothing."""
     if out.exists() and not out.is_dir():
         raise ParameterError(f"{out} exists and is not a folder")
     if out.is_dir() and any(out.iterdir()):
@@ -142,6 +143,12 @@ def prepare_out(out: Path, force: bool) -> None:
             raise ParameterError(
                 f"{out} is not empty and holds no earlier demo; refusing to delete it"
             )
+
+
+def prepare_out(out: Path, force: bool) -> None:
+    """Create the output folder; refuse a non-empty one unless it is an earlier demo's."""
+    check_out(out, force)
+    if out.is_dir() and any(out.iterdir()):
         shutil.rmtree(out)
     out.mkdir(parents=True, exist_ok=True)
 
