@@ -21,6 +21,7 @@ import numpy as np
 from gonio.fit.data import FitData
 from gonio.fit.losses import LOSSES, Loss, constants_of, data_constants
 from gonio.fit.params import Layout
+from gonio.fit.programs import Program
 
 Array = jnp.ndarray
 
@@ -161,6 +162,7 @@ class Compiled:
 
     def __init__(self, layout: Layout, loss: Loss) -> None:
         entries = layout.entries
+        key = repr(_key(layout, loss))
 
         tied = dict(layout.tied)
 
@@ -257,7 +259,7 @@ class Compiled:
                 (sums, bad), _ = jax.lax.scan(step, init, (arrays, extra))
                 return sums, bad
 
-            fn = score_fns[names] = jax.jit(run)
+            fn = score_fns[names] = Program("scores", run, f"{key} {names}")
             return fn
 
         self.scores = scores_fn
@@ -265,12 +267,13 @@ class Compiled:
         self.chunk_res = chunk_res
         self.cost_raw = cost
         self.normal_raw = normal
-        self.cost = jax.jit(cost)
-        self.value_and_grad = jax.jit(jax.value_and_grad(cost))
-        self.normal = jax.jit(normal)
+        # the programs of every fit: kept on disk when a compilation cache is set (programs.py)
+        self.cost = Program("cost", cost, key)
+        self.value_and_grad = Program("value_and_grad", jax.value_and_grad(cost), key)
+        self.normal = Program("normal", normal, key)
+        self.hessian = Program("hessian", jax.hessian(cost), key)
         self.residuals = jax.jit(residuals)
         self.predict = jax.jit(predict)
-        self.hessian = jax.jit(jax.hessian(cost))
         self.cluster_scores = jax.jit(cluster_scores, static_argnums=4)
 
 
@@ -309,14 +312,19 @@ def _score_arrays(data: FitData, n_chunks: int, rows: int) -> dict[str, Any]:
 _CACHE: dict[Any, Compiled] = {}
 
 
-def compiled(layout: Layout, loss: Loss) -> Compiled:
-    """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
-    key = (
+def _key(layout: Layout, loss: Loss) -> tuple[Any, ...]:
+    """What the compiled functions depend on besides their arguments."""
+    return (
         jax.tree_util.tree_structure(layout.template),
         tuple((e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.shape) for e in layout.entries),
         tuple(layout.tied.items()),
         loss.name,
     )
+
+
+def compiled(layout: Layout, loss: Loss) -> Compiled:
+    """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
+    key = _key(layout, loss)
     fns = _CACHE.get(key)
     if fns is None:
         if len(_CACHE) > 64:
