@@ -125,9 +125,14 @@ def subset_curvature(
     at every step. The losses that normalize by the total weight (every loss but ``wls``) give
     subset sums on the scale of the full ones; ``wls`` sums are scaled by the sample ratio."""
     factor = problem.data.n / sub.data.n if problem.loss.value_kind == "chi2" else 1.0
+    calls = [0]
 
     def normal(u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        cost, grad = problem.value_and_grad(u)
+        # from the second pass on, each may be the last: it also computes the score sums at
+        # its point (kept by the problem), so the fit's score pass is not a pass of its own
+        pass_ = problem.value_and_grad_scored if calls[0] else problem.value_and_grad
+        calls[0] += 1
+        cost, grad = pass_(u)
         a = hessian if hessian is not None else sub.normal(u)[2]
         return cost, 0.5 * grad, factor * a
 
