@@ -5,7 +5,9 @@ closed-over constants, which XLA would embed in the program and recompile per ma
 and split into equal chunks so that memory stays bounded on a full MERL table: the normal
 equations ``A = J^T J`` (P x P) and ``g = J^T r`` are accumulated chunk by chunk with one
 forward-mode Jacobian pass (``jacfwd``, P tangents) per chunk, so the cost in N is one pass.
-All arithmetic is float64.
+All arithmetic is float64. The programs every fit runs (cost, gradient, normal equations,
+Hessian, score pass) are :class:`~gonio.fit.programs.Program` objects: ``jax.jit`` functions
+whose traced form is kept on disk when a compilation cache directory is set.
 """
 
 from __future__ import annotations

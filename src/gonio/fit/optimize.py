@@ -19,7 +19,9 @@ Strategy of :func:`optimize` (every step seeded, nothing to restart by hand):
    (nlopt's LD_LBFGS / LD_SLSQP with exact JAX gradients). After step 3, LM takes the loss and
    its gradient from every sample (one reverse-mode pass each) and the curvature from the
    subset's exact Hessian at its optimum (:func:`subset_hessian`), and stops at a relative
-   change of 1e-8: typically two passes over the data.
+   change of 1e-8: typically two passes over the data. The passes after the first also sum
+   every loss's score at their point, so that the fit's reported metrics need no pass of
+   their own when the last pass is at the optimum (the usual case).
 5. If the polish did not meet its tolerance, restart it from where it stopped (at most
    ``max_restarts`` times).
 
