@@ -371,21 +371,32 @@ def node_directions(axes: Sequence[Axis], parameterization: str) -> tuple[np.nda
     """``(wi, wo)``, each ``(n_nodes, 3)`` float64, of every node in C order: the inverse of
     :func:`gonio.brdf.frames.half_diff` (``frames.half_diff_to_directions``), evaluated with
     NumPy (no per-operation compilation on a million-node grid)."""
-    nodes = [a.nodes() for a in axes]
-    mesh = np.meshgrid(*nodes, indexing="ij")
+    # each axis's nodes broadcast against the others: the same numbers as on a meshgrid, with
+    # the sines and cosines taken per axis instead of per node
+    k = len(axes)
+    nodes = [np.asarray(a.nodes()).reshape([-1 if j == i else 1 for j in range(k)])
+             for i, a in enumerate(axes)]  # fmt: skip
+    shape = tuple(a.size for a in axes)
     if parameterization == "half_diff_iso":
-        th, td, pd = (m.reshape(-1) for m in mesh)
+        th, td, pd = nodes
         ph = None
     else:
-        th, ph, td, pd = (m.reshape(-1) for m in mesh)
+        th, ph, td, pd = nodes
     st = np.sin(td)
     dx, dy, dz = st * np.cos(pd), st * np.sin(pd), np.cos(td)
     sh, ch = np.sin(th), np.cos(th)
+
+    def flat(*parts: np.ndarray) -> np.ndarray:
+        out = np.empty((*shape, len(parts)))
+        for i, v in enumerate(parts):
+            out[..., i] = v
+        return out.reshape(-1, len(parts))
+
     # R_y(theta_h) applied to d = (dx, dy, dz) and to (-dx, -dy, dz)
-    wi = np.stack([ch * dx + sh * dz, dy, -sh * dx + ch * dz], -1)
-    wo = np.stack([-ch * dx + sh * dz, -dy, sh * dx + ch * dz], -1)
+    wi = flat(ch * dx + sh * dz, dy, -sh * dx + ch * dz)
+    wo = flat(-ch * dx + sh * dz, -dy, sh * dx + ch * dz)
     if ph is not None:  # then R_z(phi_h)
-        c, s = np.cos(ph)[:, None], np.sin(ph)[:, None]
+        c, s = flat(np.cos(ph)), flat(np.sin(ph))
         for w in (wi, wo):
             x, y = w[:, 0].copy(), w[:, 1].copy()
             w[:, 0], w[:, 1] = c[:, 0] * x - s[:, 0] * y, s[:, 0] * x + c[:, 0] * y

@@ -5,7 +5,9 @@ closed-over constants, which XLA would embed in the program and recompile per ma
 and split into equal chunks so that memory stays bounded on a full MERL table: the normal
 equations ``A = J^T J`` (P x P) and ``g = J^T r`` are accumulated chunk by chunk with one
 forward-mode Jacobian pass (``jacfwd``, P tangents) per chunk, so the cost in N is one pass.
-All arithmetic is float64.
+All arithmetic is float64. The programs every fit runs (cost, gradient, normal equations,
+Hessian, score pass) are :class:`~gonio.fit.programs.Program` objects: ``jax.jit`` functions
+whose traced form is kept on disk when a compilation cache directory is set.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from gonio.fit.data import FitData
 from gonio.fit.losses import LOSSES, Loss, constants_of, data_constants
 from gonio.fit.params import Layout
+from gonio.fit.programs import Program
 
 Array = jnp.ndarray
 
@@ -71,6 +74,7 @@ class Problem:
         self.n_residuals = n * self.data.channels
         self.n_params = self.layout.size
         self._score_arrays: dict[str, Any] | None = None
+        self._scored: tuple[np.ndarray, np.ndarray, int] | None = None
         self._build()
 
     # -- compiled functions ---------------------------------------------------------------------
@@ -87,6 +91,17 @@ class Problem:
         v, g = self.fns.value_and_grad(
             jnp.asarray(u, jnp.float64), self.arrays, self.layout.template
         )
+        return float(v), np.asarray(g)
+
+    def value_and_grad_scored(self, u: np.ndarray) -> tuple[float, np.ndarray]:
+        """:meth:`value_and_grad`, computing in the same pass the sums :meth:`scores` needs
+        for every loss at ``u`` and keeping them (the last such point only): a fit whose last
+        gradient pass is at its optimum then needs no separate score pass."""
+        u = np.array(u, dtype=np.float64)
+        (v, (sums, bad)), g = self.fns.value_and_grad_scored(
+            jnp.asarray(u), self.arrays, self._score_data(), self.layout.template
+        )
+        self._scored = (u, np.asarray(sums), int(bad))
         return float(v), np.asarray(g)
 
     def normal(self, u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -121,17 +136,24 @@ class Problem:
         host; on a MERL table this replaces :meth:`predict` plus
         :func:`~gonio.fit.losses.evaluate_many`, equal to 1e-10). ``wls`` is the chi-square
         with the data's sigma (1 when absent)."""
-        if self._score_arrays is None:
-            self._score_arrays = _score_arrays(self.data, self.n_chunks, self.chunk_rows)
-        sums, bad = self.fns.scores(names)(
-            jnp.asarray(u, jnp.float64), self.arrays, self._score_arrays, self.layout.template
-        )
+        kept = self._scored
+        if kept is not None and names == tuple(LOSSES) and np.array_equal(kept[0], u):
+            sums, bad = kept[1], kept[2]
+        else:
+            sums, bad = self.fns.scores(names)(
+                jnp.asarray(u, jnp.float64), self.arrays, self._score_data(), self.layout.template
+            )
         total_w = float(np.sum(self.data.weights)) * self.data.channels
         out = {}
         for name, v in zip(names, np.asarray(sums), strict=True):
             lo = LOSSES[name]
             out[name] = lo.value(float(v) / (total_w if "scale" in lo.needs else 1.0))
         return out, int(bad)
+
+    def _score_data(self) -> dict[str, Any]:
+        if self._score_arrays is None:
+            self._score_arrays = _score_arrays(self.data, self.n_chunks, self.chunk_rows)
+        return self._score_arrays
 
     def cluster_scores(self, u: np.ndarray, ids: np.ndarray, n_clusters: int) -> np.ndarray:
         """``J_g^T r_g`` per cluster, ``(G, P)``, for sample cluster indices ``ids`` ``(N,)`` in
@@ -161,6 +183,7 @@ class Compiled:
 
     def __init__(self, layout: Layout, loss: Loss) -> None:
         entries = layout.entries
+        key = repr(_key(layout, loss))
 
         tied = dict(layout.tied)
 
@@ -225,6 +248,25 @@ class Compiled:
             model = to_model(u, tmpl)
             return jax.vmap(lambda c: model.f(c["wi"], c["wo"]))(arrays)
 
+        def score_sums(f: Array, c: dict[str, Any], e: dict[str, Any], names: tuple[str, ...],
+                       needs: tuple[str, ...]) -> tuple[Array, Array]:  # fmt: skip
+            """One chunk's sums of squared residuals per loss (``scale`` = sqrt(w)) and its
+            count of non-finite model values at valid samples."""
+            y = e["y"]
+            f = jnp.broadcast_to(f, y.shape)
+            ok = jnp.isfinite(f)
+            bad = jnp.sum(jnp.where(ok, 0.0, c["mask"]))
+            f = jnp.where(ok, f, 0.0)
+            k = {**constants_of(needs, y, e["inv_sigma"], e["w"], c["wi"][..., 2:3],
+                                skip=tuple(e["k"])), **e["k"]}  # fmt: skip
+            sums = jnp.stack(
+                [jnp.sum((LOSSES[n]._residual(f, k, jnp) * c["mask"]) ** 2) for n in names]
+            )
+            return sums, bad
+
+        def needs_of(names: tuple[str, ...]) -> tuple[str, ...]:
+            return tuple(dict.fromkeys(k for n in names for k in LOSSES[n].needs))
+
         score_fns: dict[tuple[str, ...], Any] = {}
 
         def scores_fn(names: tuple[str, ...]) -> Any:
@@ -234,43 +276,58 @@ class Compiled:
             fn = score_fns.get(names)
             if fn is not None:
                 return fn
-            needs = tuple(dict.fromkeys(k for n in names for k in LOSSES[n].needs))
+            needs = needs_of(names)
 
             def run(u: Array, arrays: dict[str, Any], extra: dict[str, Any], tmpl: Any) -> Any:
                 model = to_model(u, tmpl)
 
                 def step(acc: tuple[Array, Array], xs: Any) -> tuple[Any, None]:
                     c, e = xs
-                    y = e["y"]
-                    f = jnp.broadcast_to(model.f(c["wi"], c["wo"]), y.shape)
-                    ok = jnp.isfinite(f)
-                    bad = jnp.sum(jnp.where(ok, 0.0, c["mask"]))
-                    f = jnp.where(ok, f, 0.0)
-                    k = {**constants_of(needs, y, e["inv_sigma"], e["w"], c["wi"][..., 2:3],
-                                        skip=tuple(e["k"])), **e["k"]}  # fmt: skip
-                    sums = jnp.stack(
-                        [jnp.sum((LOSSES[n]._residual(f, k, jnp) * c["mask"]) ** 2) for n in names]
-                    )
+                    sums, bad = score_sums(model.f(c["wi"], c["wo"]), c, e, names, needs)
                     return (acc[0] + sums, acc[1] + bad), None
 
                 init = (jnp.zeros(len(names), u.dtype), jnp.zeros((), u.dtype))
                 (sums, bad), _ = jax.lax.scan(step, init, (arrays, extra))
                 return sums, bad
 
-            fn = score_fns[names] = jax.jit(run)
+            fn = score_fns[names] = Program("scores", run, f"{key} {names}")
             return fn
+
+        every = tuple(LOSSES)
+        every_needs = needs_of(every)
+
+        def cost_scored(u: Array, arrays: dict[str, Any], extra: dict[str, Any], tmpl: Any) -> Any:
+            """``cost`` with, as auxiliary output, every loss's score sums at ``u`` (the score
+            pass of the same model values, outside the gradient)."""
+            model = to_model(u, tmpl)
+
+            def step(acc: tuple[Array, Array, Array], xs: Any) -> tuple[Any, None]:
+                c, e = xs
+                f = model.f(c["wi"], c["wo"])
+                r = (loss.residual(f, c["k"]) * c["mask"]).reshape(-1)
+                sums, bad = score_sums(jax.lax.stop_gradient(f), c, e, every, every_needs)
+                return (acc[0] + jnp.dot(r, r), acc[1] + sums, acc[2] + bad), None
+
+            init = (jnp.zeros((), u.dtype), jnp.zeros(len(every), u.dtype),
+                    jnp.zeros((), u.dtype))  # fmt: skip
+            (total, sums, bad), _ = jax.lax.scan(step, init, (arrays, extra))
+            return total, (sums, bad)
 
         self.scores = scores_fn
         self.to_model = to_model
         self.chunk_res = chunk_res
         self.cost_raw = cost
         self.normal_raw = normal
-        self.cost = jax.jit(cost)
-        self.value_and_grad = jax.jit(jax.value_and_grad(cost))
-        self.normal = jax.jit(normal)
+        # the programs of every fit: kept on disk when a compilation cache is set (programs.py)
+        self.cost = Program("cost", cost, key)
+        self.value_and_grad = Program("value_and_grad", jax.value_and_grad(cost), key)
+        self.value_and_grad_scored = Program(
+            "value_and_grad_scored", jax.value_and_grad(cost_scored, has_aux=True), key
+        )
+        self.normal = Program("normal", normal, key)
+        self.hessian = Program("hessian", jax.hessian(cost), key)
         self.residuals = jax.jit(residuals)
         self.predict = jax.jit(predict)
-        self.hessian = jax.jit(jax.hessian(cost))
         self.cluster_scores = jax.jit(cluster_scores, static_argnums=4)
 
 
@@ -309,14 +366,19 @@ def _score_arrays(data: FitData, n_chunks: int, rows: int) -> dict[str, Any]:
 _CACHE: dict[Any, Compiled] = {}
 
 
-def compiled(layout: Layout, loss: Loss) -> Compiled:
-    """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
-    key = (
+def _key(layout: Layout, loss: Loss) -> tuple[Any, ...]:
+    """What the compiled functions depend on besides their arguments."""
+    return (
         jax.tree_util.tree_structure(layout.template),
         tuple((e.key, e.size, e.offset, e.scale, e.lo, e.hi, e.shape) for e in layout.entries),
         tuple(layout.tied.items()),
         loss.name,
     )
+
+
+def compiled(layout: Layout, loss: Loss) -> Compiled:
+    """The (cached) :class:`Compiled` functions for this layout's structure and this loss."""
+    key = _key(layout, loss)
     fns = _CACHE.get(key)
     if fns is None:
         if len(_CACHE) > 64:

@@ -19,7 +19,9 @@ Strategy of :func:`optimize` (every step seeded, nothing to restart by hand):
    (nlopt's LD_LBFGS / LD_SLSQP with exact JAX gradients). After step 3, LM takes the loss and
    its gradient from every sample (one reverse-mode pass each) and the curvature from the
    subset's exact Hessian at its optimum (:func:`subset_hessian`), and stops at a relative
-   change of 1e-8: typically two passes over the data.
+   change of 1e-8: typically two passes over the data. The passes after the first also sum
+   every loss's score at their point, so that the fit's reported metrics need no pass of
+   their own when the last pass is at the optimum (the usual case).
 5. If the polish did not meet its tolerance, restart it from where it stopped (at most
    ``max_restarts`` times).
 
@@ -125,9 +127,14 @@ def subset_curvature(
     at every step. The losses that normalize by the total weight (every loss but ``wls``) give
     subset sums on the scale of the full ones; ``wls`` sums are scaled by the sample ratio."""
     factor = problem.data.n / sub.data.n if problem.loss.value_kind == "chi2" else 1.0
+    calls = [0]
 
     def normal(u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        cost, grad = problem.value_and_grad(u)
+        # from the second pass on, each may be the last: it also computes the score sums at
+        # its point (kept by the problem), so the fit's score pass is not a pass of its own
+        pass_ = problem.value_and_grad_scored if calls[0] else problem.value_and_grad
+        calls[0] += 1
+        cost, grad = pass_(u)
         a = hessian if hessian is not None else sub.normal(u)[2]
         return cost, 0.5 * grad, factor * a
 

@@ -224,20 +224,20 @@ class NBRDF:
         th, td, pd = (
             np.asarray(a.nodes(), dtype=np.float64) for a in merl_axes(dims, cells="start")
         )
-        th, td, pd = np.meshgrid(th, td, pd, indexing="ij")
+        # per axis, broadcast against the others (the same numbers as on a meshgrid, with the
+        # sines and cosines of 360 values instead of 1.5e6 each)
+        th, td, pd = th[:, None, None], td[None, :, None], pd[None, None, :]
         # directions of the nodes (phi_h = 0), as in gonio.brdf.frames.half_diff_to_directions:
         # d is the difference vector, wi = R_y(theta_h) d and wo = R_y(theta_h) (-d_x, -d_y, d_z),
         # so their z components are cos(theta_h) d_z -/+ sin(theta_h) d_x
         st = np.sin(td)
-        dx, dz = st * np.cos(pd), np.cos(td)
+        dx, dy, dz = st * np.cos(pd), st * np.sin(pd), np.cos(td)
         sh, ch = np.sin(th), np.cos(th)
         mask = (ch * dz - sh * dx > 0) & (ch * dz + sh * dx > 0)
         # the features of a node are known in closed form; only valid cells are evaluated
-        feats = np.stack(
-            [sh[mask], np.zeros(int(mask.sum())), ch[mask], dx[mask],
-             (st * np.sin(pd))[mask], dz[mask]],
-            axis=-1,
-        ).astype(np.float32)  # fmt: skip
+        feats = np.zeros((int(mask.sum()), 6), dtype=np.float32)
+        for col, v in ((0, sh), (2, ch), (3, dx), (4, dy), (5, dz)):
+            feats[:, col] = np.broadcast_to(v, mask.shape)[mask]
         vals = np.zeros((*mask.shape, 3), dtype=np.float32)
         with np.errstate(over="ignore", invalid="ignore"):  # non-finite output: refused below
             vals[mask] = np.expm1(self._forward_many(feats))

@@ -1,0 +1,150 @@
+"""The fit's compiled programs, kept on disk as serialized ``jax.export`` modules between runs.
+
+JAX's persistent compilation cache (:mod:`gonio.compile_cache`) skips only XLA's compilation:
+a new process still traces each jitted function to a jaxpr and lowers it to StableHLO, which
+for the fit's programs (the normal equations on two data sizes, the gradient on every cell, the
+subset's Hessian, the score pass) took 1.2 s of tracing and 0.7 s of lowering per cold
+``gonio fit`` here. A :class:`Program` exports its function once per argument signature, stores
+the serialized module, and in later processes deserializes it and calls it (the call lowers to
+the stored module, which the compilation cache then finds).
+
+Where: ``<JAX compilation cache dir>/gonio-fit-programs/`` (the folder
+:func:`gonio.compile_cache.enable` sets for the commands); when no cache directory is set (a
+library user who did not turn the cache on), a :class:`Program` is a plain ``jax.jit`` and
+writes nothing. A file's name is a SHA-256 of everything the traced program depends on: the
+program's name and its static key (model structure, fitted parameters, loss), the arguments'
+tree structure, shapes and dtypes, the JAX and jaxlib versions, the backend, the x64 flag and
+the contents of every ``.py`` file of the installed ``gonio`` package, so an edited model or
+loss never reuses a stale program. A file that cannot be read, written or deserialized is
+ignored (the function is traced as usual): the files only save time.
+
+Format: the :class:`jax.export.Exported` object pickled (its own ``serialize`` needs the
+optional ``flatbuffers`` package). Loading unpickles only classes of ``jax``, ``jaxlib``,
+``numpy`` and Python's builtins (anything else is refused and the program traced again); the
+folder is trusted as JAX's compilation cache beside it is, whose files are native code.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+#: Subfolder of the compilation cache directory holding the serialized programs.
+SUBDIR = "gonio-fit-programs"
+
+_SOURCE_HASH: list[str] = []
+
+
+def source_hash() -> str:
+    """SHA-256 of the path and contents of every ``.py`` file of the ``gonio`` package."""
+    if not _SOURCE_HASH:
+        root = Path(__file__).resolve().parents[1]
+        h = hashlib.sha256()
+        for p in sorted(root.rglob("*.py")):
+            h.update(str(p.relative_to(root)).encode())
+            h.update(p.read_bytes())
+        _SOURCE_HASH.append(h.hexdigest())
+    return _SOURCE_HASH[0]
+
+
+def program_dir() -> Path | None:
+    """Where programs are kept, or None when JAX has no compilation cache directory."""
+    base = jax.config.jax_compilation_cache_dir
+    return Path(base) / SUBDIR if base else None
+
+
+class Program:
+    """``jax.jit(fn)`` whose traced and lowered form is kept on disk (module docstring).
+
+    Parameters
+    ----------
+    name : a name for the program (part of the file key).
+    fn : the function; its arguments are pytrees of arrays, its outputs arrays or tuples of them.
+    key : a ``repr``-stable description of everything ``fn`` closes over that changes what it
+        computes (model structure, loss, ...).
+    """
+
+    def __init__(self, name: str, fn: Callable[..., Any], key: str) -> None:
+        self.name, self.fn, self.key = name, fn, key
+        self.jitted = jax.jit(fn)
+        self._calls: dict[Any, Callable[..., Any]] = {}
+        #: how the last new signature was served: "loaded", "exported" or "jit"
+        self.last_source = ""
+
+    def __call__(self, *args: Any) -> Any:
+        where = program_dir()
+        if where is None:
+            return self.jitted(*args)
+        leaves, tree = jax.tree_util.tree_flatten(args)
+        sig = (tree, tuple((np.shape(x), _dtype(x)) for x in leaves), str(where))
+        call = self._calls.get(sig)
+        if call is None:
+            call = self._calls[sig] = self._resolve(where, tree, leaves)
+        return call(*leaves)
+
+    def _file(self, where: Path, tree: Any, leaves: list[Any]) -> Path:
+        specs = [(np.shape(x), str(_dtype(x))) for x in leaves]
+        import jaxlib
+
+        versions = (jax.__version__, jaxlib.__version__, jax.default_backend())
+        text = repr((self.name, self.key, repr(tree), specs, versions,
+                     bool(jax.config.jax_enable_x64), source_hash()))  # fmt: skip
+        return where / f"{self.name}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.jaxexport"
+
+    def _resolve(self, where: Path, tree: Any, leaves: list[Any]) -> Callable[..., Any]:
+        def flat(*xs: Any) -> Any:
+            return self.fn(*jax.tree_util.tree_unflatten(tree, xs))
+
+        path = self._file(where, tree, leaves)
+        try:
+            exp = _Loader(io.BytesIO(path.read_bytes())).load()
+            if not isinstance(exp, jax.export.Exported):
+                raise TypeError("not an exported program")
+            self.last_source = "loaded"
+        except Exception:  # absent, unreadable or from another version: export it again
+            try:
+                specs = [jax.ShapeDtypeStruct(np.shape(x), _dtype(x)) for x in leaves]
+                exp = jax.export.export(jax.jit(flat))(*specs)
+                # (the VJP rule is a closure and not needed: the programs are never differentiated)
+                _write(path, pickle.dumps(dataclasses.replace(exp, _get_vjp=None)))
+                self.last_source = "exported"
+            except Exception:  # a program JAX cannot export: trace it every process
+                self.last_source = "jit"
+                return jax.jit(flat)
+        return jax.jit(exp.call)
+
+
+def _dtype(x: Any) -> Any:
+    return x.dtype if hasattr(x, "dtype") else np.result_type(x)
+
+
+class _Loader(pickle.Unpickler):
+    """Unpickles JAX's, NumPy's and builtin classes only."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        if module.partition(".")[0] in ("jax", "jaxlib", "numpy", "builtins", "collections"):
+            return super().find_class(module, name)
+        raise pickle.UnpicklingError(f"{module}.{name} is not allowed in a fit program")
+
+
+def _write(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (a concurrent reader never sees a partial file);
+    errors are ignored (the file only saves time)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except OSError:
+        pass
