@@ -18,19 +18,16 @@ the contents of every ``.py`` file of the installed ``gonio`` package, so an edi
 loss never reuses a stale program. A file that cannot be read, written or deserialized is
 ignored (the function is traced as usual): the files only save time.
 
-Format: the :class:`jax.export.Exported` object pickled (its own ``serialize`` needs the
-optional ``flatbuffers`` package). Loading unpickles only classes of ``jax``, ``jaxlib``,
-``numpy`` and Python's builtins (anything else is refused and the program traced again); the
-folder is trusted as JAX's compilation cache beside it is, whose files are native code.
+Format: JAX's own serialization of the :class:`jax.export.Exported` object
+(``Exported.serialize``, a flatbuffer of the StableHLO module and its calling convention; the
+``flatbuffers`` package is a dependency for it). Deserializing executes nothing; the folder is
+trusted as JAX's compilation cache beside it is, whose files are native code.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
-import io
 import os
-import pickle
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -107,16 +104,13 @@ class Program:
 
         path = self._file(where, tree, leaves)
         try:
-            exp = _Loader(io.BytesIO(path.read_bytes())).load()
-            if not isinstance(exp, jax.export.Exported):
-                raise TypeError("not an exported program")
+            exp = jax.export.deserialize(bytearray(path.read_bytes()))
             self.last_source = "loaded"
         except Exception:  # absent, unreadable or from another version: export it again
             try:
                 specs = [jax.ShapeDtypeStruct(np.shape(x), _dtype(x)) for x in leaves]
                 exp = jax.export.export(jax.jit(flat))(*specs)
-                # (the VJP rule is a closure and not needed: the programs are never differentiated)
-                _write(path, pickle.dumps(dataclasses.replace(exp, _get_vjp=None)))
+                _write(path, bytes(exp.serialize()))  # no VJP: the programs are not differentiated
                 self.last_source = "exported"
             except Exception:  # a program JAX cannot export: trace it every process
                 self.last_source = "jit"
@@ -126,15 +120,6 @@ class Program:
 
 def _dtype(x: Any) -> Any:
     return x.dtype if hasattr(x, "dtype") else np.result_type(x)
-
-
-class _Loader(pickle.Unpickler):
-    """Unpickles JAX's, NumPy's and builtin classes only."""
-
-    def find_class(self, module: str, name: str) -> Any:
-        if module.partition(".")[0] in ("jax", "jaxlib", "numpy", "builtins", "collections"):
-            return super().find_class(module, name)
-        raise pickle.UnpicklingError(f"{module}.{name} is not allowed in a fit program")
 
 
 def _write(path: Path, data: bytes) -> None:
