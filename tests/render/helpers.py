@@ -1,6 +1,12 @@
-"""Shared helpers for the renderer tests: closed-form pixel geometry and seed statistics."""
+"""Shared helpers for the renderer tests: closed-form pixel geometry, seed statistics and the
+``gonio`` command line."""
 
 from __future__ import annotations
+
+import contextlib
+import io
+import subprocess
+import sys
 
 import numpy as np
 
@@ -46,3 +52,31 @@ def z_scores(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     se2 = a.var(axis=0, ddof=1) / ka + b.var(axis=0, ddof=1) / kb
     d = a.mean(axis=0) - b.mean(axis=0)
     return d / np.sqrt(np.maximum(se2, 1e-30))
+
+
+def gonio_cli(*args, real: bool = False) -> subprocess.CompletedProcess:
+    """``gonio ARGS``: exit status, stdout and stderr, as a ``CompletedProcess``.
+
+    By default the command runs in this process (:func:`gonio.cli.main`, stdout and stderr
+    captured): a ``python -m gonio`` child pays ``import jax`` and compiles every render kernel
+    again (5-30 s a call on this suite's machine), while in-process calls share the compiled
+    kernels. ``real=True`` runs the real entry point, ``python -m gonio``, in a child process.
+    Either way no traceback may reach stderr (in-process, an escaped exception fails the test).
+    """
+    argv = [str(a) for a in args]
+    if real:
+        out = subprocess.run(
+            [sys.executable, "-m", "gonio", *argv],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+    else:
+        from gonio.cli import main
+
+        stdout, stderr = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            rc = main(argv)
+        out = subprocess.CompletedProcess(argv, rc, stdout.getvalue(), stderr.getvalue())
+    assert "Traceback" not in out.stderr, out.stderr
+    return out

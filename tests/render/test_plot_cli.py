@@ -1,8 +1,10 @@
-"""``gonio plot`` through the real command line: PNG and SVG, shared axes, refusals."""
+"""``gonio plot`` through the command line: PNG and SVG, shared axes, refusals.
+
+The commands run in-process (:func:`gonio.cli.main`); plotting into a folder goes through the
+real ``python -m gonio``.
+"""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -10,18 +12,11 @@ import pytest
 from gonio import io
 from gonio.brdf import models
 from gonio.brdf.tabulated import MeasuredSamples
+from tests.render.helpers import gonio_cli as gonio
 
 PAINT = models.Lambert(albedo=[0.5, 0.3, 0.1]) + models.TorranceSparrow(
     alpha=0.3, fresnel=models.Schlick(f0=0.05)
 )
-
-
-def gonio(*args):
-    out = subprocess.run(
-        [sys.executable, "-m", "gonio", *map(str, args)], capture_output=True, text=True
-    )
-    assert "Traceback" not in out.stderr, out.stderr
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +77,9 @@ def test_plot_refuses_bad_output_before_any_work(inputs, tmp_path, out, why):
 
 
 def test_plot_into_a_folder(inputs, tmp_path):
-    r = gonio("plot", inputs / "fit.json", "--kind", "halfdiff", "--out", f"{tmp_path}/figs/")
+    r = gonio(
+        "plot", inputs / "fit.json", "--kind", "halfdiff", "--out", f"{tmp_path}/figs/", real=True
+    )
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "figs" / "plot.png").is_file()
 
