@@ -199,7 +199,12 @@ def test_plan_timing_from_a_previous_run_predicts_that_run(tmp_path):
     assert per["bookkeeping"] == round(statistics.median(e["t_book"] for e in samples), 4)
     overhead = statistics.median(e["move_wall_s"] - e["profile_wall_s"] for e in samples)
     assert per["move_overhead"] == round(max(0.0, overhead), 4)
-    # and the run itself took about that long (n - 1 configurations between the first and the
-    # last sample, the first one's jit compile aside; loose: the machine is shared)
-    actual = samples[-1]["t"] - samples[0]["t"]
-    assert actual == pytest.approx(est["predicted_total_s"] * (n - 1) / n, rel=0.5)
+    # the motion it predicts is the motion that run planned and executed (the wall time of the
+    # run itself is not compared: on a shared machine it measures the load, not the planner)
+    planned = sum(e["predicted_motion_s"] for e in events if e["event"] == "stage_planned")
+    assert est["predicted_motion_s"] == pytest.approx(planned, abs=1e-3)
+    scale = est["time_scale"]
+    # each move's profile is recomputed from where the servos settled, not the planned pose
+    assert sum(e["profile_wall_s"] for e in samples) == pytest.approx(planned / scale, rel=0.05)
+    per_cfg = per["capture"] + per["bookkeeping"] + per["move_overhead"]
+    assert est["predicted_total_s"] == pytest.approx(planned / scale + n * per_cfg, abs=5e-3)
