@@ -77,7 +77,10 @@ def test_table_is_the_network_on_merl_nodes_and_reads_like_merl():
         if valid:
             np.testing.assert_allclose(vals[ih, id_, ip], _hand_forward(layers, th, td, pd),
                                        rtol=2e-5, atol=1e-7)  # fmt: skip
-            np.testing.assert_allclose(vals[ih, id_, ip], net.f(wi, wo), rtol=1e-6)
+            # both are float32 evaluations of one network, but the table's is one XLA program
+            # over the grid and this one a single row: summation order differs, and expm1 of the
+            # log1p output amplifies it (16 float32 ulps seen on one CI machine)
+            np.testing.assert_allclose(vals[ih, id_, ip], net.f(wi, wo), rtol=1e-5)
 
 
 @pytest.mark.parametrize("name", ["gold-paint", "blue-acrylic", "chrome-steel", "white-fabric"])
