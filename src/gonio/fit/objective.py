@@ -4,7 +4,9 @@
 closed-over constants, which XLA would embed in the program and recompile per material), padded
 and split into equal chunks so that memory stays bounded on a full MERL table: the normal
 equations ``A = J^T J`` (P x P) and ``g = J^T r`` are accumulated chunk by chunk with one
-forward-mode Jacobian pass (``jacfwd``, P tangents) per chunk, so the cost in N is one pass.
+forward-mode Jacobian pass (``jacfwd``, P tangents) per chunk, so the cost in N is one pass;
+likewise the gradient and the Hessian are sums of the chunks' gradients and Hessians in one
+forward scan (:func:`chunk_sum`), not derivatives of the whole scan.
 All arithmetic is float64. The programs every fit runs (cost, gradient, normal equations,
 Hessian, score pass) are :class:`~gonio.fit.programs.Program` objects: ``jax.jit`` functions
 whose traced form is kept on disk when a compilation cache directory is set.
@@ -201,13 +203,21 @@ class Compiled:
             r = loss.residual(f, c["k"])
             return (r * c["mask"]).reshape(-1)
 
-        def cost(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
-            def step(acc: Array, c: dict[str, Any]) -> tuple[Array, None]:
-                r = chunk_res(u, c, tmpl)
-                return acc + jnp.dot(r, r), None
+        def chunk_cost(u: Array, c: dict[str, Any], tmpl: Any) -> Array:
+            """One chunk's ``sum r^2``."""
+            r = chunk_res(u, c, tmpl)
+            return jnp.dot(r, r)
 
-            total, _ = jax.lax.scan(step, jnp.zeros((), u.dtype), arrays)
-            return total
+        def cost(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
+            return chunk_sum(lambda c: chunk_cost(u, c, tmpl), arrays)
+
+        def value_and_grad(u: Array, arrays: dict[str, Any], tmpl: Any) -> tuple[Array, Array]:
+            """``(L, dL/du)`` as sums of the chunks' values and gradients (see chunk_sum)."""
+            return chunk_sum(lambda c: jax.value_and_grad(chunk_cost)(u, c, tmpl), arrays)
+
+        def hessian(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
+            """``d2L/du2`` (P x P) as the sum of the chunks' Hessians (see chunk_sum)."""
+            return chunk_sum(lambda c: jax.hessian(chunk_cost)(u, c, tmpl), arrays)
 
         def normal(u: Array, arrays: dict[str, Any], tmpl: Any) -> tuple[Array, Array, Array]:
             p = u.shape[0]
@@ -296,22 +306,19 @@ class Compiled:
         every = tuple(LOSSES)
         every_needs = needs_of(every)
 
-        def cost_scored(u: Array, arrays: dict[str, Any], extra: dict[str, Any], tmpl: Any) -> Any:
-            """``cost`` with, as auxiliary output, every loss's score sums at ``u`` (the score
-            pass of the same model values, outside the gradient)."""
-            model = to_model(u, tmpl)
+        def chunk_cost_scored(u: Array, c: dict[str, Any], e: dict[str, Any], tmpl: Any) -> Any:
+            """One chunk's ``sum r^2`` with, as auxiliary output, every loss's score sums at
+            ``u`` (the score pass of the same model values, outside the gradient)."""
+            f = to_model(u, tmpl).f(c["wi"], c["wo"])
+            r = (loss.residual(f, c["k"]) * c["mask"]).reshape(-1)
+            return jnp.dot(r, r), score_sums(jax.lax.stop_gradient(f), c, e, every, every_needs)
 
-            def step(acc: tuple[Array, Array, Array], xs: Any) -> tuple[Any, None]:
-                c, e = xs
-                f = model.f(c["wi"], c["wo"])
-                r = (loss.residual(f, c["k"]) * c["mask"]).reshape(-1)
-                sums, bad = score_sums(jax.lax.stop_gradient(f), c, e, every, every_needs)
-                return (acc[0] + jnp.dot(r, r), acc[1] + sums, acc[2] + bad), None
-
-            init = (jnp.zeros((), u.dtype), jnp.zeros(len(every), u.dtype),
-                    jnp.zeros((), u.dtype))  # fmt: skip
-            (total, sums, bad), _ = jax.lax.scan(step, init, (arrays, extra))
-            return total, (sums, bad)
+        def value_and_grad_scored(
+            u: Array, arrays: dict[str, Any], extra: dict[str, Any], tmpl: Any
+        ) -> Any:
+            """``((L, (score sums, n_bad)), dL/du)``, summed over the chunks (see chunk_sum)."""
+            vg = jax.value_and_grad(chunk_cost_scored, has_aux=True)
+            return chunk_sum(lambda ce: vg(u, ce[0], ce[1], tmpl), (arrays, extra))
 
         self.scores = scores_fn
         self.to_model = to_model
@@ -320,12 +327,10 @@ class Compiled:
         self.normal_raw = normal
         # the programs of every fit: kept on disk when a compilation cache is set (programs.py)
         self.cost = Program("cost", cost, key)
-        self.value_and_grad = Program("value_and_grad", jax.value_and_grad(cost), key)
-        self.value_and_grad_scored = Program(
-            "value_and_grad_scored", jax.value_and_grad(cost_scored, has_aux=True), key
-        )
+        self.value_and_grad = Program("value_and_grad", value_and_grad, key)
+        self.value_and_grad_scored = Program("value_and_grad_scored", value_and_grad_scored, key)
         self.normal = Program("normal", normal, key)
-        self.hessian = Program("hessian", jax.hessian(cost), key)
+        self.hessian = Program("hessian", hessian, key)
         self.residuals = jax.jit(residuals)
         self.predict = jax.jit(predict)
         self.cluster_scores = jax.jit(cluster_scores, static_argnums=4)
@@ -361,6 +366,26 @@ def _score_arrays(data: FitData, n_chunks: int, rows: int) -> dict[str, Any]:
         _SCORE_DATA.clear()
     _SCORE_DATA[id(data)] = (weakref.ref(data), (n_chunks, rows), arrays)
     return arrays
+
+
+def chunk_sum(fn: Any, xs: Any) -> Any:
+    """``sum_k fn(chunk k)`` over the leading (chunk) axis of the pytree ``xs``, in one forward
+    ``jax.lax.scan`` whose carry holds the running sums (a pytree of ``fn``'s output structure).
+
+    The gradient and Hessian programs are built from this with ``fn`` a chunk's
+    ``jax.value_and_grad`` or ``jax.hessian``, since the derivatives of a sum are the sums of
+    the chunks' derivatives: differentiating the whole scan instead (``jax.grad`` of
+    ``cost``) makes JAX keep every chunk's residuals for the backward pass and run a second,
+    reverse scan over them; per-chunk accumulation needs one pass and one chunk's memory.
+    """
+    one = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), xs)
+    init = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(fn, one))
+
+    def step(acc: Any, x: Any) -> tuple[Any, None]:
+        return jax.tree_util.tree_map(jnp.add, acc, fn(x)), None
+
+    total, _ = jax.lax.scan(step, init, xs)
+    return total
 
 
 _CACHE: dict[Any, Compiled] = {}
