@@ -244,7 +244,9 @@ def _chi2(table, theta_o_deg, method, proposal="majorant", phi_o=0.0, n=1_000_00
     return r
 
 
-@pytest.mark.parametrize("theta_o", [0, 45, 85])
+# 45 deg adds little to normal and grazing incidence and costs its own compilations (each
+# outgoing bucket is a new program): it runs with -m slow
+@pytest.mark.parametrize("theta_o", [0, pytest.param(45, marks=pytest.mark.slow), 85])
 def test_inversion_chi2(glossy, theta_o):
     _chi2(glossy, theta_o, "inversion")
 
@@ -264,7 +266,7 @@ def test_rejection_chi2_cosine_slow(rough, theta_o):
     _chi2(rough, theta_o, "rejection", proposal="cosine")
 
 
-@pytest.mark.parametrize("theta_o", [0, 45, 85])
+@pytest.mark.parametrize("theta_o", [0, pytest.param(45, marks=pytest.mark.slow), 85])
 def test_rejection_chi2_majorant(glossy, theta_o):
     """The default proposal: exact sampling of g cos on the glossy table."""
     _chi2(glossy, theta_o, "rejection", proposal="majorant")
@@ -309,7 +311,8 @@ def test_majorant_bounds_g_cos_and_acceptance(glossy):
     assert acceptance > 0.3, f"majorant acceptance {acceptance:.3f}"
 
 
-@pytest.mark.parametrize("proposal", ["majorant", "cosine"])
+# the bucket lookup is shared by both proposals; the cosine one runs with -m slow
+@pytest.mark.parametrize("proposal", ["majorant", pytest.param("cosine", marks=pytest.mark.slow)])
 def test_rejection_on_a_bucket_edge(proposal):
     """Proposals run in float32: a float64 direction on a bucket edge (45 degrees is the edge
     between buckets 7 and 8 of 16) rounds into the lower bucket there. Its structures must be
@@ -478,7 +481,8 @@ def test_sampling_under_jit_builds_every_bucket():
         assert t.sampling_cache_size(method) == 4
 
 
-@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+# float32 (the renderer's precision, where rounding differs most) by default; float64 with -m slow
+@pytest.mark.parametrize("dtype", [np.float32, pytest.param(np.float64, marks=pytest.mark.slow)])
 def test_rejection_under_jit_matches_eager(dtype):
     """Traced or eager, rejection runs the same compacting while loop
     (:func:`rejection_sample_traced`): the same proposals (same counters), so the same samples

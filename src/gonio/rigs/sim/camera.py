@@ -198,26 +198,29 @@ class VirtualCamera:
         with np.errstate(divide="ignore", invalid="ignore"):
             s = -o[2] / d[..., 2]
         hit = np.isfinite(s) & (s > 0)
-        p = o + np.where(hit[..., None], s[..., None], 0.0) * d
         L = np.zeros((*hit.shape, 3))
-
+        # Only rays that hit the holder plane are shaded (the rest stay black): on the flat
+        # arrays of those rays, not on the whole supersampled image.
+        d, s = d[hit], s[hit]
+        p = o + s[:, None] * d
         to_light = light_pos - p
         dist2 = np.sum(to_light**2, -1)
-        wi = to_light / np.sqrt(dist2)[..., None]
+        wi = to_light / np.sqrt(dist2)[:, None]
         wo = -d / np.linalg.norm(d, axis=-1, keepdims=True)
-        irradiance = intensity * (np.maximum(wi[..., 2], 0.0) / dist2)[..., None]  # W/m^2
+        irradiance = intensity * (np.maximum(wi[:, 2], 0.0) / dist2)[:, None]  # W/m^2
 
         lay = self.layout
-        in_sample = hit & _in_disk(p, lay.sample_center, lay.sample_radius)
-        in_ref = hit & _in_disk(p, lay.reference_center, lay.reference_radius) & ~in_sample
+        in_sample = _in_disk(p, lay.sample_center, lay.sample_radius)
+        in_ref = _in_disk(p, lay.reference_center, lay.reference_radius) & ~in_sample
         w, h = lay.board_size_m
-        in_board = hit & (np.abs(p[..., 0]) < w / 2) & (np.abs(p[..., 1]) < h / 2)
-        in_board &= ~in_sample & ~in_ref
+        in_board = (np.abs(p[:, 0]) < w / 2) & (np.abs(p[:, 1]) < h / 2) & ~in_sample & ~in_ref
 
+        Lh = np.zeros((len(p), 3))
         tex = self.board_texture(float(np.linalg.norm(o)))
-        board_albedo = _bilinear(tex, (p[..., 0] + w / 2) / w, (h / 2 - p[..., 1]) / h)
-        L += np.where(in_board[..., None], (board_albedo / np.pi)[..., None] * irradiance, 0.0)
-        L += np.where(in_ref[..., None], lay.reference_albedo / np.pi * irradiance, 0.0)
+        pb = p[in_board]
+        board_albedo = _bilinear(tex, (pb[:, 0] + w / 2) / w, (h / 2 - pb[:, 1]) / h)
+        Lh[in_board] = (board_albedo / np.pi)[:, None] * irradiance[in_board]
+        Lh[in_ref] = lay.reference_albedo / np.pi * irradiance[in_ref]
         if in_sample.any():
             # Pad to a power of two: JAX models compile once per input shape, and the number of
             # sample pixels changes with every geometry.
@@ -228,7 +231,8 @@ class VirtualCamera:
             f = np.asarray(self.truth.f(a, b), dtype=np.float64)[:n]
             if f.shape[-1] == 1:
                 f = np.repeat(f, 3, axis=-1)
-            L[in_sample] = f * irradiance[in_sample]
+            Lh[in_sample] = f * irradiance[in_sample]
+        L[hit] = Lh
         return L.reshape(cam.height, ss, cam.width, ss, 3).mean(axis=(1, 3))
 
     def electron_rate(
@@ -278,12 +282,10 @@ def _in_disk(p: np.ndarray, center: tuple[float, float], radius: float) -> np.nd
 
 
 def _bilinear(tex: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Bilinear lookup of ``tex`` (rows, cols) at normalized coordinates u (cols), v (rows)."""
-    x = np.clip(u * tex.shape[1] - 0.5, 0, tex.shape[1] - 1)
-    y = np.clip(v * tex.shape[0] - 0.5, 0, tex.shape[0] - 1)
-    x0 = np.minimum(np.floor(x).astype(np.int64), tex.shape[1] - 2)
-    y0 = np.minimum(np.floor(y).astype(np.int64), tex.shape[0] - 2)
-    fx, fy = x - x0, y - y0
-    top = tex[y0, x0] * (1 - fx) + tex[y0, x0 + 1] * fx
-    bot = tex[y0 + 1, x0] * (1 - fx) + tex[y0 + 1, x0 + 1] * fx
-    return top * (1 - fy) + bot * fy
+    """Bilinear lookup of ``tex`` (rows, cols) at normalized coordinates u (cols), v (rows)
+    (texel centres at (i + 0.5) / size; clamped to the edge texels outside)."""
+    from scipy import ndimage
+
+    rows, cols = tex.shape
+    coords = np.stack([v * rows - 0.5, u * cols - 0.5])
+    return ndimage.map_coordinates(tex, coords, order=1, mode="nearest")
