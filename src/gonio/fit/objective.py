@@ -198,10 +198,13 @@ class Compiled:
                 parts[target] = parts[source]
             return tmpl.replace(**parts)
 
-        def chunk_res(u: Array, c: dict[str, Any], tmpl: Any) -> Array:
+        def chunk_values(u: Array, c: dict[str, Any], tmpl: Any) -> tuple[Array, Array]:
+            """One chunk's model values ``(rows, C)`` and masked residuals ``(rows * C,)``."""
             f = to_model(u, tmpl).f(c["wi"], c["wo"])
-            r = loss.residual(f, c["k"])
-            return (r * c["mask"]).reshape(-1)
+            return f, (loss.residual(f, c["k"]) * c["mask"]).reshape(-1)
+
+        def chunk_res(u: Array, c: dict[str, Any], tmpl: Any) -> Array:
+            return chunk_values(u, c, tmpl)[1]
 
         def chunk_cost(u: Array, c: dict[str, Any], tmpl: Any) -> Array:
             """One chunk's ``sum r^2``."""
@@ -220,36 +223,29 @@ class Compiled:
             return chunk_sum(lambda c: jax.hessian(chunk_cost)(u, c, tmpl), arrays)
 
         def normal(u: Array, arrays: dict[str, Any], tmpl: Any) -> tuple[Array, Array, Array]:
-            p = u.shape[0]
-
-            def step(acc: tuple[Array, Array, Array], c: dict[str, Any]) -> tuple[Any, None]:
+            def one(c: dict[str, Any]) -> tuple[Array, Array, Array]:
                 def res_aux(v: Array) -> tuple[Array, Array]:
                     r = chunk_res(v, c, tmpl)
                     return r, r
 
                 jac, r = jax.jacfwd(res_aux, has_aux=True)(u)
-                s, g, a = acc
-                return (s + jnp.dot(r, r), g + jac.T @ r, a + jac.T @ jac), None
+                return jnp.dot(r, r), jac.T @ r, jac.T @ jac
 
-            init = (jnp.zeros((), u.dtype), jnp.zeros(p, u.dtype), jnp.zeros((p, p), u.dtype))
-            (s, g, a), _ = jax.lax.scan(step, init, arrays)
-            return s, g, a
+            return chunk_sum(one, arrays)
 
         def cluster_scores(
             u: Array, arrays: dict[str, Any], tmpl: Any, ids: Array, n_clusters: int
         ) -> Array:
-            p = u.shape[0]
             n_ch = arrays["k"]["y"].shape[-1]
 
-            def step(acc: Array, xs: tuple[dict[str, Any], Array]) -> tuple[Array, None]:
+            def one(xs: tuple[dict[str, Any], Array]) -> Array:
                 c, idc = xs
                 jac = jax.jacfwd(lambda v: chunk_res(v, c, tmpl))(u)
                 r = chunk_res(u, c, tmpl)
                 rows = jnp.repeat(idc, n_ch)  # residual rows are (sample, channel) in C order
-                return acc + jax.ops.segment_sum(jac * r[:, None], rows, n_clusters), None
+                return jax.ops.segment_sum(jac * r[:, None], rows, n_clusters)
 
-            total, _ = jax.lax.scan(step, jnp.zeros((n_clusters, p), u.dtype), (arrays, ids))
-            return total
+            return chunk_sum(one, (arrays, ids))
 
         def residuals(u: Array, arrays: dict[str, Any], tmpl: Any) -> Array:
             return jax.vmap(lambda c: chunk_res(u, c, tmpl))(arrays).reshape(-1)
@@ -291,14 +287,11 @@ class Compiled:
             def run(u: Array, arrays: dict[str, Any], extra: dict[str, Any], tmpl: Any) -> Any:
                 model = to_model(u, tmpl)
 
-                def step(acc: tuple[Array, Array], xs: Any) -> tuple[Any, None]:
+                def one(xs: Any) -> tuple[Array, Array]:
                     c, e = xs
-                    sums, bad = score_sums(model.f(c["wi"], c["wo"]), c, e, names, needs)
-                    return (acc[0] + sums, acc[1] + bad), None
+                    return score_sums(model.f(c["wi"], c["wo"]), c, e, names, needs)
 
-                init = (jnp.zeros(len(names), u.dtype), jnp.zeros((), u.dtype))
-                (sums, bad), _ = jax.lax.scan(step, init, (arrays, extra))
-                return sums, bad
+                return chunk_sum(one, (arrays, extra))
 
             fn = score_fns[names] = Program("scores", run, f"{key} {names}")
             return fn
@@ -309,8 +302,7 @@ class Compiled:
         def chunk_cost_scored(u: Array, c: dict[str, Any], e: dict[str, Any], tmpl: Any) -> Any:
             """One chunk's ``sum r^2`` with, as auxiliary output, every loss's score sums at
             ``u`` (the score pass of the same model values, outside the gradient)."""
-            f = to_model(u, tmpl).f(c["wi"], c["wo"])
-            r = (loss.residual(f, c["k"]) * c["mask"]).reshape(-1)
+            f, r = chunk_values(u, c, tmpl)
             return jnp.dot(r, r), score_sums(jax.lax.stop_gradient(f), c, e, every, every_needs)
 
         def value_and_grad_scored(
@@ -372,7 +364,8 @@ def chunk_sum(fn: Any, xs: Any) -> Any:
     """``sum_k fn(chunk k)`` over the leading (chunk) axis of the pytree ``xs``, in one forward
     ``jax.lax.scan`` whose carry holds the running sums (a pytree of ``fn``'s output structure).
 
-    The gradient and Hessian programs are built from this with ``fn`` a chunk's
+    Every pass over the cells is one (cost, normal equations, score sums, cluster scores); the
+    gradient and Hessian programs are built from it with ``fn`` a chunk's
     ``jax.value_and_grad`` or ``jax.hessian``, since the derivatives of a sum are the sums of
     the chunks' derivatives: differentiating the whole scan instead (``jax.grad`` of
     ``cost``) makes JAX keep every chunk's residuals for the backward pass and run a second,
