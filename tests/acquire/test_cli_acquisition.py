@@ -207,6 +207,8 @@ def test_plan_timing_from_a_previous_run_predicts_that_run(tmp_path):
     # each move's profile is recomputed from where the servos settled, not the planned pose
     assert sum(e["profile_wall_s"] for e in samples) == pytest.approx(planned / scale, rel=0.05)
     per_cfg = per["capture"] + per["bookkeeping"] + per["move_overhead"]
-    # the printed per-configuration costs are rounded to 1e-4 s each, the total to 1e-3 s
+    # the three printed per-configuration costs are rounded to 1e-4 s each (the same error in
+    # every configuration, so up to n x 1.5e-4 s), the total to 1e-3 s; the last term is slack
+    # for the dry run's motion against the journal's (equal up to rounding, checked above)
     rounding = n * 3 * 0.5e-4 + 0.5e-3 + 0.5e-3 / scale
     assert est["predicted_total_s"] == pytest.approx(planned / scale + n * per_cfg, abs=rounding)
