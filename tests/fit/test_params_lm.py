@@ -125,3 +125,33 @@ def test_tied_parameters_follow_their_source():
     assert float(lay.to_model(jnp.asarray(u)).params()["testlobe2.n"]) == pytest.approx(42.0)
     with pytest.raises(FitError, match="cannot tie"):
         Layout(tmpl, 1, tied={"testlobe2.n": "testlobe2.n"})
+
+
+def test_lm_holds_a_parameter_on_its_bound_and_solves_the_rest():
+    """A linear least-squares problem whose optimum has one parameter on its upper bound and
+    strong coupling to the others: LM must reach the exact bounded optimum (scipy's
+    lsq_linear) in a few passes. Clipping the full unbounded step instead bends the other
+    parameters at every step (zigzag) and stops far from it or after many passes."""
+    from scipy.optimize import lsq_linear
+
+    from gonio.fit.lm import CONVERGED_F, CONVERGED_X, levenberg_marquardt
+
+    rng = np.random.default_rng(3)
+    base = rng.normal(size=(200, 4))
+    m = base @ np.array(
+        [[1.0, 0.9, 0.8, 0.7], [0.0, 0.5, 0.4, 0.3], [0.0, 0.0, 0.3, 0.2], [0.0, 0.0, 0.0, 0.2]]
+    )
+    b = m @ np.array([0.2, -0.4, 0.6, 2.0]) + 0.01 * rng.normal(size=200)
+    lo, hi = np.full(4, -5.0), np.array([5.0, 5.0, 5.0, 1.0])  # the last one wants 2, gets 1
+    ref = lsq_linear(m, b, bounds=(lo, hi), tol=1e-14)
+    assert ref.x[3] == pytest.approx(1.0)
+
+    def normal(u):
+        r = m @ u - b
+        return float(r @ r), m.T @ r, m.T @ m
+
+    res = levenberg_marquardt(normal, np.zeros(4), lo, hi, ftol=1e-14, xtol=1e-14)
+    assert res.status in (CONVERGED_F, CONVERGED_X)
+    np.testing.assert_allclose(res.u, ref.x, rtol=0, atol=1e-8)
+    assert res.u[3] == 1.0  # exactly on the bound
+    assert res.n_eval <= 12

@@ -7,8 +7,8 @@ Strategy of :func:`optimize` (every step seeded, nothing to restart by hand):
    multi-level single linkage with L-BFGS local searches; ``"direct"``: DIRECT-L) inside the
    box of the reparameterized space (see :mod:`gonio.fit.params`).
 2. From ``n_starts`` points (the template's values, the global result, and uniform random points
-   of the start box) run the chosen local method on the subsample, all starts at once
-   (``vmap``) for LM.
+   of the start box) run the chosen local method on the subsample, one start after the other
+   (each LM iteration is one jitted normal-equation pass over the subsample).
 3. On data larger than twice ``refine`` samples, run the local method from the best start to
    convergence on a stratified subset of ``refine`` samples (one per theta_h stratum, see
    :meth:`~gonio.fit.data.FitData.stratified_subset`): on a MERL table (about 9e5 cells) this
