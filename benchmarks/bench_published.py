@@ -316,7 +316,7 @@ def speed(
       each, alternated, both with a filled cache, and the ratio of the medians;
     - warm against ``baseline``: ``repeats`` alternated pairs of fresh processes, one per
       code, each timing 3 warm fits after one that compiles, and the ratio of the medians;
-    - warm: in process, the default staged fit (multi-start on 4000 random cells, refinement on
+    - warm: in process, the default staged fit (multi-start on 2048 random cells, refinement on
       a stratified 65,536-cell subset, polish on every cell with the subset's curvature) against
       the earlier path (``refine=0``: every polish step on every cell), alternated ``repeats``
       times on the first material so that both see the same machine load; the ratio of the

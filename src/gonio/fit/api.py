@@ -136,7 +136,7 @@ class FitOptions:
     global_method: str | None = None
     n_starts: int = 8
     seed: int = 0
-    subsample: int = 4000
+    subsample: int = 2048
     refine: int = 65536
     max_iter: int = 200
     laplace_method: str = "gauss-newton"
