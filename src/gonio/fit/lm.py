@@ -77,12 +77,16 @@ def _trial(
     return np.clip(u + delta, lo, hi)
 
 
+def _predicted(g: np.ndarray, a: np.ndarray, step: np.ndarray) -> float:
+    """Decrease of the quadratic model ``L + 2 g.s + s.A.s`` along ``step``."""
+    return float(-(2.0 * g @ step + step @ a @ step))
+
+
 def _next_gain(
     u: np.ndarray, g: np.ndarray, a: np.ndarray, lam: float, lo: np.ndarray, hi: np.ndarray
 ) -> float:
     """Decrease of the quadratic model predicted for the next (projected) step."""
-    step = _trial(u, g, a, lam, lo, hi) - u
-    return float(-(2.0 * g @ step + step @ a @ step))
+    return _predicted(g, a, _trial(u, g, a, lam, lo, hi) - u)
 
 
 def levenberg_marquardt(
@@ -115,7 +119,7 @@ def levenberg_marquardt(
         c_new, g_new, a_new = normal(u_new)
         n_eval += 1
         history.append(c_new)
-        predicted = -(2.0 * g @ step + step @ a @ step)
+        predicted = _predicted(g, a, step)
         actual = cost - c_new
         rho = actual / predicted if predicted > 0 else -np.inf
         if np.isfinite(c_new) and actual > 0 and rho > 1e-4:
