@@ -313,7 +313,8 @@ def speed(
     - cold: a fresh ``gonio fit`` process (imports, tabulating the network, fit, JSON), with an
       empty persistent compilation cache and again with the cache it filled; with ``baseline``
       (another source tree, e.g. the previous commit's ``src``), ``repeats`` cold processes of
-      each, alternated, both with a filled cache, and the ratio of the medians;
+      each, alternated, with an empty cache each and then with a filled one, and the ratio of
+      the medians;
     - warm against ``baseline``: ``repeats`` alternated pairs of fresh processes, one per
       code, each timing 3 warm fits after one that compiles, and the ratio of the medians;
     - warm: in process, the default staged fit (multi-start on 2048 random cells, refinement on
@@ -342,6 +343,17 @@ def speed(
     def cold(what: str, timing: tuple[float, float]) -> None:
         row(what, timing[0], cpu_s=round(timing[1], 3))
 
+    if baseline is not None:
+        # empty caches, the two codes alternated: the first fit a new user runs
+        empty: dict[str, list[tuple[float, float]]] = {"current": [], "baseline": []}
+        for _ in range(repeats):
+            for k, src in (("current", None), ("baseline", baseline)):
+                with tempfile.TemporaryDirectory() as fresh:
+                    empty[k].append(_cold_cli(names[0], preset, loss, fresh, src=src))
+                cold(f"cold gonio fit, empty compile cache, {k} code", empty[k][-1])
+        for k, v in empty.items():
+            cold(f"cold gonio fit median, empty compile cache, {k} code",
+                 tuple(np.median(np.array(v), axis=0)))  # fmt: skip
     with tempfile.TemporaryDirectory() as cache:
         cold("cold gonio fit, empty compile cache", _cold_cli(names[0], preset, loss, cache))
         cold("cold gonio fit, compile cache filled", _cold_cli(names[0], preset, loss, cache))

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -111,3 +115,74 @@ def test_source_hash_changes_the_file_name(cache_dir, monkeypatch):
     fns.cost(u, pb.arrays, pb.layout.template)
     assert fns.cost.last_source == "exported"
     assert len(list(cache_dir.glob("cost-*.jaxexport"))) == 2
+
+
+def _counting(monkeypatch, block: threading.Event | None = None) -> list[str]:
+    """Count Program._resolve calls (optionally holding each until ``block`` is set)."""
+    calls: list[str] = []
+    real = programs.Program._resolve
+
+    def resolve(self, *a):
+        calls.append(self.name)
+        if block is not None:
+            assert block.wait(60)
+        return real(self, *a)
+
+    monkeypatch.setattr(programs.Program, "_resolve", resolve)
+    return calls
+
+
+def test_prepare_in_a_thread_serves_a_concurrent_call_once(cache_dir, monkeypatch):
+    pb = _problem()
+    u = jnp.asarray(pb.layout.random_starts(1, 0)[0])
+    args = (u, pb.arrays, pb.layout.template)
+    release = threading.Event()
+    calls = _counting(monkeypatch, release)
+    fns = _fresh(pb)
+    with ThreadPoolExecutor(2) as pool:
+        ahead = pool.submit(fns.normal.prepare, *args)
+        for _ in range(3000):  # until the preparing thread holds the signature
+            if calls:
+                break
+            time.sleep(0.01)
+        caller = pool.submit(fns.normal, *args)
+        time.sleep(0.2)
+        assert not caller.done()  # waits for the preparing thread instead of compiling
+        release.set()
+        ahead.result()
+        got = caller.result()
+    assert calls == ["normal"]
+    for a, b in zip(jax.jit(fns.normal_raw)(*args), got, strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12)
+
+
+def test_a_failed_prepare_is_retried_by_the_next_call(cache_dir, monkeypatch):
+    pb = _problem()
+    u = jnp.asarray(pb.layout.random_starts(1, 0)[0])
+    args = (u, pb.arrays, pb.layout.template)
+    real = programs.Program._resolve
+    fail = [True]
+
+    def resolve(self, *a):
+        if fail.pop() if fail else False:
+            raise MemoryError("compiler ran out of memory")
+        return real(self, *a)
+
+    monkeypatch.setattr(programs.Program, "_resolve", resolve)
+    fns = _fresh(pb)
+    with pytest.raises(MemoryError):
+        fns.cost.prepare(*args)
+    assert float(fns.cost(*args)) == float(jax.jit(fns.cost_raw)(*args))
+
+
+def test_problem_prepare_compiles_without_running(cache_dir, monkeypatch):
+    pb = _problem()
+    calls = _counting(monkeypatch)
+    pb.fns = _fresh(pb)
+    pb.prepare("hessian", "value_and_grad_scored")
+    assert calls == ["hessian", "value_and_grad_scored"]
+    assert pb._scored is None  # prepared, not run
+    u = pb.layout.random_starts(1, 0)[0]
+    pb.hessian(u)
+    pb.value_and_grad_scored(u)
+    assert calls == ["hessian", "value_and_grad_scored"]  # the calls reused them

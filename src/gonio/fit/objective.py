@@ -117,6 +117,15 @@ class Problem:
             self.fns.hessian(jnp.asarray(u, jnp.float64), self.arrays, self.layout.template)
         )
 
+    def prepare(self, *names: str) -> None:
+        """Compile (or load) the programs ``names`` (of ``"cost"``, ``"value_and_grad"``,
+        ``"value_and_grad_scored"``, ``"normal"``, ``"hessian"``) for this problem's data
+        without running them (:meth:`~gonio.fit.programs.Program.prepare`)."""
+        u = jnp.zeros(self.n_params, jnp.float64)
+        for name in names:
+            extra = (self._score_data(),) if name == "value_and_grad_scored" else ()
+            getattr(self.fns, name).prepare(u, self.arrays, *extra, self.layout.template)
+
     def residuals(self, u: np.ndarray) -> np.ndarray:
         """Residuals of the valid samples, (N, C)."""
         r = np.asarray(

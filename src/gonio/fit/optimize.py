@@ -24,6 +24,9 @@ Strategy of :func:`optimize` (every step seeded, nothing to restart by hand):
    their own when the last pass is at the optimum (the usual case).
 5. If the polish did not meet its tolerance, restart it from where it stopped (at most
    ``max_restarts`` times).
+6. While steps 1-2 run, a background thread compiles (or loads from the compilation cache) the
+   programs of steps 3-4 (:meth:`~gonio.fit.programs.Program.prepare`); a stage that needs one
+   before it is ready waits for it.
 
 Parameters that end on the edge of the search box are reported in ``on_bounds``.
 """
@@ -32,6 +35,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import nlopt
@@ -245,6 +249,23 @@ def _nlopt_message(code: int) -> str:
 
 
 # -- driver --------------------------------------------------------------------------------------
+#: Threads that compile the later stages' programs while the first stages run (created on
+#: first use; XLA's compiler releases the GIL, so on 2 cores this overlaps with the starts).
+_AHEAD: list[ThreadPoolExecutor] = []
+
+
+def _prepare_ahead(problem: Problem, mid: Problem) -> None:
+    """Compile (or load) the refinement's and the polish's programs in the background: on an
+    empty compilation cache that is most of a first fit's time (module docstring, 6.). A
+    stage that calls one before it is ready waits for it (``Program.prepare``); a failure
+    here is raised again by that call, so nothing is lost by not waiting for these."""
+    if not _AHEAD:
+        _AHEAD.append(ThreadPoolExecutor(2, thread_name_prefix="gonio-compile"))
+    for prob, name in ((mid, "normal"), (problem, "value_and_grad"), (mid, "hessian"),
+                       (problem, "value_and_grad_scored")):  # fmt: skip
+        _AHEAD[0].submit(prob.prepare, name)
+
+
 def optimize(
     problem: Problem,
     method: str = "lm",
@@ -287,6 +308,10 @@ def optimize(
     sub = problem
     if problem.data.n > subsample:
         sub = problem.with_data(problem.data.random_subset(subsample, seed))
+    mid = None
+    if refine and problem.data.n > 2 * refine and method == "lm":
+        mid = problem.with_data(problem.data.stratified_subset(int(refine), seed))
+        _prepare_ahead(problem, mid)
 
     starts = layout.random_starts(max(int(n_starts), 1), seed)
     if start is not None:
@@ -321,9 +346,8 @@ def optimize(
     timings["starts"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    mid, curvature, polish_ftol = None, None, 1e-10
-    if refine and problem.data.n > 2 * refine and method == "lm":
-        mid = problem.with_data(problem.data.stratified_subset(int(refine), seed))
+    curvature, polish_ftol = None, 1e-10
+    if mid is not None:
         best = run_lm(mid, best, max_iter=max_iter, ftol=_STAGE_FTOL)[0]
         hess = subset_hessian(mid, best)
         curvature = subset_curvature(problem, mid, hess)
