@@ -1,8 +1,9 @@
 """Where a cold ``gonio fit`` process's time goes, phase by phase, against another source tree.
 
 Each process (a fresh interpreter, the persistent compilation cache filled by an earlier
-process of the same code) does what ``gonio fit ARCHIVE::NAME -m lambert+cook-torrance --loss
-ngan --no-plots`` does, timing each phase (wall and CPU seconds of the process, all threads):
+process of the same code, or with ``--empty-cache`` an empty one) does what ``gonio fit
+ARCHIVE::NAME -m lambert+cook-torrance --loss ngan --no-plots`` does, timing each phase (wall
+and CPU seconds of the process, all threads):
 ``import jax``, the gonio imports, reading and tabulating the network (``io.load``),
 ``prepare`` (the cells under 80 degrees), the first fit (tracing or loading the fit's programs,
 the compilation cache, the fit itself) and writing the JSON; then a second fit of the same
@@ -101,6 +102,9 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--baseline", metavar="SRC", help="another source tree to alternate with")
     ap.add_argument("--out", default="fit_phases")
+    ap.add_argument("--empty-cache", action="store_true",
+                    help="every process starts with an empty compilation cache (a new user's "
+                         "first fit) instead of one filled by an earlier process")  # fmt: skip
     args = ap.parse_args()
     codes = {"current": str(ROOT / "src")}
     if args.baseline:
@@ -108,12 +112,14 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as caches:
         dirs = {k: str(Path(caches) / k) for k in codes}
-        for k, src in codes.items():  # fill each code's cache
-            run_child(src, dirs[k], args.material)
+        if not args.empty_cache:
+            for k, src in codes.items():  # fill each code's cache
+                run_child(src, dirs[k], args.material)
         for rnd in range(args.rounds):
             for k, src in codes.items():
                 load = os.getloadavg()[0]
-                for name, wall, cpu in run_child(src, dirs[k], args.material):
+                cache = dirs[k] if not args.empty_cache else str(Path(caches) / f"{k}-{rnd}")
+                for name, wall, cpu in run_child(src, cache, args.material):
                     rows.append({"code": k, "round": rnd, "phase": name, "wall_s": wall,
                                  "cpu_s": cpu, "load1": load})  # fmt: skip
     RESULTS.mkdir(parents=True, exist_ok=True)

@@ -155,9 +155,11 @@ class Program:
 def _compiler_options() -> dict[str, Any]:
     """XLA options of the fit's programs: on the CPU, XLA's loop emitters instead of its MLIR
     fusion emitters, which take longer to compile these programs and run them no faster.
-    Same-run A/B, 3 alternated rounds of a fresh process (gold-paint Cook-Torrance ``ngan``,
-    909 696 cells, idle 2-core machine): the first fit on an empty compilation cache
-    3.53-3.96 -> 2.76-2.80 s, a warm fit 0.49-0.52 -> 0.41-0.47 s. Not set for the render
+    ``benchmarks/fit_phases.py --empty-cache``, gold-paint Cook-Torrance ``ngan``, 909 696
+    cells, medians of 3 alternated fresh processes, 2 cores at load 1-2: a first fit on an
+    empty compilation cache 3.52 -> 2.30 s with this and the background compile of
+    ``optimize`` (``fit_phases_empty.csv``), 2.70 -> 2.30 s with the background compile alone
+    (``fit_phases_empty_prepare.csv``); a warm fit 0.50 -> 0.41 s. Not set for the render
     kernels, whose cold first image is slower with it (1.99 -> 2.34 s,
     ``bench_first_image.py --quick``)."""
     return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else {}
