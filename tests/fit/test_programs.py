@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from gonio.fit import programs
+from gonio.fit import optimize, programs
 from gonio.fit.data import from_arrays
 from gonio.fit.losses import get_loss
 from gonio.fit.objective import Compiled, Problem
@@ -186,3 +186,24 @@ def test_problem_prepare_compiles_without_running(cache_dir, monkeypatch):
     pb.hessian(u)
     pb.value_and_grad_scored(u)
     assert calls == ["hessian", "value_and_grad_scored"]  # the calls reused them
+
+
+def test_leaving_a_fit_cancels_the_compilations_not_started(monkeypatch):
+    pb = _problem()
+    started: list[tuple[str, ...]] = []
+    gate = threading.Event()
+
+    def prepare(self, *names):
+        started.append(names)
+        assert gate.wait(60)
+
+    monkeypatch.setattr(Problem, "prepare", prepare)
+    with pytest.raises(KeyboardInterrupt), optimize._compiled_ahead(pb, pb):
+        for _ in range(3000):  # until both threads hold a job; two more are queued
+            if len(started) == 2:
+                break
+            time.sleep(0.01)
+        raise KeyboardInterrupt
+    gate.set()
+    optimize._AHEAD[0].submit(lambda: None).result()  # the pool has run all it will run
+    assert started == [("normal",), ("value_and_grad",)]

@@ -34,8 +34,9 @@ Parameters that end on the edge of the search box are reported in ``on_bounds``.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import nlopt
@@ -254,16 +255,26 @@ def _nlopt_message(code: int) -> str:
 _AHEAD: list[ThreadPoolExecutor] = []
 
 
-def _prepare_ahead(problem: Problem, mid: Problem) -> None:
-    """Compile (or load) the refinement's and the polish's programs in the background: on an
-    empty compilation cache that is most of a first fit's time (module docstring, 6.). A
-    stage that calls one before it is ready waits for it (``Program.prepare``); a failure
-    here is raised again by that call, so nothing is lost by not waiting for these."""
+@contextmanager
+def _compiled_ahead(problem: Problem, mid: Problem | None) -> Iterator[None]:
+    """Compile (or load) the refinement's and the polish's programs in the background while
+    the body runs: on an empty compilation cache that is most of a first fit's time (module
+    docstring, 6.). A stage that calls one before it is ready waits for it
+    (``Program.prepare``), and a failure here is raised again by that call. Leaving the body
+    cancels the compilations not yet started (an interrupted fit does not wait for them)."""
+    if mid is None:
+        yield
+        return
     if not _AHEAD:
         _AHEAD.append(ThreadPoolExecutor(2, thread_name_prefix="gonio-compile"))
-    for prob, name in ((mid, "normal"), (problem, "value_and_grad"), (mid, "hessian"),
-                       (problem, "value_and_grad_scored")):  # fmt: skip
-        _AHEAD[0].submit(prob.prepare, name)
+    jobs = [_AHEAD[0].submit(prob.prepare, name)
+            for prob, name in ((mid, "normal"), (problem, "value_and_grad"), (mid, "hessian"),
+                               (problem, "value_and_grad_scored"))]  # fmt: skip
+    try:
+        yield
+    finally:
+        for job in jobs:
+            job.cancel()
 
 
 def optimize(
@@ -311,67 +322,67 @@ def optimize(
     mid = None
     if refine and problem.data.n > 2 * refine and method == "lm":
         mid = problem.with_data(problem.data.stratified_subset(int(refine), seed))
-        _prepare_ahead(problem, mid)
 
-    starts = layout.random_starts(max(int(n_starts), 1), seed)
-    if start is not None:
-        starts[0] = np.clip(start, *layout.box())
-    t0 = time.perf_counter()
-    if global_method is not None:
-        maxeval = 200 * layout.size if global_method != "direct" else 400 * layout.size
-        ug, _, _, _ = run_nlopt(sub, starts[0], global_method, maxeval=maxeval, seed=seed)
-        starts = np.vstack([ug[None], starts])
-    timings["global"] = time.perf_counter() - t0
+    with _compiled_ahead(problem, mid):
+        starts = layout.random_starts(max(int(n_starts), 1), seed)
+        if start is not None:
+            starts[0] = np.clip(start, *layout.box())
+        t0 = time.perf_counter()
+        if global_method is not None:
+            maxeval = 200 * layout.size if global_method != "direct" else 400 * layout.size
+            ug, _, _, _ = run_nlopt(sub, starts[0], global_method, maxeval=maxeval, seed=seed)
+            starts = np.vstack([ug[None], starts])
+        timings["global"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    if len(starts) > 1 or sub is not problem:
-        if method == "lm":
-            # a few iterations from every start, then the two best to convergence
-            us, costs, _, _ = run_lm(sub, starts, max_iter=min(12, max_iter))
+        t0 = time.perf_counter()
+        if len(starts) > 1 or sub is not problem:
+            if method == "lm":
+                # a few iterations from every start, then the two best to convergence
+                us, costs, _, _ = run_lm(sub, starts, max_iter=min(12, max_iter))
+                costs = np.where(np.isfinite(costs), costs, np.inf)
+                top = np.argsort(costs)[:2]
+                ftol = _STAGE_FTOL if sub is not problem else 1e-10
+                us2, costs2, _, _ = run_lm(sub, us[top], max_iter=max_iter, ftol=ftol)
+                us[top], costs[top] = us2, costs2
+            else:
+                runs = [run_nlopt(sub, s, method, maxeval=50 * max_iter) for s in starts]
+                us = np.stack([r[0] for r in runs])
+                costs = np.array([r[1] for r in runs])
             costs = np.where(np.isfinite(costs), costs, np.inf)
-            top = np.argsort(costs)[:2]
-            ftol = _STAGE_FTOL if sub is not problem else 1e-10
-            us2, costs2, _, _ = run_lm(sub, us[top], max_iter=max_iter, ftol=ftol)
-            us[top], costs[top] = us2, costs2
+            order = np.argsort(costs)
+            best = us[order[0]]
+            start_costs = [float(costs[i]) for i in order]
         else:
-            runs = [run_nlopt(sub, s, method, maxeval=50 * max_iter) for s in starts]
-            us = np.stack([r[0] for r in runs])
-            costs = np.array([r[1] for r in runs])
-        costs = np.where(np.isfinite(costs), costs, np.inf)
-        order = np.argsort(costs)
-        best = us[order[0]]
-        start_costs = [float(costs[i]) for i in order]
-    else:
-        best, start_costs = starts[0], []
-    timings["starts"] = time.perf_counter() - t0
+            best, start_costs = starts[0], []
+        timings["starts"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    curvature, polish_ftol = None, 1e-10
-    if mid is not None:
-        best = run_lm(mid, best, max_iter=max_iter, ftol=_STAGE_FTOL)[0]
-        hess = subset_hessian(mid, best)
-        curvature = subset_curvature(problem, mid, hess)
-        if hess is not None:  # (with J^T J, convergence is linear: keep the tight test)
-            polish_ftol = _POLISH_FTOL
-    timings["refine"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        curvature, polish_ftol = None, 1e-10
+        if mid is not None:
+            best = run_lm(mid, best, max_iter=max_iter, ftol=_STAGE_FTOL)[0]
+            hess = subset_hessian(mid, best)
+            curvature = subset_curvature(problem, mid, hess)
+            if hess is not None:  # (with J^T J, convergence is linear: keep the tight test)
+                polish_ftol = _POLISH_FTOL
+        timings["refine"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    converged, message, n_iter, cost = False, "", 0, np.inf
-    u = best
-    for _ in range(max_restarts + 1):
-        if method == "lm":
-            u, cost_a, it, status = run_lm(problem, u, max_iter, polish_ftol, normal=curvature)
-            cost = float(cost_a)
-            n_iter += int(it)
-            message = STATUS_TEXT[int(status)]
-            converged = int(status) in (CONVERGED_F, CONVERGED_X, STALLED)
-        else:
-            u, cost, n, message = run_nlopt(problem, u, method, maxeval=50 * max_iter)
-            n_iter += n
-            converged = "converged" in message or message in ("success", "roundoff limited")
-        if converged:
-            break
-    timings["polish"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        converged, message, n_iter, cost = False, "", 0, np.inf
+        u = best
+        for _ in range(max_restarts + 1):
+            if method == "lm":
+                u, cost_a, it, status = run_lm(problem, u, max_iter, polish_ftol, normal=curvature)
+                cost = float(cost_a)
+                n_iter += int(it)
+                message = STATUS_TEXT[int(status)]
+                converged = int(status) in (CONVERGED_F, CONVERGED_X, STALLED)
+            else:
+                u, cost, n, message = run_nlopt(problem, u, method, maxeval=50 * max_iter)
+                n_iter += n
+                converged = "converged" in message or message in ("success", "roundoff limited")
+            if converged:
+                break
+        timings["polish"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     if not np.isfinite(cost):
         raise FitError(
