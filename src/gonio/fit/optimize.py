@@ -24,9 +24,9 @@ Strategy of :func:`optimize` (every step seeded, nothing to restart by hand):
    their own when the last pass is at the optimum (the usual case).
 5. If the polish did not meet its tolerance, restart it from where it stopped (at most
    ``max_restarts`` times).
-6. While steps 1-2 run, a background thread compiles (or loads from the compilation cache) the
-   programs of steps 3-4 (:meth:`~gonio.fit.programs.Program.prepare`); a stage that needs one
-   before it is ready waits for it.
+6. While steps 1-2 run, two background threads compile (or load from the compilation cache)
+   the programs of steps 3-4 (:meth:`~gonio.fit.programs.Program.prepare`); a stage that needs
+   one before it is ready waits for it.
 
 Parameters that end on the edge of the search box are reported in ``on_bounds``.
 """
