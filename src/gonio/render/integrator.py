@@ -277,8 +277,9 @@ def _light_stage(groups: tuple, position: Array, frame: Array, u: Array):
             ls = _pick(light, j).sample(p, jnp.stack([u0, uk[..., 1]], -1))
             ls = LightSample(ls.wi, ls.value, ls.pdf / n)
         # stored before the rotation: fused into it, the light's sampler (the environment's
-        # quadtree descent) would run once per component (light stage 8 -> 22 ms per tile)
-        wi = materialize([ls.wi], ls.pdf)[0]
+        # quadtree descent) would run once per component (light stage 8 -> 22 ms per tile);
+        # the runtime 1.0 comes from the uniform numbers, which are always finite
+        wi = materialize([ls.wi], uk[..., 0])[0]
         out.append((_local(frame, wi), ls.value, ls.pdf))
     return out
 
