@@ -205,5 +205,5 @@ def test_leaving_a_fit_cancels_the_compilations_not_started(monkeypatch):
             time.sleep(0.01)
         raise KeyboardInterrupt
     gate.set()
-    optimize._AHEAD[0].submit(lambda: None).result()  # the pool has run all it will run
+    optimize._compile_pool().submit(lambda: None).result()  # the pool has run all it will run
     assert started == [("normal",), ("value_and_grad",)]

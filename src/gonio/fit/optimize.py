@@ -33,6 +33,7 @@ Parameters that end on the edge of the search box are reported in ``on_bounds``.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -250,9 +251,11 @@ def _nlopt_message(code: int) -> str:
 
 
 # -- driver --------------------------------------------------------------------------------------
-#: Threads that compile the later stages' programs while the first stages run (created on
-#: first use; XLA's compiler releases the GIL, so on 2 cores this overlaps with the starts).
-_AHEAD: list[ThreadPoolExecutor] = []
+@functools.cache
+def _compile_pool() -> ThreadPoolExecutor:
+    """Threads that compile the later stages' programs while the first stages run (created on
+    first use; XLA's compiler releases the GIL, so on 2 cores this overlaps with the starts)."""
+    return ThreadPoolExecutor(2, thread_name_prefix="gonio-compile")
 
 
 @contextmanager
@@ -265,9 +268,7 @@ def _compiled_ahead(problem: Problem, mid: Problem | None) -> Iterator[None]:
     if mid is None:
         yield
         return
-    if not _AHEAD:
-        _AHEAD.append(ThreadPoolExecutor(2, thread_name_prefix="gonio-compile"))
-    jobs = [_AHEAD[0].submit(prob.prepare, name)
+    jobs = [_compile_pool().submit(prob.prepare, name)
             for prob, name in ((mid, "normal"), (problem, "value_and_grad"), (mid, "hessian"),
                                (problem, "value_and_grad_scored"))]  # fmt: skip
     try:

@@ -106,11 +106,9 @@ class Program:
         sig = (tree, tuple((np.shape(x), _dtype(x)) for x in leaves), str(where))
         with self._lock:
             pending = self._calls.get(sig)
-            if pending is None:
+            mine = pending is None
+            if mine:
                 pending = self._calls[sig] = Future()
-                mine = True
-            else:
-                mine = False
         if mine:
             try:
                 call = self._resolve(where, tree, leaves)
@@ -154,7 +152,7 @@ class Program:
 
 def _compiler_options() -> dict[str, Any]:
     """XLA options of the fit's programs: on the CPU, XLA's loop emitters instead of its MLIR
-    fusion emitters, which take longer to compile these programs and run them no faster.
+    fusion emitters, which take longer to compile these programs and run them slower.
     ``benchmarks/fit_phases.py --empty-cache``, gold-paint Cook-Torrance ``ngan``, 909 696
     cells, medians of 3 alternated fresh processes, 2 cores at load 1-2: a first fit on an
     empty compilation cache 3.52 -> 2.30 s with this and the background compile of
