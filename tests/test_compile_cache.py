@@ -38,7 +38,11 @@ def _render(tmp_path: Path, cache_home: Path, *flags: str, **env: str) -> None:
     child_env = {k: v for k, v in os.environ.items() if k not in drop}
     child_env.update(XDG_CACHE_HOME=str(cache_home), JAX_PLATFORMS="cpu", **env)
     cmd = [sys.executable, "-m", "gonio", "render", "--fitted", str(fit), "--resolution", "8"]
-    cmd += ["--light", "dir:20,0", "--no-images", "--out", str(tmp_path / "x.png"), *flags]
+    # the studio environment, not a directional light: JAX writes only kernels that compile
+    # in MIN_COMPILE_SECONDS (0.1 s) or more, and the delta-light kernel takes 0.10-0.11 s on
+    # a fast machine (nothing written: a flaky test); the environment's light stage takes 0.57
+    cmd += ["--env", "studio", "--spp", "16", "--no-images", "--out", str(tmp_path / "x.png")]
+    cmd += list(flags)
     subprocess.run(cmd, env=child_env, check=True, capture_output=True, timeout=300)
 
 
