@@ -70,6 +70,18 @@ def test_padded_pairs_are_each_the_rotated_lattice_in_a_random_order():
         assert ((counts - 187.5) ** 2 / 187.5).sum() < 37.7
 
 
+def test_samples_first_layout_holds_the_same_numbers():
+    # the renderer's (S, P, d) layout is the (P, S, d) one transposed, bit for bit, for a
+    # power-of-2 batch (permuted pairs) and another size (mask 0)
+    for n in (16, 24):
+        pts = sobol.sobol_ints(n, 1)
+        sh = sobol.shifts(np.random.default_rng(3), 50, 6)
+        a = np.asarray(sobol.padded_unit(pts, sh))
+        b = np.asarray(sobol.padded_unit(pts, sh, samples_first=True))
+        assert b.shape == (n, 50, 6)
+        np.testing.assert_array_equal(b, a.transpose(1, 0, 2))
+
+
 def _zaremba(g: int, n: int) -> int:
     """Zaremba index of the Korobov lattice {(j / n, frac(j g / n))}: min over the nonzero
     dual vectors (h1 + g h2 = 0 mod n) of max(1, |h1|) max(1, |h2|)."""

@@ -43,19 +43,23 @@ dimensions 2-3 for the light digitally shifted 0.0049 / 0.0101, padded 0.0045 / 
 spp: 0.00076 / 0.00123 against padded 0.00064 / 0.00108); the lattice in place of the padded
 Sobol' net (mean of 4 seeds) 0.00255 -> 0.00199 / 0.00667 -> 0.00511.
 
-Work is split into tiles of pixels x samples of bounded size (``tile_samples``), each run as
-three jitted float32 stages: light sampling, the material (``f`` and ``pdf`` at the light
-samples, BRDF samples), shading. Tile shapes do not follow the request: ``spp`` is padded to a
-multiple of :data:`SAMPLE_BATCH` and pixels to one of a few tile sizes (padding has zero
-weight), and delta and area lights of one kind are stacked and looped over (or picked from)
-with a traced count, so that a new ``spp``, image size or number of delta, area or environment
-lights reuses the compiled kernels (with the persistent cache of :mod:`gonio.compile_cache`,
-across processes too). Each tile's sums stay on the device until the end of the render (one
-transfer back). Every material is traced into
-the middle stage: a table sampled by one of its own methods gets, as kernel arguments, its
-sampling structures for the outgoing directions of the image (built once per render, before the
-first tile, for the buckets those directions fall in), and rejection draws its extra random
-numbers from a hash of each sample's uniforms, so no kernel call waits on the host.
+Work is split into tiles of pixels x samples of bounded size (``tile_samples``), laid out
+samples-major (S, P, ...): XLA:CPU runs elementwise code over a (P, S) batch with its short
+samples axis innermost 2-3x slower than over the same number of lanes flat, and (S, P) keeps
+the long axis innermost (same-run A/B, 8192-pixel x 16-sample tile of the equal-time scene:
+light stage 5.7 -> 4.8 ms, Lambert material 2.5 -> 1.6 ms, GGX 12.8 -> 9.0 ms; shading 1.5 ->
+1.7 ms). Each tile runs as three jitted float32 stages: light sampling, the material (``f`` and
+``pdf`` at the light samples, BRDF samples), shading. Tile shapes do not follow the request:
+``spp`` is padded to a multiple of :data:`SAMPLE_BATCH` and pixels to one of a few tile sizes
+(padding has zero weight), and delta and area lights of one kind are stacked and looped over
+(or picked from) with a traced count, so that a new ``spp``, image size or number of delta,
+area or environment lights reuses the compiled kernels (with the persistent cache of
+:mod:`gonio.compile_cache`, across processes too). Each tile's sums stay on the device until
+the end of the render (one transfer back). Every material is traced into the middle stage: a
+table sampled by one of its own methods gets, as kernel arguments, its sampling structures for
+the outgoing directions of the image (built once per render, before the first tile, for the
+buckets those directions fall in), and rejection draws its extra random numbers from a hash of
+each sample's uniforms, so no kernel call waits on the host.
 """
 
 from __future__ import annotations
@@ -236,12 +240,12 @@ def _model_ops(model: Any, kind: str, proposal: Any = None, state: Any = None):
 # dot_general, and a sum over the size-3 axis into a reduction loop of its own (at 8192 x 16
 # directions: 2.8 ms for _world and 1.2 ms for _local that way, 0.19 ms each written out).
 def _local(frame: Array, w: Array) -> Array:
-    f = frame[:, None]
+    f = frame[None]
     return jnp.stack([dot(f[..., i, :], w) for i in range(3)], -1)
 
 
 def _world(frame: Array, w: Array) -> Array:
-    f = frame[:, None]
+    f = frame[None]
     return jnp.stack([dot(w, f[..., :, j]) for j in range(3)], -1)
 
 
@@ -258,12 +262,12 @@ def _pick(stacked: Any, i: Array) -> Any:
 
 
 def _light_stage(groups: tuple, position: Array, frame: Array, u: Array):
-    """One light sample per group and sample: list of (wi local (P,S,3), value (P,S,C), pdf
-    (P,S)). In a stacked group the light is chosen uniformly among its ``count`` members by
+    """One light sample per group and sample: list of (wi local (S,P,3), value (S,P,C), pdf
+    (S,P)). In a stacked group the light is chosen uniformly among its ``count`` members by
     the first of the pair's numbers (rescaled to [0, 1) for the light's own sampling), and
     ``pdf`` includes the choice (divided by ``count``)."""
     out = []
-    p = jnp.broadcast_to(position[:, None, :], (*u.shape[:-1], 3))
+    p = jnp.broadcast_to(position[None], (*u.shape[:-1], 3))
     for k, (light, count) in enumerate(groups):
         uk = u[..., 2 + 2 * k : 4 + 2 * k]
         if count is None:
@@ -284,7 +288,7 @@ def _light_stage(groups: tuple, position: Array, frame: Array, u: Array):
 
 
 def _shade_light(lights, light_samples, f_vals, brdf_pdfs, weights, mis: bool):
-    """Sum over lights of f L cos / pdf (times the MIS weight); (P, S, C)."""
+    """Sum over lights of f L cos / pdf (times the MIS weight); (S, P, C)."""
     total = 0.0
     for (light, _), (wi, value, pdf), f, pb in zip(
         lights, light_samples, f_vals, brdf_pdfs, strict=True
@@ -295,16 +299,16 @@ def _shade_light(lights, light_samples, f_vals, brdf_pdfs, weights, mis: bool):
         if mis and not light.is_delta:
             c = c * _power(pdf, pb)[..., None]
         total = total + c
-    return total * weights[None, :, None]
+    return total * weights[:, None, None]
 
 
 def _shade_brdf(lights, position, frame, brdf, mis: bool, weights):
-    """Sum over lights of L(wi_b) f cos / pdf_b (times the MIS weight); (P, S, C). Every
+    """Sum over lights of L(wi_b) f cos / pdf_b (times the MIS weight); (S, P, C). Every
     member of a stacked group is looked at, in a loop with a traced trip count; its light
     sampling density is its own times the chance ``1 / count`` of being chosen."""
     wi, pdf_b, weight, delta = brdf
     wi_w = _world(frame, wi)
-    p = jnp.broadcast_to(position[:, None, :], wi_w.shape)
+    p = jnp.broadcast_to(position[None], wi_w.shape)
 
     def term(light, n):
         if mis:
@@ -322,11 +326,11 @@ def _shade_brdf(lights, position, frame, brdf, mis: bool, weights):
         total = total + jax.lax.fori_loop(
             1, count, lambda i, acc, light=light, n=n: acc + term(_pick(light, i), n), first
         )
-    return total * weights[None, :, None]
+    return total * weights[:, None, None]
 
 
 def _uniforms(sobol: Array, shift: Array) -> Array:
-    return _sobol_mod.padded_unit(sobol, shift)
+    return _sobol_mod.padded_unit(sobol, shift, samples_first=True)
 
 
 # A tile runs as three jitted stages: light sampling; the material (f and pdf at the light
@@ -344,13 +348,25 @@ def _light_stage_jit(lights, position, frame, sobol, shift):
 def _model_stage(model, proposal, state, light_wi, wo, sobol, shift, *, kind, mis,
                  light_sampling):  # fmt: skip
     f, pdf, sample = _model_ops(model, kind, proposal, state)
-    u = _uniforms(sobol, shift)
-    wo_s = jnp.broadcast_to(wo[:, None, :], (*u.shape[:-1], 3))
+    u = _uniforms(sobol, shift)[..., :2]
     if kind == "model" and getattr(model, "broadcasts_outgoing", False):
-        wo_s = wo[:, None, :]  # the model computes what depends on wo once per pixel
-    fv = [f(wi, wo_s) for wi in light_wi] if light_sampling else None
-    pb = [pdf(wi, wo_s) for wi in light_wi] if light_sampling and mis else None
-    brdf = sample(wo_s, u[..., :2]) if kind != "none" else None
+        # The model computes what depends on wo once per pixel (its table slices) and gathers
+        # every sample of a pixel from them; laid out pixel-major, consecutive lanes gather from
+        # one slice. Same-run A/B, RGL paper_white, 8192 x 16 tile: material stage 24.4-25.3 ms
+        # so (swaps included), 31.8-32.2 ms samples-major.
+        def swap(x):
+            return jnp.swapaxes(x, 0, 1)
+
+        wo_s, light_wi, u = wo[:, None], [swap(wi) for wi in light_wi], swap(u)
+    else:
+
+        def swap(x):
+            return x
+
+        wo_s = jnp.broadcast_to(wo[None], (*u.shape[:-1], 3))
+    fv = [swap(f(wi, wo_s)) for wi in light_wi] if light_sampling else None
+    pb = [swap(pdf(wi, wo_s)) for wi in light_wi] if light_sampling and mis else None
+    brdf = tuple(swap(x) for x in sample(wo_s, u)) if kind != "none" else None
     return fv, pb, brdf
 
 
@@ -363,18 +379,15 @@ def _shade_stage(lights, ls, fv, pb, position, frame, brdf, weights, acc, *, mis
         total = total + _shade_light(lights, ls, fv, pbs, weights, mis)
     if brdf is not None:
         total = total + _shade_brdf(lights, position, frame, brdf, mis, weights)
-    return acc + _sum_samples(
-        jnp.broadcast_to(total, (acc.shape[0], weights.shape[0], acc.shape[1]))
-    )
+    return acc + _sum_samples(jnp.broadcast_to(total, (weights.shape[0], *acc.shape)))
 
 
 def _sum_samples(x: Array) -> Array:
-    """``x`` (P, S, C) summed over its samples axis -> (P, C), as S - 1 elementwise adds:
-    XLA:CPU's reduction over that middle axis was most of the shading stage (5.2 -> 1.3-2.0 ms
-    per 8192-pixel x 16-sample tile of the equal-time scene, written this way)."""
-    out = x[:, 0]
-    for s in range(1, x.shape[1]):
-        out = out + x[:, s]
+    """``x`` (S, P, C) summed over its samples axis -> (P, C), as S - 1 elementwise adds
+    (XLA:CPU ran the reduction over a middle axis as a slow loop of its own)."""
+    out = x[0]
+    for s in range(1, x.shape[0]):
+        out = out + x[s]
     return out
 
 

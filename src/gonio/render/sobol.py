@@ -118,9 +118,12 @@ def to_unit(points: jnp.ndarray, shift: jnp.ndarray) -> jnp.ndarray:
     return (x >> 8).astype(jnp.float32) * jnp.float32(2.0**-24)
 
 
-def padded_unit(points: jnp.ndarray, shift: jnp.ndarray) -> jnp.ndarray:
+def padded_unit(
+    points: jnp.ndarray, shift: jnp.ndarray, *, samples_first: bool = False
+) -> jnp.ndarray:
     """``d = shift.shape[1]`` uniforms per sample, as float32 (P, S, d): pairs of the rank-1
-    lattice sequence (see the module's docstring), rotated per pixel.
+    lattice sequence (see the module's docstring), rotated per pixel. ``samples_first``: laid
+    out (S, P, d) instead (the renderer's layout), the same numbers.
 
     ``points`` (S, k >= 1) uint32 hold in column 0 the radical inverses of the samples' indices
     (the first Sobol' dimension, :func:`sobol_ints`) in aligned blocks of a power of 2 up to 256
@@ -137,13 +140,20 @@ def padded_unit(points: jnp.ndarray, shift: jnp.ndarray) -> jnp.ndarray:
     s, d = points.shape[0], shift.shape[1]
     r = points[:, 0]  # radical inverse of the sample's index, 32 bits
     lattice = jnp.stack([r, r * jnp.uint32(LATTICE_GENERATOR)], -1)  # products wrap mod 2^32
-    cols = [jnp.broadcast_to(lattice[None], (shift.shape[0], s, 2))]
     i = jnp.arange(s, dtype=jnp.uint32)
     mask = jnp.uint32(min(s, 256) - 1) if s & (s - 1) == 0 else jnp.uint32(0)
-    for k in range(1, (d + 1) // 2):
-        r_k = shift[:, 2 * k] & mask
-        cols.append(jnp.take(lattice, (i[None, :] ^ r_k[:, None]).astype(jnp.int32), axis=0))
-    x = jnp.concatenate(cols, -1)[..., :d] + shift[:, None, :]  # wraps: a rotation modulo 1
+    if samples_first:
+        cols = [jnp.broadcast_to(lattice[:, None], (s, shift.shape[0], 2))]
+        for k in range(1, (d + 1) // 2):
+            r_k = shift[:, 2 * k] & mask
+            cols.append(jnp.take(lattice, (i[:, None] ^ r_k[None, :]).astype(jnp.int32), axis=0))
+        x = jnp.concatenate(cols, -1)[..., :d] + shift[None, :, :]  # wraps: a rotation modulo 1
+    else:
+        cols = [jnp.broadcast_to(lattice[None], (shift.shape[0], s, 2))]
+        for k in range(1, (d + 1) // 2):
+            r_k = shift[:, 2 * k] & mask
+            cols.append(jnp.take(lattice, (i[None, :] ^ r_k[:, None]).astype(jnp.int32), axis=0))
+        x = jnp.concatenate(cols, -1)[..., :d] + shift[:, None, :]
     return (x >> 8).astype(jnp.float32) * jnp.float32(2.0**-24)
 
 

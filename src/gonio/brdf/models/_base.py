@@ -328,15 +328,17 @@ def channels_last(x: Array) -> Array:
     1.4-2.4x, GGX 1.7-4.5x faster than with a plain transpose, ``ab_kernels.py`` variant
     ``no-dot``). With the cheaper dielectric term, in the sample weight and for Lambert no gain
     showed above the run-to-run noise, so their outputs stay channels last (bit for bit as
-    before).
+    before). The batch axes are flattened for the product: over a rank-3 ``(C, S, P)`` array
+    XLA:CPU's dot ran 3x slower than over ``(C, S * P)`` (GGX conductor ``f`` at the renderer's
+    16 x 8192 directions: 3.0 -> 1.0 ms; material stage of a render tile 9.0 -> 7.5 ms).
     """
     c = x.shape[0]
     if c == 1:
         return x[0][..., None]
     # HIGHEST: the default float32 dot precision on GPUs may round the operands to TF32
-    return jnp.einsum(
-        "c...,cd->...d", x, jnp.eye(c, dtype=x.dtype), precision=jax.lax.Precision.HIGHEST
-    )
+    eye = jnp.eye(c, dtype=x.dtype)
+    out = jnp.einsum("cn,cd->nd", x.reshape(c, -1), eye, precision=jax.lax.Precision.HIGHEST)
+    return out.reshape(*x.shape[1:], c)
 
 
 def clamp_u(u: Array) -> Array:
