@@ -9,7 +9,10 @@ rendered by ``render_sphere`` in one warm process:
 - tile size: the same renders of a Lambertian and a GGX conductor (alpha 0.2) with
   ``tile_samples`` of 2^17 (the default: 8192 pixels x 16 samples per kernel call, so the
   image's 12 868 sphere pixels are padded to 16 384) down to 2^14 (1024 pixels, 13 calls),
-  alternated over ``--rounds`` rounds; median wall and CPU seconds.
+  alternated over ``--rounds`` rounds; median wall and CPU seconds;
+- stages: each of a tile's three kernels (light sampling, the material, shading) timed alone
+  (one tile in flight, waiting for each call), median wall seconds per call over ``--renders``
+  renders, for both materials and an RGL tensor file (``--rgl``, skipped when missing).
 
 Writes results/render_profile.csv and render_profile.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/profile_render.py [--rounds K] [--renders N]
@@ -31,6 +34,7 @@ import numpy as np
 from bench_equal_time import GOLD_ETA, GOLD_K
 
 RESULTS = Path(__file__).resolve().parent / "results"
+RGL_FILE = Path(__file__).resolve().parents[1].parent / "shared/data/rgl/paper_white_rgb.bsdf"
 TILE_SAMPLES = (1 << 17, 1 << 16, 1 << 15, 1 << 14)
 
 
@@ -56,10 +60,46 @@ def host_share(render, n: int) -> dict[str, float]:
     return {"total": total, **parts}
 
 
+def stage_times(render, n: int) -> dict[str, float]:
+    """Median seconds per call of each render stage, one tile at a time."""
+    import jax
+
+    from gonio.render import integrator
+
+    names = {"light": "_light_stage_jit", "material": "_model_stage", "shading": "_shade_stage"}
+    saved = {k: getattr(integrator, v) for k, v in names.items()} | {"": integrator.IN_FLIGHT}
+    times: dict[str, list[float]] = {k: [] for k in names}
+
+    def timed(key, fn):
+        def call(*a, **kw):
+            t0 = time.perf_counter()
+            out = jax.block_until_ready(fn(*a, **kw))
+            times[key].append(time.perf_counter() - t0)
+            return out
+
+        return call
+
+    try:
+        integrator.IN_FLIGHT = 1
+        for key, attr in names.items():
+            setattr(integrator, attr, timed(key, saved[key]))
+        render(0)  # compiles the wrapped calls' shapes
+        for v in times.values():
+            v.clear()
+        for seed in range(n):
+            render(seed + 1)
+    finally:
+        integrator.IN_FLIGHT = saved[""]
+        for key, attr in names.items():
+            setattr(integrator, attr, saved[key])
+    return {k: float(np.median(v)) for k, v in times.items() if v}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=7, help="alternated rounds (default 7)")
     ap.add_argument("--renders", type=int, default=20, help="renders profiled (default 20)")
+    ap.add_argument("--rgl", type=Path, default=RGL_FILE, help="RGL tensor file for the stages")
     args = ap.parse_args()
 
     from gonio.brdf import models
@@ -100,6 +140,15 @@ def main() -> None:
     for part, sec in host_share(lambda s: render(lam, s), args.renders).items():
         rows.append({"what": f"host share, Lambert: {part}", "material": "Lambert",
                      "tile_samples": TILE_SAMPLES[0], "wall_s": sec, "cpu_s": ""})  # fmt: skip
+    stage_materials = dict(materials)
+    if args.rgl is not None and args.rgl.is_file():
+        from gonio.io.rgl_measured import load_rgl
+
+        stage_materials[f"RGL {args.rgl.stem}"] = load_rgl(args.rgl)
+    for name, model in stage_materials.items():
+        for stage, sec in stage_times(lambda s, m=model: render(m, s), args.renders).items():
+            rows.append({"what": f"stage per tile: {stage}", "material": name,
+                         "tile_samples": TILE_SAMPLES[0], "wall_s": sec, "cpu_s": ""})  # fmt: skip
     for r in rows:
         r["load_avg_1min"] = f"{load0:.1f} -> {os.getloadavg()[0]:.1f}"
 
