@@ -142,18 +142,19 @@ def padded_unit(
     lattice = jnp.stack([r, r * jnp.uint32(LATTICE_GENERATOR)], -1)  # products wrap mod 2^32
     i = jnp.arange(s, dtype=jnp.uint32)
     mask = jnp.uint32(min(s, 256) - 1) if s & (s - 1) == 0 else jnp.uint32(0)
-    if samples_first:
-        cols = [jnp.broadcast_to(lattice[:, None], (s, shift.shape[0], 2))]
-        for k in range(1, (d + 1) // 2):
-            r_k = shift[:, 2 * k] & mask
-            cols.append(jnp.take(lattice, (i[:, None] ^ r_k[None, :]).astype(jnp.int32), axis=0))
-        x = jnp.concatenate(cols, -1)[..., :d] + shift[None, :, :]  # wraps: a rotation modulo 1
-    else:
-        cols = [jnp.broadcast_to(lattice[None], (shift.shape[0], s, 2))]
-        for k in range(1, (d + 1) // 2):
-            r_k = shift[:, 2 * k] & mask
-            cols.append(jnp.take(lattice, (i[None, :] ^ r_k[:, None]).astype(jnp.int32), axis=0))
-        x = jnp.concatenate(cols, -1)[..., :d] + shift[:, None, :]
+
+    def grid(per_sample: jnp.ndarray, per_pixel: jnp.ndarray):
+        """Both with the axis of the other inserted, in the output's axis order."""
+        if samples_first:
+            return per_sample[:, None], per_pixel[None]
+        return per_sample[None], per_pixel[:, None]
+
+    shape = (s, shift.shape[0]) if samples_first else (shift.shape[0], s)
+    cols = [jnp.broadcast_to(grid(lattice, shift)[0], (*shape, 2))]
+    for k in range(1, (d + 1) // 2):
+        i_k, r_k = grid(i, shift[:, 2 * k] & mask)
+        cols.append(jnp.take(lattice, (i_k ^ r_k).astype(jnp.int32), axis=0))
+    x = jnp.concatenate(cols, -1)[..., :d] + grid(i, shift)[1]  # wraps: a rotation modulo 1
     return (x >> 8).astype(jnp.float32) * jnp.float32(2.0**-24)
 
 
