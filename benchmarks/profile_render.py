@@ -67,7 +67,8 @@ def stage_times(render, n: int) -> dict[str, float]:
     from gonio.render import integrator
 
     names = {"light": "_light_stage_jit", "material": "_model_stage", "shading": "_shade_stage"}
-    saved = {k: getattr(integrator, v) for k, v in names.items()} | {"": integrator.IN_FLIGHT}
+    saved = {k: getattr(integrator, v) for k, v in names.items()}
+    in_flight = integrator.IN_FLIGHT
     times: dict[str, list[float]] = {k: [] for k in names}
 
     def timed(key, fn):
@@ -89,7 +90,7 @@ def stage_times(render, n: int) -> dict[str, float]:
         for seed in range(n):
             render(seed + 1)
     finally:
-        integrator.IN_FLIGHT = saved[""]
+        integrator.IN_FLIGHT = in_flight
         for key, attr in names.items():
             setattr(integrator, attr, saved[key])
     return {k: float(np.median(v)) for k, v in times.items() if v}
