@@ -108,3 +108,60 @@ def test_wrong_axes_are_refused():
 
     with pytest.raises(ParameterError):
         gridding.interpolate_samples(s, default_axes("half_diff_aniso", 4, 4, 4, 4))
+
+
+def _half_diff_samples(model, th, td, pd):
+    from gonio.brdf.frames import half_diff_to_directions
+
+    wi, wo = half_diff_to_directions(th, np.zeros_like(th), td, pd)
+    return MeasuredSamples(wi, wo, np.asarray(model.f(wi, wo)))
+
+
+def test_samples_on_a_line_are_interpolated_along_it():
+    # a 1-D file (ALTA's COS_TH): theta_d = 0 everywhere, theta_h from 0 to 80 degrees; Qhull
+    # cannot tetrahedralize it (it raised on such data), so the interpolant works on the line
+    th = np.radians(np.linspace(0.0, 80.0, 41))
+    s = _half_diff_samples(PAINT, th, np.zeros_like(th), np.zeros_like(th))
+    axes = gridding.render_axes(32, 16, 8)
+    t = gridding.interpolate_samples(s, axes)
+    th_n, td_n = axes[0].nodes(), axes[1].nodes()
+    assert td_n[0] == 0.0 and th_n[-1] > th[-1]
+    truth = np.asarray(s.values)
+    # along the line: the log-linear interpolant of the samples in theta_h (inside the samples'
+    # range; beyond it, the last sample)
+    want = np.exp(np.stack([np.interp(th_n, th, np.log(truth[:, c])) for c in range(3)], -1))
+    vals = np.asarray(t.values)
+    np.testing.assert_allclose(vals[:, 0, 0], want, rtol=1e-5)
+    # off the line every node takes the value at its projection (same theta_h), not covered
+    np.testing.assert_allclose(vals[:, 5, 3], want, rtol=1e-5)
+    mask = np.asarray(t.mask)
+    assert mask[th_n <= th[-1], 0].all() and not mask[:, 1:].any() and not mask[th_n > th[-1]].any()
+
+
+def test_samples_in_a_plane_are_interpolated_in_it():
+    # an in-plane measurement (phi_d = 0 only, one plane of the embedding) of a smooth paint
+    g = np.radians(np.linspace(0.0, 40.0, 9))  # theta_h + theta_d <= 80: both above the horizon
+    th, td = (x.ravel() for x in np.meshgrid(g, g, indexing="ij"))
+    s = _half_diff_samples(PAINT, th, td, np.zeros_like(th))
+    pts = gridding._scattered_points(s)
+    _, basis = gridding._affine_span(pts.x)
+    assert basis.shape[0] == 2
+    rng = np.random.default_rng(3)
+    q_th, q_td = np.radians(rng.uniform(0, 40, 200)), np.radians(rng.uniform(0, 40, 200))
+    q = gridding.embed(q_th, q_td, np.zeros(200))
+    idx, w, inside = gridding._weights(pts.x, q)
+    assert inside.all()
+    truth = np.asarray(_half_diff_samples(PAINT, q_th, q_td, np.zeros(200)).values)
+    got = np.exp(np.einsum("qk,qkc->qc", w, np.log(pts.f)[idx]))
+    # a 5-degree grid of a smooth paint: log-linear in the plane within 3 %
+    np.testing.assert_allclose(got, truth, rtol=0.03)
+    # off the plane (phi_d = 45 degrees): the plane's value, not covered
+    off = gridding.embed(q_th, q_td, np.full(200, np.pi / 4))
+    idx2, w2, inside2 = gridding._weights(pts.x, off)
+    assert not inside2[q_td > 1e-3].any()
+    # embedded at (theta_h, 0, theta_d); its projection onto the samples' plane (third
+    # coordinate 0) is (theta_h, 0, 0), whose interpolated value it takes
+    idx3, w3, _ = gridding._weights(pts.x, off * np.array([1.0, 1.0, 0.0]))
+    got2 = np.exp(np.einsum("qk,qkc->qc", w2, np.log(pts.f)[idx2]))
+    got3 = np.exp(np.einsum("qk,qkc->qc", w3, np.log(pts.f)[idx3]))
+    np.testing.assert_allclose(got2, got3, rtol=1e-9)

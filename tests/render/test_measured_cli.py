@@ -65,6 +65,32 @@ def test_render_alta_retroreflector(tmp_path):
     assert lit.mean() > 0.3
 
 
+def test_render_a_one_dimensional_alta_file(tmp_path):
+    # COS_TH only (theta_d = 0): the samples lie on a line, which Qhull cannot tetrahedralize
+    # (render, plot and grid --method interp stopped on a QhullError)
+    from gonio import io
+    from gonio.brdf.gridding import half_diff_iso
+    from gonio.render.measured import renderable
+
+    path = shared_file("alta", "pink-felt-1d.alta")
+    out = gonio("render", "--measured", path, *FAST, "--out", tmp_path / "p.png")
+    assert out.returncode == 0, out.stderr
+    _, lit = _sphere(tmp_path / "p-measured.exr")
+    assert lit.mean() > 0.3
+    samples = io.load(path)
+    table, _ = renderable(samples)
+    th, _, _ = half_diff_iso(samples.wi, samples.wo)
+    order = np.argsort(th)
+    th_n = table.axes[0].nodes()
+    keep = th_n <= th.max()
+    vals = np.asarray(samples.values)[order]
+    want = np.exp([np.interp(th_n[keep], th[order], np.log(vals[:, c])) for c in range(3)]).T
+    # the theta_d = 0 row is the file's slice, log-linear between its samples; the other
+    # theta_d rows repeat it (the file says nothing about them)
+    np.testing.assert_allclose(np.asarray(table.values)[keep, 0, 0], want, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(table.values)[keep, 7, 5], want, rtol=1e-5)
+
+
 def test_render_cornell_spectral_in_colour(tmp_path):
     path = shared_file("cornell", "garnet_red.brdf")
     out = gonio("render", "--measured", path, *FAST, "--out", tmp_path / "c.png")

@@ -24,6 +24,10 @@ Two ways, for two jobs:
     the samples take the value of the nearest sample in the embedding and are masked invalid
     (the coverage mask); sigma is propagated through the interpolation weights (to first order in
     ``log f``: ``sigma^2 = sum_k (dF / df_k)^2 sigma_k^2``), and is 0 outside the hull.
+    Samples that span only a plane or a line in the embedding (a 1-D file such as ALTA's
+    ``COS_TH``, all at ``theta_d = 0``) are interpolated in that plane or along that line: each
+    node takes the interpolated value at its projection onto it, and only nodes on it count as
+    covered.
 
 Only isotropic data is supported (``half_diff_iso``); the anisotropic part of a sample set is
 averaged over ``phi_h`` by construction. Directions are unit vectors in the local frame (z the
@@ -192,14 +196,29 @@ def _scattered_points(samples: MeasuredSamples) -> _Points:
     return _merge_duplicates(x, f, sig)
 
 
+def _affine_span(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre ``(3,)`` and orthonormal basis ``(k, 3)`` of the affine subspace the points span
+    (``k`` = 0 for one point, 1 for points on a line, ...): directions along which their rms
+    spread exceeds 1e-7 rad. A 1-D file (ALTA's ``COS_TH``, theta_d = 0) spans a line."""
+    centre = points.mean(axis=0)
+    if points.shape[0] < 2:
+        return centre, np.zeros((0, 3))
+    _, sv, vt = np.linalg.svd(points - centre, full_matrices=False)
+    return centre, vt[sv / math.sqrt(points.shape[0]) > 1e-7]
+
+
 def _weights(points: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Barycentric interpolation over a Delaunay tetrahedralization of ``points`` (M, 3).
 
-    Returns ``(vertex indices (Q, 4), weights (Q, 4), inside (Q,))``; outside the hull (or when
-    the points do not span three dimensions) the nearest point gets weight 1.
+    Returns ``(vertex indices (Q, 4), weights (Q, 4), inside (Q,))``; outside the hull the
+    nearest point gets weight 1. Points that span fewer than three dimensions are
+    interpolated in the plane or on the line they span (:func:`_weights_low_dim`).
     """
     from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
+    centre, basis = _affine_span(points)
+    if basis.shape[0] < 3:
+        return _weights_low_dim(points, query, centre, basis)
     q = query.shape[0]
     idx = np.zeros((q, 4), dtype=np.int64)
     wts = np.zeros((q, 4))
@@ -216,14 +235,17 @@ def _weights(points: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndar
             try:
                 tri = Delaunay(points, qhull_options=options)
                 break
-            except QhullError:  # coplanar or collinear data: nearest sample everywhere
+            except QhullError:  # numerically flat data: nearest sample everywhere
                 tri = None
     if tri is not None:
         # find_simplex falls back to a brute-force search over every simplex for each point
         # outside the hull; test the hull's facet planes first so that only inside points walk.
-        eq = ConvexHull(points).equations
         in_hull = np.ones(q, dtype=bool)
-        for start in range(0, q, 8192):
+        try:
+            eq = ConvexHull(points).equations
+        except QhullError:  # every point walks instead
+            eq = None
+        for start in range(0, q, 8192) if eq is not None else ():
             part = query[start : start + 8192]
             in_hull[start : start + 8192] = np.all(part @ eq[:, :3].T + eq[:, 3] <= 1e-12, axis=1)
         simplex = np.full(q, -1, dtype=np.int64)
@@ -241,6 +263,57 @@ def _weights(points: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndar
         idx[out, 0] = nearest
         wts[out, 0] = 1.0
     return idx, np.clip(wts, 0.0, 1.0), inside
+
+
+def _weights_low_dim(
+    points: np.ndarray, query: np.ndarray, centre: np.ndarray, basis: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_weights` for points spanning ``k = len(basis) < 3`` dimensions: each query is
+    projected onto their span and interpolated there (linearly between neighbours on a line,
+    over a Delaunay triangulation in a plane; the nearest projected point beyond the ends).
+    ``inside`` needs the query on the span (within 1e-7 rad) and inside the hull there; for a
+    1-D file that is its own slice, the rest of the table extrapolates it."""
+    from scipy.spatial import Delaunay, QhullError, cKDTree
+
+    q = query.shape[0]
+    idx = np.zeros((q, 4), dtype=np.int64)
+    wts = np.zeros((q, 4))
+    y = (points - centre) @ basis.T  # (M, k)
+    yq = (query - centre) @ basis.T  # (Q, k)
+    on_span = np.linalg.norm(query - centre - yq @ basis, axis=1) <= 1e-7
+    k = basis.shape[0]
+    if k == 0:
+        wts[:, 0] = 1.0
+        return idx, wts, on_span
+    if k == 1:
+        order = np.argsort(y[:, 0])
+        ys = y[order, 0]
+        j = np.clip(np.searchsorted(ys, yq[:, 0], side="right") - 1, 0, len(ys) - 2)
+        t = np.clip((yq[:, 0] - ys[j]) / (ys[j + 1] - ys[j]), 0.0, 1.0)
+        idx[:, 0], idx[:, 1] = order[j], order[j + 1]
+        wts[:, 0], wts[:, 1] = 1.0 - t, t
+        inside = (yq[:, 0] >= ys[0]) & (yq[:, 0] <= ys[-1])
+        return idx, wts, inside & on_span
+    inside = np.zeros(q, dtype=bool)
+    try:
+        tri = Delaunay(y, qhull_options="QJ Qbb")
+    except QhullError:  # fewer than three points in the plane: nearest everywhere
+        tri = None
+    if tri is not None:
+        simplex = tri.find_simplex(yq)
+        inside = simplex >= 0
+        s = simplex[inside]
+        t = tri.transform[s]  # (n, 3, 2)
+        b = np.einsum("nij,nj->ni", t[:, :2, :], yq[inside] - t[:, 2, :])
+        wts[inside, :2] = b
+        wts[inside, 2] = 1.0 - b.sum(axis=1)
+        idx[inside, :3] = tri.simplices[s]
+    out = ~inside
+    if out.any():
+        _, nearest = cKDTree(y).query(yq[out])
+        idx[out, 0] = nearest
+        wts[out, 0] = 1.0
+    return idx, np.clip(wts, 0.0, 1.0), inside & on_span
 
 
 def interpolate_samples(

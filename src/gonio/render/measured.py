@@ -7,8 +7,9 @@ hemisphere. Measured data comes in shapes it cannot use directly; :func:`rendera
   a 64 x 32 x 32 isotropic half/diff grid (sqrt-warped theta_h) through the log-linear Delaunay
   interpolant of :func:`gonio.brdf.gridding.interpolate_samples`. Outside the samples' convex
   hull the nearest sample's value is used (extrapolation; the note says how much of the grid
-  that is). Its error on a simulated acquisition of a known material is measured by
-  ``benchmarks/bench_scattered_render.py`` (README table).
+  that is); samples that span only a line or a plane (a 1-D ``COS_TH`` ALTA file) are
+  interpolated along it and extended off it. Its error on a simulated acquisition of a known
+  material is measured by ``benchmarks/bench_scattered_render.py`` (README table).
 * **Gridded tables with holes** (a binned table from ``gonio grid``, or a run's ``/gridded``):
   the valid nodes are treated as samples and interpolated the same way (onto the render grid
   when the table's own grid is coarser), so uncovered cells do not render black. Tables with
@@ -109,7 +110,7 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
         notes.append(
             f"{len(obj)} scattered samples tabulated by log-linear Delaunay interpolation on a "
             f"{'x'.join(str(s) for s in table.shape)} half/diff grid; {covered:.0%} of it inside "
-            "the samples' hull, the rest the nearest sample's value"
+            "the samples' hull, the rest extrapolated from the nearest samples"
         )
         return table, notes
     if isinstance(obj, TabulatedBRDF):
