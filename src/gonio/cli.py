@@ -163,6 +163,12 @@ def _run(argv: Sequence[str] | None, flag: interrupts.StopFlag) -> int:
     except GonioError as exc:
         print(_one_line(exc), file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:
+        # the system refused a file operation (a read-only or full disk, a file where a folder
+        # is needed): the path and the reason are the whole story; atomic writers leave nothing
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"gonio: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as exc:
         print(_one_line(exc, "interrupted"), file=sys.stderr)
         return 128 + int(getattr(exc, "signum", 2))

@@ -2,7 +2,9 @@
 
 Every error that bad *input* can cause derives from :class:`GonioError`. The command line catches
 ``GonioError``, prints ``gonio: <message>`` on one line to stderr and exits with the error's
-``exit_code``; anything else is a bug and keeps its traceback.
+``exit_code``. An ``OSError`` (the system refusing a file operation: a read-only folder, a
+full disk, a file where a folder is needed) is printed the same way, as ``gonio: <path>:
+<reason>`` with exit status 1; anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations

@@ -81,6 +81,30 @@ def test_bad_input_one_line_nonzero_nothing_written(tmp_path, capsys, edit, args
     assert _files(tmp_path) == before
 
 
+@pytest.mark.parametrize("out", ["fit.json", "fit.xml", "link.xml"])
+def test_an_output_that_would_overwrite_the_fit_is_refused(tmp_path, capsys, out):
+    # Mitsuba's export writes FILE.json beside FILE.xml: "--out fit.xml" would replace the fit
+    fit = write_record(tmp_path / "fit.json", fit_record(GGX))
+    (tmp_path / "link.json").symlink_to(fit)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    rc = main(["export", str(fit), "--to", "mitsuba", "--out", str(tmp_path / out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "would overwrite the input" in err, err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_a_refused_file_operation_becomes_one_line(tmp_path, capsys):
+    # an output folder below a regular file: the system refuses (an OSError, as for a read-only
+    # folder or a full disk), which the command line prints as one line; nothing is written
+    fit = write_record(tmp_path / "fit.json", fit_record(GGX))
+    (tmp_path / "afile").write_text("")
+    rc = main(["export", str(fit), "--to", "pbrt", "--out", str(tmp_path / "afile/sub/m.pbrt")])
+    err = capsys.readouterr().err
+    assert rc == 1 and err.count("\n") == 1 and err.startswith("gonio: "), err
+    assert str(tmp_path / "afile") in err
+    assert _files(tmp_path) == ["afile", "fit.json"]
+
+
 def test_spectral_fit_exports_rgb(tmp_path):
     """A spectral Lambert + GGX/Schlick fit: albedo and f0 are converted with
     gonio.io.spectral's matrix (exactly for the albedo); the mapping stays exact."""

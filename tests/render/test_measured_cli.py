@@ -226,6 +226,18 @@ def test_render_output_checks(tmp_path):
     assert not (tmp_path / "d").is_file()
 
 
+def test_negative_seed_is_refused(tmp_path):
+    from gonio.errors import ParameterError
+    from gonio.render import render_sphere
+
+    fit = _spectral_fit(tmp_path / "l.json", np.full(31, 0.5), np.arange(400, 701, 10.0))
+    bad = gonio("render", "--fitted", fit, *FAST, "--seed", "-1", "--out", tmp_path / "a.png")
+    assert bad.returncode == 2 and "--seed must be >= 0" in bad.stderr, bad.stderr
+    assert not list(tmp_path.glob("a*"))
+    with pytest.raises(ParameterError, match="seed"):
+        render_sphere(models.Lambert(), resolution=8, spp=1, seed=-1)
+
+
 def test_brdf_slice_exr_is_not_an_environment(tmp_path, run_table):
     assert gonio("grid", run_table, tmp_path / "g.brdf.h5", "--res", "6").returncode == 0
     assert gonio("convert", tmp_path / "g.brdf.h5", tmp_path / "s.exr", "--quiet").returncode == 0

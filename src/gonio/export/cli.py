@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.errors import ParameterError
+from gonio.io.atomic import same_file
 
 TARGET_NAMES = ("mitsuba", "pbrt", "blender", "openpbr", "usd")
 SUFFIX = {
@@ -137,6 +138,14 @@ def run(args: argparse.Namespace) -> int:
     e = export(args.fit, args.to, refit_from=args.refit_from)
     report = e.to_json()
     if args.out:
+        inputs = [args.fit, *([args.refit_from] if args.refit_from else [])]
+        for path in e.paths(args.out):
+            for src in inputs:
+                if same_file(src, path):
+                    raise ParameterError(
+                        f"--out {args.out} would overwrite the input {src} (as {path}); "
+                        "choose another name"
+                    )
         paths = e.write(args.out)
         report["files"] = [str(p) for p in paths]
         if args.json:

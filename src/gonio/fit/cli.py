@@ -203,6 +203,8 @@ def run(args: argparse.Namespace) -> int:
         raise FitError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
     if args.starts < 1 or args.mcmc_steps < 10 or args.jobs < 1 or args.refine < 0:
         raise FitError("--starts and --jobs must be >= 1, --mcmc-steps >= 10 and --refine >= 0")
+    if args.seed < 0:
+        raise FitError(f"--seed must be >= 0, got {args.seed}")
     from gonio.fit.batch import expand_inputs
 
     paths = expand_inputs(args.inputs)
@@ -268,7 +270,10 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         # Write into a hidden staging folder beside OUT and move the files in at the end, so
         # that Ctrl-C (or an error) while writing leaves no half-written result behind.
         out.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+        try:
+            staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+        except OSError as exc:  # named after the folder asked for, not the staging one
+            raise OSError(exc.errno, exc.strerror, str(out)) from None
         try:
             files = []
             for r in results:

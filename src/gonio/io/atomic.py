@@ -56,7 +56,10 @@ def atomic_output(
         folder.mkdir(parents=True, exist_ok=True)
     elif not folder.is_dir():
         raise FormatError(f"{os.fspath(dest)}: output folder {folder} does not exist")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=suffix, dir=folder)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=suffix, dir=folder)
+    except OSError as exc:  # named after the file asked for, not the temporary one
+        raise OSError(exc.errno, exc.strerror, os.fspath(dest)) from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -69,4 +72,13 @@ def atomic_output(
         raise
 
 
-__all__ = ["atomic_output", "current_umask"]
+def same_file(a: PathLike, b: PathLike) -> bool:
+    """Whether ``a`` and ``b`` name one file: through symlinks and hard links when both
+    exist, by their resolved names otherwise (an output that does not exist yet)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+__all__ = ["atomic_output", "current_umask", "same_file"]

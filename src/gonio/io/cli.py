@@ -9,6 +9,7 @@ import sys
 from typing import Any
 
 from gonio.errors import ParameterError
+from gonio.io.atomic import same_file
 
 
 def register(subparsers: Any) -> None:
@@ -167,7 +168,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     lossy = None if args.lossy is None else parse_precision(args.lossy)
     if args.every < 1:
         raise ParameterError("--every must be >= 1")
-    if os.path.abspath(args.input) == os.path.abspath(args.output):
+    if same_file(args.input, args.output):
         raise ParameterError("IN and OUT are the same file")
     out_name = args.output.lower()
     if not out_name.endswith((".h5", ".hdf5", ".binary", ".exr", ".bsdf")):

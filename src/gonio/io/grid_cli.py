@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from gonio.errors import ParameterError
+from gonio.io.atomic import same_file
 
 DEFAULT_RES = (16, 15, 12)
 
@@ -73,7 +74,7 @@ def cmd_grid(args: argparse.Namespace) -> int:
         raise ParameterError(f"{args.output}: the output must be a .brdf.h5 file")
     if not os.path.exists(args.input):
         raise ParameterError(f"file not found: {args.input}")
-    if os.path.abspath(args.input) == os.path.abspath(args.output):
+    if same_file(args.input, args.output):
         raise ParameterError("IN and OUT are the same file")
     if os.path.isdir(args.output):
         raise ParameterError(f"{args.output} is a folder; give a .brdf.h5 file name")

@@ -348,6 +348,8 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError("give --measured TABLE and/or --fitted FIT.json")
     if args.spp < 1:
         raise ParameterError(f"--spp must be >= 1, got {args.spp}")
+    if args.seed < 0:
+        raise ParameterError(f"--seed must be >= 0, got {args.seed}")
     if not 8 <= args.resolution <= 4096:
         raise ParameterError(f"--resolution must be in [8, 4096], got {args.resolution}")
     from gonio.render.output import output_path

@@ -522,6 +522,8 @@ def render_sphere(
     if isinstance(spp, bool) or not isinstance(spp, int | np.integer) or spp < 1:
         raise ParameterError(f"spp must be a positive integer, got {spp!r}")
     spp = int(spp)
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ParameterError(f"seed must be a non-negative integer, got {seed!r}")
     c_mat = material_channels(material)
     idx = _channel_index(material, channels, max(c_mat, *(lt.channels for lt in lights)))
     post_idx = idx  # channels still to cut from the result
