@@ -108,6 +108,9 @@ def test_alta_bad_headers(tmp_path):
         "nan": "#DIM 1 3\n#PARAM_IN COS_TH\n#PARAM_OUT RGB_COLOR\n0.5 nan 2 3\n",
         "text": "#DIM 1 3\n#PARAM_IN COS_TH\n#PARAM_OUT RGB_COLOR\n0.5 one 2 3\n",
         "func": "#ALTA FUNC HEADER\n#FUNC nonlinear_function_lafortune\n",
+        # inputs outside their domain, which the direction formulas clamped or wrapped silently
+        "cos_above_1": "#DIM 1 3\n#PARAM_IN COS_TH\n#PARAM_OUT RGB_COLOR\n0.9 1 2 3\n2.5 1 2 3\n",
+        "rusin_degrees": "#DIM 2 1\n#PARAM_IN RUSIN_TH_TD\n#PARAM_OUT INV_STERADIAN\n30 10 0.5\n",
     }
     for name, text in cases.items():
         p = tmp_path / f"{name}.alta"

@@ -130,6 +130,33 @@ def _directions(param_in: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     raise AssertionError(param_in)
 
 
+#: Input columns with a bounded domain: (first column, last column + 1, low, high, what).
+_BOUNDED_INPUTS = {
+    "COS_TH": [(0, 1, -1.0, 1.0, "a cosine, in [-1, 1]")],
+    "RUSIN_TH_TD": [(0, 2, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]")],
+    "RUSIN_TH_TD_PD": [(0, 2, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]")],
+    "RUSIN_TH_PH_TD_PD": [
+        (0, 1, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]"),
+        (2, 3, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]"),
+    ],
+}
+
+
+def _check_inputs(path: PathLike, param_in: str, x: np.ndarray) -> None:
+    """Refuse input coordinates outside their domain (beyond 1e-6 of rounding), which the
+    direction formulas would otherwise clamp or wrap silently; names the first bad row."""
+    for a, b, lo, hi, what in _BOUNDED_INPUTS.get(param_in, ()):
+        cols = x[:, a:b]
+        bad = np.flatnonzero(np.any((cols < lo - 1e-6) | (cols > hi + 1e-6), axis=1))
+        if bad.size:
+            row = int(bad[0])
+            raise fail(
+                path,
+                f"data row {row + 1}: {param_in} input {cols[row].tolist()} is not {what} "
+                f"({bad.size} row(s) out of range)",
+            )
+
+
 def read_alta(
     path: PathLike,
     param_out: str | None = None,
@@ -174,6 +201,7 @@ def read_alta(
     elif vs == 2:
         lo_hi = data[:, n_in + n_out :].reshape(-1, n_out, 2)
         sigma = 0.5 * np.abs(lo_hi[..., 1] - lo_hi[..., 0])
+    _check_inputs(path, pin, x)
     wi, wo = _directions(pin, x)
     keep = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     if pout == "INV_STERADIAN_COSINE_FACTOR":
