@@ -119,6 +119,22 @@ def test_roundtrip_and_resampling_write(tmp_path):
     assert 0.5 < lam.mask.mean() < 0.95
 
 
+def test_a_merl_like_grid_of_another_resolution_is_written_at_merls(tmp_path):
+    # MERL's reference reader refuses any dimensions but 90 x 90 x 180: a coarser table on the
+    # same warped axes (gonio grid's default 16 x 15 x 12) is resampled, not written as is
+    from gonio.brdf.tabulated import TabulatedBRDF
+
+    rgb = np.array([0.05, 0.1, 0.2])
+    axes = merl.merl_axes((16, 15, 12))
+    t = TabulatedBRDF(np.broadcast_to(rgb, (16, 15, 12, 3)).copy(), axes, "half_diff_iso")
+    p = tmp_path / "coarse.binary"
+    save(t, p)
+    assert struct.unpack("<3i", p.read_bytes()[:12]) == (90, 90, 180)
+    a = merl.read_merl_arrays(p)
+    assert 0.5 < a.mask.mean() < 0.95  # the cells with both directions above the horizon
+    np.testing.assert_allclose(a.values[a.mask], np.tile(rgb, (a.mask.sum(), 1)), rtol=1e-6)
+
+
 def test_bad_merl_files(tmp_path):
     good = _handmade({})
     cases = {

@@ -187,9 +187,11 @@ def _on_merl_grid(table: TabulatedBRDF) -> bool:
 def write_merl(table: Any, path: PathLike) -> None:
     """Write an RGB table as a MERL ``.binary`` file, atomically.
 
-    A table already on a MERL-like half/diff grid is written cell for cell; anything else (another
-    grid, an anisotropic table, an analytic model with ``f``) is resampled by evaluating
-    ``table.f`` at the MERL cell centres. Invalid cells are written as -1.
+    A table already on MERL's 90 x 90 x 180 half/diff grid is written cell for cell; anything
+    else (another grid, a MERL-like grid of another resolution, an anisotropic table, an analytic
+    model with ``f``) is resampled by evaluating ``table.f`` at the MERL cell centres: MERL's
+    reference reader accepts no other dimensions (gonio reads them). Invalid cells are written
+    as -1.
     """
     from gonio.brdf import frames
 
@@ -203,7 +205,7 @@ def write_merl(table: Any, path: PathLike) -> None:
         raise ParameterError(
             f"{os.fspath(path)}: scattered samples cannot be written as MERL (grid them first)"
         )
-    if hasattr(table, "axes") and _on_merl_grid(table):
+    if hasattr(table, "axes") and _on_merl_grid(table) and table.shape[:3] == MERL_DIMS:
         values = np.asarray(table.values, dtype=np.float64)
         mask = None if table.mask is None else np.asarray(table.mask, dtype=bool)
     else:
