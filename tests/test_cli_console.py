@@ -172,3 +172,9 @@ def test_demo_times_are_stated_with_the_machine_state():
     assert len(timed) >= 2
     for s in timed:
         assert re.search(r"idle|load|busy", s), s
+
+
+def test_plan_refuses_a_negative_refusal_count():
+    proc = cs.run(*PLAN, "--list-refused", "-1", columns=80)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip() == "gonio: --list-refused must be >= 0, got -1"

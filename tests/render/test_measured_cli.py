@@ -246,3 +246,10 @@ def test_brdf_slice_exr_is_not_an_environment(tmp_path, run_table):
                 tmp_path / "e.png")  # fmt: skip
     assert out.returncode == 2 and "not a lat-long environment map" in out.stderr
     assert not (tmp_path / "e.png").exists()
+
+
+def test_spp_beyond_the_limit_is_refused(tmp_path):
+    fit = _spectral_fit(tmp_path / "l.json", np.full(31, 0.5), np.arange(400, 701, 10.0))
+    bad = gonio("render", "--fitted", fit, "--spp", "100000000", "--out", tmp_path / "a.png")
+    assert bad.returncode == 2 and "--spp must be in [1, 65536]" in bad.stderr, bad.stderr
+    assert not list(tmp_path.glob("a*"))

@@ -147,6 +147,8 @@ def _plan(args: argparse.Namespace) -> int:
     from gonio.acquire.timing import costs_from_run, default_costs
     from gonio.rigs.config import load_rig
 
+    if args.list_refused < 0:
+        raise ParameterError(f"--list-refused must be >= 0, got {args.list_refused}")
     rig = load_rig(args.rig, check_sample_model=False)  # no model code (JAX) for a dry run
     plan, _ = load_plan(args.plan)
     costs = costs_from_run(args.timing_from) if args.timing_from else default_costs(rig)

@@ -16,6 +16,9 @@ from gonio.errors import FormatError, ParameterError
 # Fit files hold a model description made by ``Node.to_dict``; they are parsed through the model
 # registry (gonio.brdf) so that gonio.render never imports gonio.fit (DESIGN.md dependency rule).
 MAX_FIT_BYTES = 16 * 1024 * 1024
+#: Largest --spp: 2^16 samples per pixel already takes minutes at 256^2 (3.4e9 samples); the
+#: 10^8 of a typo would run for days with no sign of it but the progress bar.
+MAX_SPP = 1 << 16
 #: The fit-result format read here (``gonio.fit.result.SCHEMA_ID`` / ``SCHEMA_VERSION``; not
 #: imported from gonio.fit, which gonio.render must not depend on).
 FIT_SCHEMA = "gonio/fit-result"
@@ -229,7 +232,9 @@ def register(subparsers: Any) -> None:
         "shown as linear sRGB through CIE 1931 XYZ under it; D65 (default) is sRGB's white, so a "
         "grey BRDF stays grey",
     )
-    p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
+    p.add_argument(
+        "--spp", type=int, default=64, help=f"samples per pixel (default 64, at most {MAX_SPP})"
+    )
     p.add_argument("--resolution", type=int, default=256, help="image size in pixels (256)")
     p.add_argument(
         "--sampler",
@@ -346,8 +351,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.measured and not args.fitted:
         raise ParameterError("give --measured TABLE and/or --fitted FIT.json")
-    if args.spp < 1:
-        raise ParameterError(f"--spp must be >= 1, got {args.spp}")
+    if not 1 <= args.spp <= MAX_SPP:
+        raise ParameterError(f"--spp must be in [1, {MAX_SPP}], got {args.spp}")
     if args.seed < 0:
         raise ParameterError(f"--seed must be >= 0, got {args.seed}")
     if not 8 <= args.resolution <= 4096:
