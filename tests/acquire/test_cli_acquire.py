@@ -61,6 +61,11 @@ def test_acquire_argument_errors(tmp_path, capsys):
     )
     assert "probability" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+    for scale in ("inf", "nan", "1e300", "0"):  # inf overflowed the emulator's clock
+        out = ["--out", str(tmp_path / "r"), "--time-scale", scale]
+        assert main(["acquire", "--rig", "sim", "--plan", "iso-tiny", *out]) == 2
+        assert "--time-scale must be in (0, 1e6]" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
 
 
 def test_acquire_tiny_run_text_output(tmp_path, capsys):

@@ -146,6 +146,17 @@ def test_out_of_limit_plan_refused_before_any_motion(tmp_path):
     goals_within_limits(run)
 
 
+def test_plan_with_nothing_reachable_is_refused_before_any_motion(tmp_path):
+    # every pose refused: the run measured nothing, exited 0 and parked the servos (motion)
+    plan = tmp_path / "grazing.toml"
+    plan.write_text('kind = "isotropic"\ntheta_i_deg = [85]\ntheta_o_deg = [45, 60]\n'
+                    'dphi_deg = [180]\n')  # fmt: skip
+    run = tmp_path / "run"
+    with pytest.raises(PlanError, match=r"nothing to measure: all 2 poses .* too grazing"):
+        acquire(run, "sim_sample", plan, progress=False)
+    assert not run.exists()
+
+
 def _run_until(cmd, run: Path, n_done: int, sig: int, timeout: float = 60.0) -> int:
     proc = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     t0 = time.monotonic()

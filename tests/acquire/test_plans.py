@@ -89,6 +89,15 @@ def test_adaptive_refines_around_measured_peak():
             "start, stop, step",
         ),
         ({"kind": "grid4d", "theta_i_deg": [1], "bogus": 1}, "bogus"),
+        (
+            {
+                "kind": "isotropic",
+                "theta_i_deg": [10],
+                "theta_o_deg": [20],
+                "dphi_deg": {"start": 0, "stop": 180, "step": 90, "stpo": 90},
+            },
+            r"dphi_deg\.stpo: unknown in a range",
+        ),
     ],
 )
 def test_bad_plan_specs(spec, match):

@@ -266,8 +266,8 @@ def _acquire(args: argparse.Namespace) -> int:
     from gonio.rigs.sim.bus import parse_faults
 
     faults = parse_faults(args.sim_faults) if args.sim_faults else None
-    if args.time_scale is not None and not args.time_scale > 0:
-        raise ParameterError("--time-scale must be > 0")
+    if args.time_scale is not None and not 0 < args.time_scale <= 1e6:  # as sim.time_scale
+        raise ParameterError(f"--time-scale must be in (0, 1e6], got {args.time_scale:g}")
 
     def devices(rig, run_dir):
         # --sim-faults and --time-scale are the simulated rig's; hardware ignores them

@@ -172,9 +172,7 @@ def dry_run(rig: RigConfig, plan: Plan, time_budget_s: float = 10.0) -> list[Sta
     """Plan every stage without hardware; later stages see no measurements (the adaptive plan
     then refines around the mirror direction)."""
     out = []
-    start = dict(rig.park_deg)
-    for j in rig.joints:
-        start.setdefault(j.name, j.zero_offset_deg)
+    start = start_pose(rig)
     idx = 0
     for s in range(plan.n_stages):
         sp = plan_stage(rig, plan, s, [], start, idx, time_budget_s)
@@ -183,6 +181,28 @@ def dry_run(rig: RigConfig, plan: Plan, time_budget_s: float = 10.0) -> list[Sta
         if sp.accepted:
             start = dict(sp.accepted[-1].joints_deg)
     return out
+
+
+def start_pose(rig: RigConfig) -> dict[str, float]:
+    """Joint angles (deg) a run starts planning from: the park pose, zero offsets elsewhere."""
+    start = dict(rig.park_deg)
+    for j in rig.joints:
+        start.setdefault(j.name, j.zero_offset_deg)
+    return start
+
+
+def _refuse_if_nothing(sp: StagePlan) -> None:
+    if not sp.accepted:
+        c = sp.refused[0] if sp.refused else None
+        raise PlanError(
+            "nothing to measure: "
+            + (
+                f"all {len(sp.refused)} poses of stage {sp.stage} are refused by the rig, first"
+                f" #{c.idx}: {c.reason} ('gonio plan --list-refused N' lists them)"
+                if c is not None
+                else f"stage {sp.stage} of the plan has no configuration"
+            )
+        )
 
 
 # --- the run ------------------------------------------------------------------------------
@@ -287,10 +307,12 @@ def acquire(
                 raise PlanError("a new run needs --rig and --plan")
             rig_cfg = rig if isinstance(rig, RigConfig) else load_rig(rig)
             plan_obj, spec = load_plan(plan)
+            # the first stage is planned before anything is created or the bus opened: a plan
+            # with nothing the rig can reach (or, strict, with any pose it cannot) moves nothing
+            first = plan_stage(rig_cfg, plan_obj, 0, [], start_pose(rig_cfg), 0)
             if strict:
-                # plan the first stage before creating anything or opening the bus
-                first = dry_run(rig_cfg, plan_obj)[0]
                 _refuse_if_any(first)
+            _refuse_if_nothing(first)
             meta = {"strict": "1" if strict else "0"}
             if exposure_planning is not None:  # a resumed run keeps the choice
                 meta["exposure_planning"] = "1" if exposure_planning else "0"
@@ -300,6 +322,7 @@ def acquire(
         if exposure_planning is None and journal.get_meta("exposure_planning") is not None:
             exposure_planning = journal.get_meta("exposure_planning") == "1"
         run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample)
+        run.first_stage = None if resume else first
         try:
             run.execute(open_devices, exposure_planning)
         except BaseException:
@@ -345,6 +368,7 @@ class _Run:
         self.bus: dict = {}
         self.stop_note = ""
         self._closed = False
+        self.first_stage: StagePlan | None = None  # stage 0 as planned before the bus opened
 
     def execute(self, open_devices, exposure_planning) -> None:
         from gonio.acquire.imaging import open_run_camera
@@ -408,16 +432,17 @@ class _Run:
         kin = Kinematics(rig)
         scale = float(getattr(ses, "time_scale", 1.0))  # rig seconds per wall second
         with _Progress(self.progress) as bar:
-            start_deg = dict(rig.park_deg)
-            for j in rig.joints:
-                start_deg.setdefault(j.name, j.zero_offset_deg)
+            start_deg = start_pose(rig)
             for stage in range(plan.n_stages):
                 if not journal.stage_planned(stage):
                     results = [
                         Result(tuple(s.wi), tuple(s.wo), float(np.mean(s.value)))
                         for s in journal.samples()
                     ]
-                    sp = plan_stage(rig, plan, stage, results, start_deg, journal.next_index())
+                    if stage == 0 and self.first_stage is not None:
+                        sp = self.first_stage  # no samples yet: the same plan, not made twice
+                    else:
+                        sp = plan_stage(rig, plan, stage, results, start_deg, journal.next_index())
                     if journal.get_meta("strict") == "1":
                         _refuse_if_any(sp)
                     journal.plan_stage(stage, sp.configs)

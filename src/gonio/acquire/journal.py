@@ -106,8 +106,11 @@ class Journal:
                         "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
                         list(items.items()),
                     )
-            else:
-                ver = self.get_meta("schema_version")
+            else:  # read directly: get_meta's None for an unreadable table would hide why
+                row = self.db.execute(
+                    "SELECT value FROM meta WHERE key = 'schema_version'"
+                ).fetchone()
+                ver = row[0] if row else None
                 if ver != str(SCHEMA_VERSION):
                     raise FormatError(f"{self.path}: unknown journal schema version {ver!r}")
         except sqlite3.DatabaseError as exc:
@@ -116,6 +119,36 @@ class Journal:
 
     def close(self) -> None:
         self.db.close()
+
+    def check(self) -> None:
+        """Refuse a damaged journal (FormatError) before a resumed run moves anything: SQLite's
+        ``quick_check`` of every page and index, then every configuration and sample row
+        decoded. A damaged file would otherwise stop the run on its first unreadable row
+        after the servos moved, or hide a recorded sample from :meth:`pending` (its index
+        page lost) so that the configuration is measured again."""
+        try:
+            found = [r[0] for r in self.db.execute("PRAGMA quick_check")]
+            configs = samples = None
+            if found == ["ok"]:
+                configs, samples = self.configs(), self.samples()
+        except sqlite3.DatabaseError as exc:
+            raise FormatError(f"{self.path}: damaged journal ({exc})") from None
+        except (ValueError, TypeError) as exc:  # a row that is not what the journal writes
+            raise FormatError(f"{self.path}: a row does not decode ({exc})") from None
+        if configs is None or samples is None:
+            # one problem per line, the first may be a "*** in database main ***" heading
+            lines = [ln for f in found for ln in f.splitlines() if not ln.startswith("***")]
+            raise FormatError(
+                f"{self.path}: damaged journal ({lines[0] if lines else found[0]}; "
+                f"{len(lines)} problem(s) found by SQLite's quick_check)"
+            )
+        status = {c.idx: c.status for c in configs}
+        stray = [s.idx for s in samples if status.get(s.idx) != "planned"]
+        if stray:
+            raise FormatError(
+                f"{self.path}: {len(stray)} sample(s) without an accepted configuration "
+                f"(first: index {stray[0]})"
+            )
 
     # --- meta ---------------------------------------------------------------------------------
     def set_meta(self, items: dict[str, str]) -> None:

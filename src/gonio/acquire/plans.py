@@ -96,6 +96,9 @@ def _key_error(key: str | tuple, msg: str) -> PlanError:
 def _angles(spec, key: str) -> np.ndarray:
     """Degrees list or {start, stop, step} (inclusive) -> radians array."""
     if isinstance(spec, dict):
+        extra = sorted(set(spec) - {"start", "stop", "step"})
+        if extra:  # a misspelt "stop" must not leave the range silently as written elsewhere
+            raise _key_error((key, extra[0]), "unknown in a range (start, stop, step)")
         try:
             if any(isinstance(spec[k], bool) for k in ("start", "stop", "step")):
                 raise TypeError("a boolean is not a number of degrees")

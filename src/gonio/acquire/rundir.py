@@ -74,15 +74,23 @@ def discard(run_dir: Path, existed: bool) -> None:
 
 
 def open_run(run_dir: Path) -> tuple[Journal, RigConfig, Plan]:
-    """Open an existing run: its journal, and the rig and plan recorded in it."""
+    """Open an existing run: its journal (checked, :meth:`Journal.check`), and the rig and plan
+    recorded in it."""
     j = Journal(run_dir)
-    text = j.get_meta("rig_text")
-    spec = j.get_meta("plan_spec")
-    if text is None or spec is None:
+    try:
+        j.check()
+        text = j.get_meta("rig_text")
+        spec = j.get_meta("plan_spec")
+        if text is None or spec is None:
+            raise FormatError(f"{run_dir}: journal lacks the rig or the plan")
+        rig = parse_rig(text, j.get_meta("rig_source") or "rig")
+        try:
+            plan = plan_from_spec(json.loads(spec))
+        except json.JSONDecodeError as exc:
+            raise FormatError(f"{j.path}: the recorded plan does not decode ({exc})") from None
+    except BaseException:
         j.close()
-        raise FormatError(f"{run_dir}: journal lacks the rig or the plan")
-    rig = parse_rig(text, j.get_meta("rig_source") or "rig")
-    plan = plan_from_spec(json.loads(spec))
+        raise
     return j, rig, plan
 
 
