@@ -57,27 +57,23 @@ def test_render_a_runs_table(tmp_path, run_table, light):
     assert np.isfinite(img).all()
 
 
-def test_render_alta_retroreflector(tmp_path):
-    path = shared_file("alta", "retro-gray-tape.dat")
+# pink-felt-1d.alta is COS_TH only (theta_d = 0): its samples lie on a line, which Qhull cannot
+# tetrahedralize (render, plot and grid --method interp stopped on a QhullError)
+@pytest.mark.parametrize("name", ["retro-gray-tape.dat", "pink-felt-1d.alta"])
+def test_render_alta_files(tmp_path, name):
+    path = shared_file("alta", name)
     out = gonio("render", "--measured", path, *FAST, "--out", tmp_path / "a.png")
     assert out.returncode == 0, out.stderr
     _, lit = _sphere(tmp_path / "a-measured.exr")
     assert lit.mean() > 0.3
 
 
-def test_render_a_one_dimensional_alta_file(tmp_path):
-    # COS_TH only (theta_d = 0): the samples lie on a line, which Qhull cannot tetrahedralize
-    # (render, plot and grid --method interp stopped on a QhullError)
+def test_a_one_dimensional_alta_file_is_interpolated_along_its_slice():
     from gonio import io
     from gonio.brdf.gridding import half_diff_iso
     from gonio.render.measured import renderable
 
-    path = shared_file("alta", "pink-felt-1d.alta")
-    out = gonio("render", "--measured", path, *FAST, "--out", tmp_path / "p.png")
-    assert out.returncode == 0, out.stderr
-    _, lit = _sphere(tmp_path / "p-measured.exr")
-    assert lit.mean() > 0.3
-    samples = io.load(path)
+    samples = io.load(shared_file("alta", "pink-felt-1d.alta"))
     table, _ = renderable(samples)
     th, _, _ = half_diff_iso(samples.wi, samples.wo)
     order = np.argsort(th)

@@ -192,17 +192,15 @@ def start_pose(rig: RigConfig) -> dict[str, float]:
 
 
 def _refuse_if_nothing(sp: StagePlan) -> None:
-    if not sp.accepted:
-        c = sp.refused[0] if sp.refused else None
-        raise PlanError(
-            "nothing to measure: "
-            + (
-                f"all {len(sp.refused)} poses of stage {sp.stage} are refused by the rig, first"
-                f" #{c.idx}: {c.reason} ('gonio plan --list-refused N' lists them)"
-                if c is not None
-                else f"stage {sp.stage} of the plan has no configuration"
-            )
-        )
+    if sp.accepted:
+        return
+    if not sp.refused:
+        raise PlanError(f"nothing to measure: stage {sp.stage} of the plan has no configuration")
+    c = sp.refused[0]
+    raise PlanError(
+        f"nothing to measure: all {len(sp.refused)} poses of stage {sp.stage} are refused by the"
+        f" rig, first #{c.idx}: {c.reason} ('gonio plan --list-refused N' lists them)"
+    )
 
 
 # --- the run ------------------------------------------------------------------------------
@@ -297,6 +295,7 @@ def acquire(
     with interrupts.installed() as flag, flag.shielded():
         if flag.requested:  # a signal during start-up whose exception was swallowed
             raise flag.interrupted()
+        first = None  # stage 0 of a new run, planned before anything is created
         if resume:
             journal, rig_cfg, plan_obj = open_run(run_dir)
             if rig is not None:
@@ -321,8 +320,7 @@ def acquire(
             created = True
         if exposure_planning is None and journal.get_meta("exposure_planning") is not None:
             exposure_planning = journal.get_meta("exposure_planning") == "1"
-        run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample)
-        run.first_stage = None if resume else first
+        run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample, first)
         try:
             run.execute(open_devices, exposure_planning)
         except BaseException:
@@ -352,7 +350,9 @@ def _default_devices(rig: RigConfig, run_dir: Path):
 class _Run:
     """One execution of :func:`acquire` (state shared by its phases)."""
 
-    def __init__(self, run_dir, journal, rig, plan, flag, resume, progress, on_sample) -> None:
+    def __init__(
+        self, run_dir, journal, rig, plan, flag, resume, progress, on_sample, first_stage=None
+    ) -> None:
         self.run_dir = run_dir
         self.journal = journal
         self.rig = rig
@@ -368,7 +368,7 @@ class _Run:
         self.bus: dict = {}
         self.stop_note = ""
         self._closed = False
-        self.first_stage: StagePlan | None = None  # stage 0 as planned before the bus opened
+        self.first_stage: StagePlan | None = first_stage  # stage 0 planned before the bus opened
 
     def execute(self, open_devices, exposure_planning) -> None:
         from gonio.acquire.imaging import open_run_camera

@@ -128,20 +128,19 @@ class Journal:
         page lost) so that the configuration is measured again."""
         try:
             found = [r[0] for r in self.db.execute("PRAGMA quick_check")]
-            configs = samples = None
-            if found == ["ok"]:
-                configs, samples = self.configs(), self.samples()
+            if found != ["ok"]:
+                # one problem per line, the first may be a "*** in database main ***" heading;
+                # raised as SQLite raises its own errors, reported by the handler below
+                lines = [ln for f in found for ln in f.splitlines() if not ln.startswith("***")]
+                raise sqlite3.DatabaseError(
+                    f"{lines[0] if lines else found[0]}; {len(lines)} problem(s) found by"
+                    " SQLite's quick_check"
+                )
+            configs, samples = self.configs(), self.samples()
         except sqlite3.DatabaseError as exc:
             raise FormatError(f"{self.path}: damaged journal ({exc})") from None
         except (ValueError, TypeError) as exc:  # a row that is not what the journal writes
             raise FormatError(f"{self.path}: a row does not decode ({exc})") from None
-        if configs is None or samples is None:
-            # one problem per line, the first may be a "*** in database main ***" heading
-            lines = [ln for f in found for ln in f.splitlines() if not ln.startswith("***")]
-            raise FormatError(
-                f"{self.path}: damaged journal ({lines[0] if lines else found[0]}; "
-                f"{len(lines)} problem(s) found by SQLite's quick_check)"
-            )
         status = {c.idx: c.status for c in configs}
         stray = [s.idx for s in samples if status.get(s.idx) != "planned"]
         if stray:

@@ -353,13 +353,13 @@ def _pixel_major(model: Any, kind: str) -> bool:
     return kind == "model" and getattr(model, "broadcasts_outgoing", False)
 
 
-@jax.jit
-def _outgoing_per_sample(wo: Array, weights: Array) -> Array:
-    """``wo`` (P, 3) repeated for each of the batch's samples -> (S, P, 3), as a buffer: the
+@functools.partial(jax.jit, static_argnames=("samples",))
+def _outgoing_per_sample(wo: Array, samples: int) -> Array:
+    """``wo`` (P, 3) repeated for each of a batch's samples -> (S, P, 3), as a buffer: the
     models' kernels run faster reading one than with the broadcast fused into them (GGX
     conductor f + pdf + sample at 16 x 8192: 7.0-7.3 ms so, 5.5-6.1 ms reading the buffer,
     made in 0.1 ms; same run)."""
-    return jnp.broadcast_to(wo[None], (weights.shape[0], *wo.shape))
+    return jnp.broadcast_to(wo[None], (samples, *wo.shape))
 
 
 @functools.partial(jax.jit, static_argnames=("kind", "mis", "light_sampling"))
@@ -374,12 +374,10 @@ def _model_stage(model, proposal, state, light_wi, wo, sobol, shift, *, kind, mi
         return jnp.swapaxes(x, 0, 1) if pixel_major else x
 
     if pixel_major:
-        wo_s, light_wi, u = wo[:, None], [swap(wi) for wi in light_wi], swap(u)
-    else:
-        wo_s = wo
-    fv = [swap(f(wi, wo_s)) for wi in light_wi] if light_sampling else None
-    pb = [swap(pdf(wi, wo_s)) for wi in light_wi] if light_sampling and mis else None
-    brdf = tuple(swap(x) for x in sample(wo_s, u)) if kind != "none" else None
+        wo, light_wi, u = wo[:, None], [swap(wi) for wi in light_wi], swap(u)
+    fv = [swap(f(wi, wo)) for wi in light_wi] if light_sampling else None
+    pb = [swap(pdf(wi, wo)) for wi in light_wi] if light_sampling and mis else None
+    brdf = tuple(swap(x) for x in sample(wo, u)) if kind != "none" else None
     return fv, pb, brdf
 
 
@@ -621,6 +619,7 @@ def _render_area(
     done = 0
     wo_tiles = [device_array(pad_rows(hits.wo[a:b], p_tile)) for a, b in tiles]
     state = None
+    pixel_major = _pixel_major(material, tech.kind)
     if is_table(material) and tech.kind in TABLE_METHODS:
         # every outgoing direction of the image is known here: the table's sampling structures
         # for their buckets are built once, and the kernels take them as arguments
@@ -649,13 +648,12 @@ def _render_area(
             if progress is not None:
                 progress(done, total)
 
-    for (a, b), wo in zip(tiles, wo_tiles, strict=True):
+    for (a, b), wo_tile in zip(tiles, wo_tiles, strict=True):
         pos = device_array(pad_rows(hits.position[a:b], p_tile))
         frame = device_array(pad_rows(hits.frame[a:b], p_tile))
         sh = device_array(pad_rows(shift[a:b], p_tile))
         acc = device_array(np.zeros((p_tile, c_out), np.float32))
-        if not _pixel_major(material, tech.kind):
-            wo = _outgoing_per_sample(wo, batches[0][1])
+        wo = wo_tile if pixel_major else _outgoing_per_sample(wo_tile, s_batch)
         for k, (sb, wb) in enumerate(batches):
             acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, state, proposal)
             pending.append(acc)
