@@ -110,6 +110,8 @@ class HDRResult:
         all frames is left out (it scales every pixel alike and the white reference removes it).
     frame_fraction : (K, H, W) float32 share of each frame in each pixel's estimate (weights
         normalized per pixel), so a region's sensitivity to each exposure error can be computed.
+    noise_terms : what ``variance`` was computed from (the noise model and each frame's dark
+        terms), for :meth:`variance_at`.
     """
 
     rate: np.ndarray
@@ -119,11 +121,49 @@ class HDRResult:
     ratio_source: list[str] = field(default_factory=list)
     log_time_cov: np.ndarray | None = None
     frame_fraction: np.ndarray | None = None
+    noise_terms: MergeNoise | None = None
 
     @property
     def sigma(self) -> np.ndarray:
         """Standard deviation of ``rate``, DN/s (NaN where ``rate`` is NaN)."""
         return np.sqrt(self.variance)
+
+    def variance_at(self, rate: np.ndarray, where: np.ndarray) -> np.ndarray:
+        """Variance (DN/s)^2 that the merge would give the pixels ``where`` if their rates were
+        ``rate`` (DN/s), through the same frames.
+
+        ``variance`` is the noise model at each pixel's own measured rate, so it is correlated
+        with that pixel's noise: a pixel that came out low claims a smaller variance. A fit that
+        weights pixels by it leans toward the low ones (a harmonic-mean bias of about
+        ``1 / SNR^2`` per pixel); weights from this method at a smooth estimate of the rate (a
+        fitted surface) are free of it.
+
+        Parameters
+        ----------
+        rate : (N,) assumed rates, DN/s.
+        where : boolean mask (H, W) selecting N pixels, or an index into the (H, W) frame.
+        """
+        if self.noise_terms is None or self.frame_fraction is None:
+            raise ParameterError("this merge result carries no noise model to re-evaluate")
+        nt = self.noise_terms
+        usable = self.frame_fraction[:, where] > 0  # a frame's weight is > 0 exactly where used
+        rate = np.asarray(rate, dtype=np.float64)
+        den = np.zeros(rate.shape)
+        for k, t in enumerate(self.exposures_s):
+            v = nt.noise.variance(rate * t, nt.dark_dn[k]) + nt.dark_var[k]
+            den += np.where(usable[k], t * t / v, 0.0)
+        with np.errstate(divide="ignore"):
+            return np.where(den > 0, 1.0 / den, np.nan)
+
+
+@dataclass(frozen=True)
+class MergeNoise:
+    """The noise terms of a merge: the sensor's model and, per frame, the mean dark signal
+    (DN) whose shot noise stays in the frame and the variance (DN^2) its dark frame adds."""
+
+    noise: NoiseModel
+    dark_dn: tuple[float, ...]
+    dark_var: tuple[float, ...]
 
 
 def saturation_threshold(white_level: int, noise: NoiseModel) -> float:
@@ -290,7 +330,8 @@ def merge_brackets(
     )
     total = weights.sum(0)
     fraction = np.where(total > 0, weights / np.where(total > 0, total, 1.0), 0.0)
-    return HDRResult(rate, var, n_used, times, source, log_cov, fraction.astype(np.float32))
+    terms = MergeNoise(noise, tuple(map(float, dark_dn)), tuple(map(float, dark_var)))
+    return HDRResult(rate, var, n_used, times, source, log_cov, fraction.astype(np.float32), terms)
 
 
 def _weighted(signals, usable, times, variances):

@@ -401,6 +401,7 @@ class ImagingCamera:
             pose_sigma_points=pose_samples(pose),
             fit_order=self.settings.fit_order,
             direction_uncertainty=True,
+            variance_at=hdr.variance_at,
         )
 
     def _write_exr(self, tag, hdr, pose, geometry, exposures, m, hint) -> None:
