@@ -50,16 +50,17 @@ the long axis innermost (same-run A/B, 8192-pixel x 16-sample tile of the equal-
 light stage 5.7 -> 4.8 ms, Lambert material 2.5 -> 1.6 ms, GGX 12.8 -> 9.0 ms; shading 1.5 ->
 1.7 ms). Each tile runs as three jitted float32 stages: light sampling, the material (``f`` and
 ``pdf`` at the light samples, BRDF samples), shading. Tile shapes do not follow the request:
-``spp`` is padded to a multiple of :data:`SAMPLE_BATCH` and pixels to one of a few tile sizes
-(padding has zero weight), and delta and area lights of one kind are stacked and looped over
-(or picked from) with a traced count, so that a new ``spp``, image size or number of delta,
-area or environment lights reuses the compiled kernels (with the persistent cache of
-:mod:`gonio.compile_cache`, across processes too). Each tile's sums stay on the device until
-the end of the render (one transfer back). Every material is traced into the middle stage: a
-table sampled by one of its own methods gets, as kernel arguments, its sampling structures for
-the outgoing directions of the image (built once per render, before the first tile, for the
-buckets those directions fall in), and rejection draws its extra random numbers from a hash of
-each sample's uniforms, so no kernel call waits on the host.
+``spp`` is padded to a multiple of :data:`SAMPLE_BATCH` (padding has zero weight) and pixels
+to equal tiles of one of at most 17 sizes (:func:`gonio.render.tiling.sample_tile`), and delta
+and area lights of one kind are stacked and looped over (or picked from) with a traced count,
+so that a new ``spp`` or number of delta, area or environment lights reuses the compiled
+kernels, and so does a new image size unless it needs a tile size not compiled yet (with the
+persistent cache of :mod:`gonio.compile_cache`, across processes too). Each tile's sums stay on
+the device until the end of the render (one transfer back). Every material is traced into the
+middle stage: a table sampled by one of its own methods gets, as kernel arguments, its sampling
+structures for the outgoing directions of the image (built once per render, before the first
+tile, for the buckets those directions fall in), and rejection draws its extra random numbers
+from a hash of each sample's uniforms, so no kernel call waits on the host.
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ from gonio.render.materials import (
     restrict_table_channels,
 )
 from gonio.render.scene import Camera, SphereHits, intersect_sphere
-from gonio.render.tiling import device_array, pad_rows, pixel_tile, sampled_groups, tile_spans
+from gonio.render.tiling import device_array, pad_rows, sample_tile, sampled_groups, tile_spans
 
 Array = jnp.ndarray
 
@@ -613,7 +614,7 @@ def _render_area(
     sob[:spp] = sobol
     wts = np.zeros(n_batches * s_batch, np.float32)
     wts[:spp] = 1.0
-    p_tile = pixel_tile(n_pix, max(1, tile_samples // s_batch))
+    p_tile = sample_tile(n_pix, max(1, tile_samples // s_batch))
     tiles = list(tile_spans(n_pix, p_tile))
     total = len(tiles) * n_batches
     done = 0
