@@ -49,6 +49,16 @@ def test_perspective_wo_points_to_the_camera():
     np.testing.assert_allclose(world_wo, to_cam, atol=1e-5)
 
 
+def test_hits_are_shared_between_renders_of_one_image_and_read_only():
+    a = intersect_sphere(24)
+    assert intersect_sphere((24, 24), Camera()) is a  # the same image: traced once
+    assert intersect_sphere(24, Camera.perspective(distance=3.0)) is not a
+    assert intersect_sphere(25) is not a
+    for arr in (a.index, a.position, a.frame, a.wo):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] = 0
+
+
 @pytest.mark.parametrize(
     "make",
     [
