@@ -237,7 +237,10 @@ def _value_at_centre(
     When given, the fit is repeated once with the variances at the first fit's surface instead
     of ``variances``, which the noise model evaluated at each pixel's own noisy value: those
     weights favour the pixels that came out low, a bias of the intercept toward lower values
-    (:meth:`gonio.acquire.hdr.HDRResult.variance_at`).
+    (:meth:`gonio.acquire.hdr.HDRResult.variance_at`). What remains is the surface's own
+    dependence on each pixel (its leverage), about ``k / N`` of that bias for ``k`` surface terms
+    and ``N`` pixels: at 12 electrons per pixel (SNR 3.3) and 32-64 pixels per colour plane,
+    600 trials gave a mean pull of -0.02 to -0.15 sigma, against -1.6 to -2.3 before (300).
     """
     dx, dy = points[:, 0] - centre[0], points[:, 1] - centre[1]
     cols = [np.ones_like(values), dx, dy]
