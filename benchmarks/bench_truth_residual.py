@@ -13,10 +13,12 @@ Linearized at the truth (the built-in paint's Lambert + Torrance-Sparrow), per r
 * the mean ``z_i z_j`` over same-channel pairs of configurations whose measured light directions
   agree within 1 deg (a correlation between configurations sharing a light);
 * with ``--weights-every N``, for every N-th configuration, the sample value re-measured from its
-  HDR frame (``RUN/hdr/*.exr``: merged rate, variance, pose) with the spot fit's pixel weights
-  taken from the noise model at a locally smoothed rate instead of each pixel's own noisy rate
-  (``gonio.acquire.radiometry.measure_brdf`` weights by the merge's variance, which the merge
-  evaluates at the pixel's own rate): the difference, in sigma, is the bias those weights cause.
+  HDR frame (``RUN/hdr/*.exr``: merged rate, variance, pose) twice: with the spot fit's pixels
+  weighted by the merge's variance, which the merge evaluates at each pixel's own noisy rate,
+  and with the noise model at a locally smoothed rate: the difference, in sigma, is the bias the
+  first weights cause. Runs acquired before the spot fit came to weight its pixels at the fitted
+  surface (``HDRResult.variance_at``) recorded the first value (``reproduced_max_abs_dz`` is 0
+  for them); later runs record a value free of that bias, and this diagnosis is what led to it.
 
 Writes ``benchmarks/results/truth_residual.csv`` (one row per run) and, with
 ``--weights-every``, ``truth_residual_weights.csv`` (one row per run: mean bias per channel).
