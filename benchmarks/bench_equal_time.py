@@ -11,9 +11,11 @@ orientation or pixel filtering: the figure is ``time x MSE`` at ``--spp`` (the i
 usual efficiency), over the pixels inside 0.9 of the sphere's radius (away from the silhouette,
 where Mitsuba's pixel filter mixes in the background). Times are the second render call
 (compilation and Dr.Jit's kernel cache excluded); MSE is relative (divided by the mean squared
-reference value) and averaged over channels. Rounds alternate the order; the table gives
-medians and the ratio gonio / Mitsuba of ``time x MSE`` (< 1: gonio reaches a given error in
-less time), in wall time and in CPU time (the process's user + system time over all threads
+reference value) and averaged over channels. Rounds alternate the order; in a round each side
+renders ``--repeats`` times with its own seeds, and the round's figures are the fastest call's
+time (and its CPU time) and the mean MSE of the calls. The table gives medians over rounds and
+the ratio gonio / Mitsuba of ``time x MSE`` (< 1: gonio reaches a given error in less time), in
+wall time and in CPU time (the process's user + system time over all threads
 during the render: both renderers run two threads; on a machine shared with other work the wall
 time also counts waiting for a core).
 
@@ -44,6 +46,18 @@ def disk_mask(res: int, radius: float = 0.9) -> np.ndarray:
     return x * x + y * y < radius * radius
 
 
+def cpu_model() -> str:
+    """The processor's model name (Linux), for the CSV: ratios against Mitsuba depend on it
+    (its vector gathers, for one, run at very different speeds on different cores)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown"
+
+
 def rel_mse(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
     d = (img[mask] - ref[mask]) ** 2
     return float(np.mean(d) / np.mean(ref[mask] ** 2))
@@ -55,6 +69,13 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=5,
+        help="renders per side and round, each with its own seed: the round's time is the "
+        "fastest, its MSE their mean (default 5)",
+    )
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument(
         "--sampler",
@@ -68,6 +89,7 @@ def main() -> None:
         help="RGL tensor file for the measured row (skipped when missing)",
     )
     ap.add_argument("--quick", action="store_true", help="64², 16 spp, reference 512 spp, 2 rounds")
+    ap.add_argument("--csv", default="equal_time.csv", help="results file name in results/")
     args = ap.parse_args()
     if args.quick:
         args.res, args.spp, args.ref_spp, args.rounds = 64, 16, 512, 2
@@ -158,8 +180,10 @@ def main() -> None:
         for r in range(args.rounds):
             sides = [("gonio", g_render, g_ref), ("mitsuba", m_render, m_ref)]
             for side, fn, ref in sides if r % 2 == 0 else sides[::-1]:
-                img, sec, cpu = fn(args.spp, r + 1)
-                res[side].append((sec, rel_mse(img, ref, mask), cpu))
+                calls = [fn(args.spp, 1 + r * args.repeats + k) for k in range(args.repeats)]
+                best = min(calls, key=lambda c: c[1])
+                mse = statistics.mean(rel_mse(c[0], ref, mask) for c in calls)
+                res[side].append((best[1], mse, best[2]))
         pairs = list(zip(res["gonio"], res["mitsuba"], strict=True))
         ratio = statistics.median((g[0] * g[1]) / (m[0] * m[1]) for g, m in pairs)
         cpu_ratio = statistics.median((g[2] * g[1]) / (m[2] * m[1]) for g, m in pairs)
@@ -174,11 +198,12 @@ def main() -> None:
         row["time_x_mse_ratio_gonio_over_mitsuba"] = f"{ratio:.3g}"
         row["cpu_time_x_mse_ratio_gonio_over_mitsuba"] = f"{cpu_ratio:.3g}"
         row["load_avg_1min"] = f"{os.getloadavg()[0]:.1f}"
+        row["cpu"] = cpu_model()
         rows.append(row)
         print(row, flush=True)
 
     RESULTS.mkdir(exist_ok=True)
-    with open(RESULTS / "equal_time.csv", "w", newline="") as fh:
+    with open(RESULTS / args.csv, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -197,7 +222,7 @@ def main() -> None:
     ax.set_title(f"environment only, {args.res}², {args.spp} spp, load {rows[-1]['load_avg_1min']}",
                  fontsize=9)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(RESULTS / "equal_time.png", dpi=120)
+    fig.savefig(RESULTS / Path(args.csv).with_suffix(".png"), dpi=120)
 
     print("\n| material | gonio s (CPU s) | gonio rel. MSE | Mitsuba s (CPU s) | Mitsuba rel. MSE "
           "| time × MSE, gonio / Mitsuba | CPU time × MSE |")  # fmt: skip

@@ -13,8 +13,10 @@ that the same script gives the device figures as soon as such a machine is avail
   table's sampling structures), in million samples per second (pixels hit x spp; one sample
   per pixel and light for delta lights);
 - recompiles: XLA compilations (counted over all of JAX; the ``count`` column) of renders
-  with other spp, image sizes and light counts, after one render of each scene kind and pixel
-  tile size (0 expected).
+  with other spp, image sizes and light counts, after one render of each scene kind and of
+  three image sizes (0 expected, except for image sizes that need a pixel tile size not
+  compiled yet: :func:`gonio.render.tiling.sample_tile` has at most 17, and the row of such
+  sizes counts their compilations).
 
 Every kernel of these renders is traced, tables included (their sampling structures are built
 once per render for the outgoing directions of the image and passed as kernel arguments), and
@@ -149,9 +151,10 @@ def main() -> None:
         rows.append(("render", what, f"{args.res}² {spp} spp", samples, sec, samples / sec / 1e6))
         print(f"render {what}: {sec:.3f} s, {samples / sec / 1e6:.2f} M samples/s", flush=True)
 
-    # Recompiles: after one render of each scene kind (and of each pixel-tile size, 256 x 4^k up
-    # to the tile cap: the first image that needs a tile size compiles it once), renders with
-    # other spp, image sizes and light counts.
+    # Recompiles: after one render of each scene kind and of three image sizes (their pixel tiles
+    # of 1536 and 8192 pixels), renders with other spp, image sizes and light counts. Image
+    # sizes whose tiles were compiled reuse them; sizes that need a new tile size (120²: 2 x
+    # 6144, 230²: 6 x 7168) compile it, once.
     env = scenes["studio environment"][0]
     suns = [Directional.from_angles(0.2 * k, 0.7 * k, 1.0) for k in range(1, 6)]
     balls = [SphereLight((3.0 * np.cos(a), 3.0 * np.sin(a), 2.0), 0.5, 3.0) for a in (0, 1, 2)]
@@ -164,8 +167,11 @@ def main() -> None:
             "spp (3, 17, 40)": lambda m=mat, s=sampler: [
                 render_sphere(m, env, resolution=args.res, spp=k, sampler=s) for k in (3, 17, 40)
             ],
-            "image sizes (44, 120, 230)": lambda m=mat, s=sampler: [
-                render_sphere(m, env, resolution=r, spp=8, sampler=s) for r in (44, 120, 230)
+            "image sizes of compiled tiles (44, 102, 202)": lambda m=mat, s=sampler: [
+                render_sphere(m, env, resolution=r, spp=8, sampler=s) for r in (44, 102, 202)
+            ],
+            "image sizes of two new tile sizes (120, 230)": lambda m=mat, s=sampler: [
+                render_sphere(m, env, resolution=r, spp=8, sampler=s) for r in (120, 230)
             ],
             "delta light counts (2, 3, 5)": lambda m=mat: [
                 render_sphere(m, suns[:k], resolution=args.res, spp=1) for k in (2, 3, 5)
@@ -178,7 +184,7 @@ def main() -> None:
         name = "MERL-grid table (inversion)" if mat is table else "TS GGX Smith conductor"
         for label, fn in variants.items():
             n = count_compiles(fn)
-            rows.append(("recompiles", name, f"3 renders, other {label}", n, None, None))
+            rows.append(("recompiles", name, f"renders with other {label}", n, None, None))
             print(f"recompiles {name}, other {label}: {n}", flush=True)
 
     load = os.getloadavg()[0]
