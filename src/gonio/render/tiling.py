@@ -54,7 +54,8 @@ def sample_tile(n: int, cap: int) -> int:
     if n <= MIN_PIXEL_TILE or cap <= MIN_PIXEL_TILE:
         return min(MIN_PIXEL_TILE, cap)
     step = max(MIN_PIXEL_TILE, cap // TILE_SIZES)
-    per_tile = -(-n // -(-n // cap))
+    tiles = -(-n // cap)  # integer ceilings
+    per_tile = -(-n // tiles)
     return min(cap, -(-per_tile // step) * step)
 
 
