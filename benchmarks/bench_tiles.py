@@ -13,8 +13,8 @@ Padding pixels cost what real ones do, so the figure of merit is the wall time o
 the padded fraction of each rule is in the CSV. The rules alternate within each round (order
 flipped every round); per round the fastest of ``--repeats`` renders; the table gives medians
 over ``--rounds`` rounds and the ratio equal / powers of 4 (< 1: the equal tiles are faster).
-The images are the same up to float32 rounding (the tiles only group the pixels differently;
-every pixel keeps its own samples).
+The images are the same bit for bit (``max_abs_image_diff``: the tiles only group the pixels
+differently; every pixel keeps its own samples).
 
 Writes results/tiles.csv and tiles.png and prints a Markdown table.
 Run: PYTHONPATH=src python benchmarks/bench_tiles.py [--rounds K] [--res 64 128 256 512]

@@ -145,12 +145,11 @@ class HDRResult:
         """
         if self.noise_terms is None or self.frame_fraction is None:
             raise ParameterError("this merge result carries no noise model to re-evaluate")
-        nt = self.noise_terms
         usable = self.frame_fraction[:, where] > 0  # a frame's weight is > 0 exactly where used
         rate = np.asarray(rate, dtype=np.float64)
         den = np.zeros(rate.shape)
         for k, t in enumerate(self.exposures_s):
-            v = nt.noise.variance(rate * t, nt.dark_dn[k]) + nt.dark_var[k]
+            v = self.noise_terms.frame_variance(k, rate * t)
             den += np.where(usable[k], t * t / v, 0.0)
         with np.errstate(divide="ignore"):
             return np.where(den > 0, 1.0 / den, np.nan)
@@ -164,6 +163,10 @@ class MergeNoise:
     noise: NoiseModel
     dark_dn: tuple[float, ...]
     dark_var: tuple[float, ...]
+
+    def frame_variance(self, k: int, signal_dn: np.ndarray) -> np.ndarray:
+        """Variance (DN^2) of frame ``k``'s dark-subtracted value at mean ``signal_dn``."""
+        return self.noise.variance(signal_dn, self.dark_dn[k]) + self.dark_var[k]
 
 
 def saturation_threshold(white_level: int, noise: NoiseModel) -> float:
@@ -317,20 +320,18 @@ def merge_brackets(
         dark_var = [noise.dark_frame_variance(t) for t in times]
     else:
         dark_dn = dark_var = [0.0] * len(times)
+    terms = MergeNoise(noise, tuple(map(float, dark_dn)), tuple(map(float, dark_var)))
     # Pass 1: weights from the observed signal; pass 2: from the model at the pass-1 rate.
-    first = [noise.variance(s, d) + v for s, d, v in zip(signals, dark_dn, dark_var, strict=True)]
+    first = [terms.frame_variance(k, s) for k, s in enumerate(signals)]
     rate = _weighted(signals, usable, times, first)[0]
     rate0 = np.where(np.isfinite(rate), rate, 0.0)
-    variances = [
-        noise.variance(rate0 * t, d) + v for t, d, v in zip(times, dark_dn, dark_var, strict=True)
-    ]
+    variances = [terms.frame_variance(k, rate0 * t) for k, t in enumerate(times)]
     rate, var, n_used = _weighted(signals, usable, times, variances)
     weights = np.stack(
         [np.where(ok, t * t / v, 0.0) for ok, t, v in zip(usable, times, variances, strict=True)]
     )
     total = weights.sum(0)
     fraction = np.where(total > 0, weights / np.where(total > 0, total, 1.0), 0.0)
-    terms = MergeNoise(noise, tuple(map(float, dark_dn)), tuple(map(float, dark_var)))
     return HDRResult(rate, var, n_used, times, source, log_cov, fraction.astype(np.float32), terms)
 
 
