@@ -60,14 +60,21 @@ def num(value: object, digits: int = 3) -> str:
     """``value`` to ``digits`` significant digits; empty, ``nan`` and text pass through."""
     if value is None or value == "":
         return ""
+    text = str(value).strip()
+    if re.fullmatch(r"-?\d+", text):  # counts and integers as written
+        return text
     try:
-        x = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return str(value)
+        x = float(text)
+    except ValueError:
+        return text
     if math.isnan(x):
         return ""
-    if x == 0 or (1e-3 <= abs(x) < 10 ** max(digits, 4)):
-        return f"{x:.{digits}g}" if abs(x) < 10**digits else f"{x:.0f}"
+    if x == 0:
+        return "0"
+    if 10**digits <= abs(x) < 1e9:
+        return f"{x:.0f}"
+    if 1e-3 <= abs(x) < 10**digits:
+        return f"{x:.{digits}g}"
     return f"{x:.{digits - 1}e}"
 
 

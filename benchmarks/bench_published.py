@@ -667,7 +667,11 @@ def write_tables() -> None:
     rows = _tables.read("published_summary.csv")
     _tables.write("published", _tables.markdown(rows, summary))
     keep = ("median", "speed-up", "optimum", "first fit", "tabulate")
-    speed = [r for r in _tables.read("published_speed.csv") if any(k in r["what"] for k in keep)]
+    speed = [
+        r
+        for r in _tables.read("published_speed.csv")
+        if any(k in r["what"] for k in keep) and "baseline" not in r["what"]
+    ]
     columns = [
         ("what", "what"),
         ("wall (s) or ratio", "seconds"),
