@@ -1,4 +1,4 @@
-# `make test` and `make demo` each create .venv when missing and install what they need.
+# `make test`, `make demo` and `make docs` each create .venv when missing and install what they need.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -10,7 +10,7 @@ BPY_VENV  := .venv-bpy
 BPY_PYTHON ?= $(PYTHON)
 BPY_STAMP := $(BPY_VENV)/.installed
 
-.PHONY: test demo lint format bench clean interop
+.PHONY: test demo docs lint format bench clean interop
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,10 @@ test: $(STAMP) $(BPY_STAMP)
 	$(VENV)/bin/ruff format --check src tests benchmarks
 	$(VENV)/bin/pytest -n 2 --dist loadgroup
 
+# The documentation site (docs/, mkdocs.yml) into site/; open site/index.html.
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/ruff format --check src tests benchmarks
@@ -50,4 +54,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) $(BPY_VENV) gonio-demo .pytest_cache build src/*.egg-info
+	rm -rf $(VENV) $(BPY_VENV) gonio-demo site .pytest_cache build src/*.egg-info

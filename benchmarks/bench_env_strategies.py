@@ -13,7 +13,7 @@ over the pixels inside 0.9 of the radius, averaged over ``--seeds`` seeds:
 - ``brdf``: BRDF samples alone, no MIS (gonio ``sampler="brdf", mis=False``;
   Mitsuba ``emitter_samples=0``), at ``--spp`` and at 4 x ``--spp``;
 - ``brdf-independent``: the same in Mitsuba with the ``independent`` sampler (its error with no
-  stratification, to compare with ``ab_point_sets.py``'s random points in gonio).
+  stratification, the cost of random points).
 
 Error only, no timing (``bench_equal_time.py`` times the renders). To compare gonio's code with
 an older revision, run this script with ``PYTHONPATH`` at that revision's ``src/`` and
@@ -186,5 +186,21 @@ def main() -> None:
     print(f"wrote {out}")
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV."""
+    import _tables
+
+    columns = [
+        ("material", "material"),
+        ("strategy", "strategy"),
+        ("spp", "spp"),
+        ("gonio rel. MSE", "gonio_rel_mse"),
+        ("Mitsuba rel. MSE", "mitsuba_rel_mse"),
+    ]
+    rows = _tables.read("env_strategies.csv")
+    _tables.write("env_strategies", _tables.markdown(rows, columns))
+
+
 if __name__ == "__main__":
     main()
+    write_tables()

@@ -234,5 +234,28 @@ def main() -> None:
               f"| {r['cpu_time_x_mse_ratio_gonio_over_mitsuba']} |")  # fmt: skip
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV."""
+    import _tables
+
+    columns = [
+        ("material", "case"),
+        ("gonio s", "gonio_s"),
+        ("gonio CPU s", "gonio_cpu_s"),
+        ("gonio rel. MSE", "gonio_rel_mse"),
+        ("Mitsuba s", "mitsuba_s"),
+        ("Mitsuba CPU s", "mitsuba_cpu_s"),
+        ("Mitsuba rel. MSE", "mitsuba_rel_mse"),
+        ("ratio, wall", "time_x_mse_ratio_gonio_over_mitsuba"),
+        ("ratio, CPU", "cpu_time_x_mse_ratio_gonio_over_mitsuba"),
+        ("load", "load_avg_1min"),
+    ]
+    rows = _tables.read("equal_time.csv")
+    cpus = sorted({r["cpu"] for r in rows if r.get("cpu")})
+    note = f"\n\nProcessor: {', '.join(cpus)}." if cpus else ""
+    _tables.write("equal_time", _tables.markdown(rows, columns) + note)
+
+
 if __name__ == "__main__":
     main()
+    write_tables()

@@ -466,5 +466,67 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's tables in benchmarks/README.md from its CSVs."""
+    import statistics
+
+    import _tables
+
+    speed = [
+        ("model", "model"),
+        ("run", "run"),
+        ("cells", "cells"),
+        ("optimum (s)", "optimum_s"),
+        ("fit call (s)", "fit_call_s"),
+        ("fit call, CPU (s)", "fit_call_cpu_s"),
+        ("Laplace (s)", "laplace_s"),
+        ("MCMC (s)", "mcmc_s"),
+        ("machine", "machine"),
+    ]
+    _tables.write("fit_speed", _tables.markdown(_tables.read("fit_speed.csv"), speed))
+    coverage = [
+        ("model", "model"),
+        ("parameter", "parameter"),
+        ("trials", "trials"),
+        ("95 % coverage", "coverage95"),
+        ("68 % coverage", "coverage68"),
+        ("binomial s.e.", "binomial_se95"),
+        ("MCMC trials", "mcmc_trials"),
+        ("MCMC 95 % coverage", "mcmc_coverage95"),
+    ]
+    _tables.write("fit_coverage", _tables.markdown(_tables.read("fit_coverage.csv"), coverage))
+    real = _tables.read("fit_real.csv")
+    files = sorted({r["file"] for r in real})
+    models = sorted({r["model"] for r in real})
+    converged = sum(r["converged"] == "True" for r in real)
+    _tables.write(
+        "fit_real",
+        f"{converged} of {len(real)} fits of {len(models)} models to {len(files)} files converge.",
+    )
+    opt = _tables.read("fit_optimizers.csv")
+    methods = sorted({r["method"] for r in opt})
+    summary = [
+        {
+            "method": m,
+            "n": str(sum(r["method"] == m for r in opt)),
+            "time": statistics.median(float(r["time_s"]) for r in opt if r["method"] == m),
+            "excess": statistics.median(
+                float(r["relative_excess"]) for r in opt if r["method"] == m
+            ),
+        }
+        for m in methods
+    ]
+    columns = [
+        ("optimizer", "method"),
+        ("fits", "n"),
+        ("median time (s)", "time"),
+        ("median relative loss excess", "excess"),
+    ]
+    _tables.write("fit_optimizers", _tables.markdown(summary, columns))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    _rc = main()
+    if not _rc:
+        write_tables()
+    sys.exit(_rc)

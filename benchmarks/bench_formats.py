@@ -196,5 +196,26 @@ def main() -> None:
     print("wrote", RESULTS / "bench_formats.csv", RESULTS / "bench_formats.png")
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV."""
+    import _tables
+
+    columns = [
+        ("noise", "noise"),
+        ("encoding", "encoding"),
+        ("precision", "precision"),
+        ("bytes", "size"),
+        ("x smaller than MERL", "ratio_vs_merl"),
+        ("median rel. error", "median_rel"),
+        ("p99 rel. error", "p99_rel"),
+        ("max rel. error", "max_rel"),
+        ("write (s)", "write_s"),
+        ("read (s)", "read_s"),
+        ("partial read (s)", "partial_read_s"),
+    ]
+    _tables.write("formats", _tables.markdown(_tables.read("bench_formats.csv"), columns))
+
+
 if __name__ == "__main__":
     main()
+    write_tables()

@@ -225,5 +225,22 @@ def main() -> None:
                 print(f"recompiles, {rec['what']}, {rec['op']}: {rec['count']} compilations")
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV (this machine: CPU)."""
+    import _tables
+
+    columns = [
+        ("kind", "kind"),
+        ("what", "what"),
+        ("op", "op"),
+        ("count", "count"),
+        ("seconds", "seconds"),
+        ("M/s", "M_per_s"),
+        ("device", "device"),
+    ]
+    _tables.write("gpu", _tables.markdown(_tables.read("gpu_cpu.csv"), columns))
+
+
 if __name__ == "__main__":
     main()
+    write_tables()

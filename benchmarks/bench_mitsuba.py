@@ -254,5 +254,22 @@ def print_table(rows, n, args, rounds, repeats, load, threads) -> None:
         )
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV."""
+    import _tables
+
+    columns = [
+        ("gonio model / Mitsuba BSDF", "pair"),
+        ("op", "op"),
+        ("gonio M/s", "gonio_M_per_s"),
+        ("Mitsuba M/s", "mitsuba_M_per_s"),
+        ("gonio / Mitsuba", "ratio_gonio_over_mitsuba"),
+        ("load", "load_avg_1min"),
+    ]
+    rows = _tables.read("mitsuba_kernels.csv")
+    _tables.write("mitsuba_kernels", _tables.markdown(rows, columns))
+
+
 if __name__ == "__main__":
     main()
+    write_tables()

@@ -390,5 +390,43 @@ def main(argv=None) -> int:
     return 0
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's tables in benchmarks/README.md from its CSVs."""
+    import _tables
+
+    rows = [r for r in _tables.read("render_convergence.csv") if r["spp"] == "64"]
+    columns = [
+        ("material", "material"),
+        ("representation", "representation"),
+        ("strategy", "strategy"),
+        ("MIS", "mis"),
+        ("spp", "spp"),
+        ("time (s)", "time_s"),
+        ("RMSE, all", "rmse_all"),
+        ("RMSE, theta < 45 deg", "rmse_45"),
+        ("efficiency / cosine", "efficiency_vs_cosine_45"),
+    ]
+    _tables.write("render_convergence", _tables.markdown(rows, columns))
+    skips = [
+        ("case", "case"),
+        ("optimized (s)", "optimized_s"),
+        ("optimized, CPU (s)", "optimized_cpu_s"),
+        ("unoptimized (s)", "unoptimized_s"),
+        ("first call (s)", "first_call_s"),
+    ]
+    _tables.write("render_skips", _tables.markdown(_tables.read("render_skips.csv"), skips))
+    lazy = [
+        ("scene", "scene"),
+        ("method", "method"),
+        ("buckets built", lambda r: f"{r['buckets_built']}/{r['buckets_total']}"),
+        ("first render (s)", "first_render_s"),
+    ]
+    rows = _tables.read("render_lazy_tables.csv")
+    _tables.write("render_lazy_tables", _tables.markdown(rows, lazy))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    _rc = main()
+    if not _rc:
+        write_tables()
+    sys.exit(_rc)

@@ -348,5 +348,42 @@ def main(argv=None) -> int:
     return 0
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's tables in benchmarks/README.md from its CSVs."""
+    import _tables
+
+    throughput = [
+        ("file", "file"),
+        ("load (ms)", "load_ms"),
+        ("dtype", "gonio_dtype"),
+        ("gonio f (M/s)", "gonio_f_Mps"),
+        ("Mitsuba eval (M/s)", "mitsuba_eval_Mps"),
+        ("ratio", "ratio_f"),
+        ("gonio sample (M/s)", "gonio_sample_Mps"),
+        ("Mitsuba sample (M/s)", "mitsuba_sample_Mps"),
+        ("ratio", "ratio_sample"),
+    ]
+    rows = _tables.read("rgl_throughput.csv")
+    _tables.write("rgl_throughput", _tables.markdown(rows, throughput))
+    fit_render = [
+        ("file", "file"),
+        ("path", "path"),
+        ("what", "what"),
+        ("seconds", "seconds"),
+        ("tabulation (s)", "tabulate_s"),
+        ("fit loss", "loss"),
+        ("MSE", "mse"),
+        ("1/(MSE t)", "efficiency"),
+        ("MSE, own ref.", "mse_own"),
+        ("CPU (s)", "cpu_seconds"),
+        ("1/(MSE t_cpu), own ref.", "efficiency_own_cpu"),
+    ]
+    rows = _tables.read("rgl_fit_render.csv")
+    _tables.write("rgl_fit_render", _tables.markdown(rows, fit_render))
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    _rc = main()
+    if not _rc:
+        write_tables()
+    raise SystemExit(_rc)

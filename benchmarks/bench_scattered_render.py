@@ -119,5 +119,23 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV."""
+    import _tables
+
+    columns = [
+        ("tabulation", "tabulation"),
+        ("region", "region"),
+        ("direction pairs", "pairs"),
+        ("median rel. error", "median_rel_error"),
+        ("relative RMS error", "rel_rms_error"),
+    ]
+    rows = _tables.read("scattered_render.csv")
+    _tables.write("scattered_render", _tables.markdown(rows, columns))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    _rc = main()
+    if not _rc:
+        write_tables()
+    sys.exit(_rc)

@@ -106,5 +106,24 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's table in benchmarks/README.md from its CSV."""
+    import _tables
+
+    columns = [
+        ("command", lambda r: f"gonio {r['command']}"),
+        ("median (s)", "median_s"),
+        ("min (s)", "min_s"),
+        ("CPU, median (s)", "cpu_median_s"),
+        ("imports jax", "jax"),
+        ("imports scipy", "scipy"),
+        ("imports matplotlib", "matplotlib"),
+    ]
+    _tables.write("startup", _tables.markdown(_tables.read("startup.csv"), columns))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    _rc = main()
+    if not _rc:
+        write_tables()
+    sys.exit(_rc)

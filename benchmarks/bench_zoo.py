@@ -231,5 +231,29 @@ def main() -> None:
         print(_markdown(rows))
 
 
+def write_tables() -> None:
+    """Rewrite this benchmark's tables in benchmarks/README.md from its CSVs."""
+    import _tables
+
+    throughput = [
+        ("model", "model"),
+        ("f (M/s)", "f_Mps"),
+        ("pdf (M/s)", "pdf_Mps"),
+        ("sample (M/s)", "sample_Mps"),
+    ]
+    rows = _tables.read("bench_zoo_throughput.csv")
+    _tables.write("zoo_throughput", _tables.markdown(rows, throughput))
+    terms = [
+        ("surface", "surface"),
+        ("terms M", "terms"),
+        ("M evaluations/s", "Meval_per_s"),
+        ("max rel. error", "max_rel_err"),
+        ("median rel. error", "median_rel_err"),
+    ]
+    rows = _tables.read("bench_zoo_htsg_terms.csv")
+    _tables.write("zoo_htsg_terms", _tables.markdown(rows, terms))
+
+
 if __name__ == "__main__":
     main()
+    write_tables()

@@ -1,6 +1,7 @@
 """Run every ``benchmarks/bench_*.py`` script in turn (``make bench``).
 
-Each script writes its CSV and PNG into ``benchmarks/results/`` and prints a Markdown table.
+Each script writes its CSV and PNG into ``benchmarks/results/``, prints a Markdown table and
+rewrites its tables in ``benchmarks/README.md`` (``benchmarks/_tables.py``).
 A failing script is reported and the others still run; the exit status is non-zero if any
 failed.
 """
