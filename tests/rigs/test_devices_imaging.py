@@ -1,5 +1,6 @@
 """Camera and light backends: gphoto2 (a fake program on PATH), folder watch, LED protocol."""
 
+import dataclasses
 import os
 import shutil
 import stat
@@ -192,16 +193,74 @@ def test_serial_led_errors():
         SerialLEDLight("/dev/gonio-no-such-port")
 
 
-def test_camera_factory_decides_the_kind_in_one_place():
+def test_factory_decides_the_kind_in_one_place():
     from gonio.errors import RigConfigError
-    from gonio.rigs import camera_factory
+    from gonio.rigs import factory
     from gonio.rigs.config import load_rig
     from gonio.rigs.sim.sample import SimulatedSampleCamera
 
     sim, direct = load_rig("sim"), load_rig("sim_sample")
-    assert camera_factory.is_raw(sim) and not camera_factory.is_raw(direct)
-    assert camera_factory.channels(sim) == ("R", "G", "B")
-    assert camera_factory.channels(direct) == ("R", "G", "B")  # the Phong truth is RGB
-    assert isinstance(camera_factory.open_direct_camera(direct), SimulatedSampleCamera)
-    with pytest.raises(RigConfigError, match="is a RAW camera"):
-        camera_factory.open_direct_camera(sim)
+    light = factory.open_light(sim)
+    raw = factory.open_camera(sim, light, factory.holder(sim))
+    reading = factory.open_camera(direct, light, factory.holder(direct))
+    assert raw.takes_raw and not reading.takes_raw
+    assert raw.channels == ("R", "G", "B")
+    assert reading.channels == ("R", "G", "B")  # the Phong truth is RGB
+    assert isinstance(reading, SimulatedSampleCamera)
+    assert isinstance(light, SimulatedLight)
+    with pytest.raises(RigConfigError, match="has no backend"):
+        factory.open_camera(dataclasses.replace(sim, camera={"kind": "webcam"}), light, None)
+    with pytest.raises(RigConfigError, match="has no backend"):
+        factory.open_light(dataclasses.replace(sim, light={"kind": "candle"}))
+
+
+def test_session_opens_every_device_and_closes_them_in_reverse(monkeypatch):
+    from gonio.rigs import factory
+    from gonio.rigs.config import load_rig
+    from gonio.rigs.dynamixel import ServoChain
+    from gonio.rigs.session import DEVICES, open_rig
+    from gonio.rigs.sim.bus import ServoChainEmulator
+
+    events = []
+    open_light, open_camera = factory.open_light, factory.open_camera
+
+    def light(rig):
+        lt = open_light(rig)
+        events.append("light")
+        monkeypatch.setattr(lt, "close", lambda: events.append("close light"))
+        return lt
+
+    def camera(rig, lt, holder):
+        cam = open_camera(rig, lt, holder)
+        events.append("camera")
+        monkeypatch.setattr(cam, "close", lambda: events.append("close camera"))
+        return cam
+
+    def closing(cls, name, event):
+        original = getattr(cls, name)
+
+        def wrapped(self):
+            events.append(event)
+            return original(self)
+
+        monkeypatch.setattr(cls, name, wrapped)
+
+    closing(ServoChain, "close", "close servos")
+    closing(ServoChainEmulator, "stop", "stop emulator")
+    monkeypatch.setattr(factory, "open_light", light)
+    monkeypatch.setattr(factory, "open_camera", camera)
+    assert DEVICES == ("light", "camera", "servos")
+    with pytest.raises(RuntimeError, match="stop"):
+        with open_rig(load_rig("sim_sample")) as ses:
+            assert ses.light.is_on and ses.camera.channels == ("R", "G", "B")
+            assert ses.chain is not None and ses.emulator is not None
+            events.append("servos")
+            raise RuntimeError("stop")
+    assert events == [
+        "light", "camera", "servos", "close servos", "stop emulator", "close camera",
+        "close light",
+    ]  # fmt: skip
+    events.clear()
+    with open_rig(load_rig("sim_sample"), devices=("servos",)) as ses:
+        assert ses.camera is None and ses.light is None and ses.chain is not None
+    assert events == ["close servos", "stop emulator"]
