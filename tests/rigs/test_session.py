@@ -6,7 +6,6 @@ import signal
 
 import pytest
 
-from gonio import interrupts
 from gonio.errors import DeviceError, Interrupted, ParameterError
 from gonio.rigs import factory
 from gonio.rigs.config import load_rig
@@ -88,10 +87,12 @@ def test_a_camera_that_fails_to_open_closes_the_light_and_powers_nothing(events,
     assert events == ["light", "camera", "close light"]
 
 
-def test_a_stop_asked_for_while_the_camera_opens_powers_no_servo(events):
-    with interrupts.installed() as flag:
-        flag.count, flag.signum = 1, signal.SIGINT  # as recorded while shielded
-        with pytest.raises(Interrupted):
-            with open_rig(RIG):
-                pytest.fail("the session opened")
-    assert events == ["light", "camera", "close camera", "close light"]
+def test_before_servos_runs_between_the_camera_and_the_servos(events):
+    def stop():
+        events.append("before servos")
+        raise Interrupted("interrupted (SIGINT)", signal.SIGINT)
+
+    with pytest.raises(Interrupted):
+        with open_rig(RIG, before_servos=stop):
+            pytest.fail("the session opened")
+    assert events == ["light", "camera", "before servos", "close camera", "close light"]

@@ -285,8 +285,7 @@ def acquire(
         frame (default: the rig file's ``camera.planning``, true) or use fixed brackets.
     open_devices : ``open_devices(rig, run_dir)``, a context manager yielding the
         :class:`gonio.rigs.session.RigSession` with the rig's devices open (default:
-        :func:`gonio.rigs.session.open_rig` with the run directory for the simulator's logs);
-        the run measures through its camera and light
+        :func:`open_session`); the run measures through its camera and light
         (:func:`gonio.acquire.imaging.measurement`). The command line binds ``--sim-faults``
         and ``--time-scale`` here.
 
@@ -347,10 +346,18 @@ def _same_rig_or_refuse(journal: Journal, recorded: RigConfig, rig, run_dir: Pat
         )
 
 
-def _default_devices(rig: RigConfig, run_dir: Path):
+def open_session(rig: RigConfig, run_dir: Path, **options):
+    """The rig session of a run: :func:`gonio.rigs.session.open_rig` with the run directory for
+    the simulator's logs, raising a stop asked for while the camera opened before any servo is
+    powered. ``options`` go to ``open_rig`` (``faults``, ``time_scale``)."""
     from gonio.rigs.session import open_rig
 
-    return open_rig(rig, log_dir=run_dir)
+    return open_rig(rig, log_dir=run_dir, before_servos=_stop_if_asked, **options)
+
+
+def _stop_if_asked() -> None:
+    if interrupts.FLAG.requested:
+        raise interrupts.FLAG.interrupted()
 
 
 class _Run:
@@ -383,7 +390,7 @@ class _Run:
         flag = self.flag
         # the session opens the light and the camera before the servos, and closes all of them
         # in reverse on the way out; the rig is parked below, before that
-        with (open_devices or _default_devices)(self.rig, self.run_dir) as ses:
+        with (open_devices or open_session)(self.rig, self.run_dir) as ses:
             chain = ses.chain
             self.started = True
             try:

@@ -15,13 +15,12 @@ pseudo-terminal and its slave path replaces the port; everything after that
 from __future__ import annotations
 
 import os
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gonio import interrupts
 from gonio.errors import ParameterError
 from gonio.rigs import factory
 from gonio.rigs.config import RigConfig
@@ -98,13 +97,14 @@ def open_rig(
     time_scale: float | None = None,
     log_dir: str | os.PathLike | None = None,
     devices: Collection[str] = DEVICES,
+    before_servos: Callable[[], None] | None = None,
 ):
     """Context manager yielding a :class:`RigSession` with the rig's devices open.
 
     ``devices`` picks which of :data:`DEVICES` to open (always in that order): ``gonio rig
     check`` opens the servos only; a camera needs its light. The light is switched on once the
-    camera is open. A stop asked for while the light and camera open (a signal recorded by
-    :mod:`gonio.interrupts`) is raised before the servos are powered.
+    camera is open. ``before_servos()`` is called between the camera and the servos: the run
+    engine raises there a stop asked for while the camera opened, so that no servo is powered.
 
     ``faults``, ``goal_log_path``, ``time_scale`` and ``log_dir`` apply to the simulated rig
     only: with ``log_dir`` (a run directory) the emulator appends every Goal Position it
@@ -128,8 +128,8 @@ def open_rig(
         if ses.light is not None:
             ses.light.on()
         if "servos" in devices:
-            if ses.camera is not None and interrupts.FLAG.requested:
-                raise interrupts.FLAG.interrupted()
+            if before_servos is not None:
+                before_servos()
             ses.emulator, ses.chain = _open_servos(
                 stack, rig, faults, goal_log_path, initialize, time_scale, log_dir
             )
