@@ -341,3 +341,19 @@ def test_adaptive_plan_refines_around_the_measured_specular_peak(tmp_path):
             or (abs(b - ti) < 1e-6 and abs(a - to) <= math.radians(4) + 1e-9)
             for ti, (to, _) in peaks.items()
         )
+
+
+def test_a_stop_asked_for_while_the_camera_opens_powers_no_servo(tmp_path, monkeypatch):
+    from gonio import interrupts
+    from gonio.acquire.engine import open_session
+    from gonio.errors import Interrupted
+    from gonio.rigs.sim.bus import ServoChainEmulator
+
+    started = []
+    monkeypatch.setattr(ServoChainEmulator, "start", lambda self: started.append(self))
+    with interrupts.installed() as flag:
+        flag.count, flag.signum = 1, signal.SIGINT  # recorded while the run was shielded
+        with pytest.raises(Interrupted):
+            with open_session(load_rig("sim_sample"), tmp_path):
+                pytest.fail("the session opened")
+    assert not started

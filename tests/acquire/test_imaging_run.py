@@ -1,11 +1,13 @@
 """End to end on the simulated rig: acquire -> RAW files, EXR frames, table vs ground truth."""
 
 import json
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
 
 from gonio.acquire.engine import acquire
+from gonio.acquire.imaging import measurement
 from gonio.acquire.journal import Journal
 from gonio.brdf import models
 from gonio.io.dng import read_dng
@@ -13,6 +15,7 @@ from gonio.io.exr import read_exr
 from gonio.io.native import read_native
 from gonio.rigs.config import load_rig, parse_rig
 from gonio.rigs.kinematics import Kinematics
+from gonio.rigs.session import open_rig
 
 # One pair of reciprocal configurations and one on the mirror direction.
 PLAN = """kind = "isotropic"
@@ -33,6 +36,13 @@ def small_rig(sample: str | None = None):
             "params = { rho_d = [0.3, 0.25, 0.2], rho_s = 0.4, n = 80.0 }", sample
         ).replace('type = "Phong"', 'type = "Lambert"')
     return parse_rig(text, "sim-small.toml")
+
+
+@contextmanager
+def imaging_camera(rig, run_dir):
+    """The imaging chain over the rig's camera and light, opened without the servos."""
+    with open_rig(rig, devices=("light", "camera")) as ses:
+        yield measurement(ses, run_dir)
 
 
 def z_and_geometry(run, rig):
@@ -150,16 +160,15 @@ def test_interrupted_imaging_run_resumes_to_the_same_samples(run, tmp_path):
 
 
 def test_a_saturating_probe_is_rescued_by_shorter_brackets(tmp_path):
-    from gonio.acquire.imaging import open_imaging_camera
     from gonio.rigs.devices import Geometry
 
     rig = small_rig()
-    cam = open_imaging_camera(rig, tmp_path)
-    cam.settings.exposure_s = 0.5  # ~100x too long: the whole holder saturates
     kin = Kinematics(rig)
     joints = {"light_arm": 30.0, "camera_arm": -40.0, "tilt": 0.0, "turntable": 0.0}
     wi, wo = kin.forward(kin.joints_deg_to_pose(joints))
-    cap = cam.capture(Geometry(0, joints, wi, wo, wi * 0.6, wo * 0.8))
+    with imaging_camera(rig, tmp_path) as cam:
+        cam.settings.exposure_s = 0.5  # ~100x too long: the whole holder saturates
+        cap = cam.capture(Geometry(0, joints, wi, wo, wi * 0.6, wo * 0.8))
     assert min(cap.meta["exposures_s"]) < 0.05 < max(cap.meta["exposures_s"])
     truth = np.asarray(models.Node.from_dict(rig.sim.sample).f(cap.meta["wi"], cap.meta["wo"]))
     assert np.all(np.abs(cap.value - truth) < 4 * cap.sigma)
@@ -184,7 +193,6 @@ def test_board_at_a_grazing_view_is_found_though_opencv_checks_reject_it(tmp_pat
     # the board once the longer brackets are merged ("0 corners"), which stopped the whole run
     import re
 
-    from gonio.acquire.imaging import open_imaging_camera
     from gonio.demo.materials import builtin_material
     from gonio.demo.pipeline import rig_text
     from gonio.rigs.devices import Geometry
@@ -195,8 +203,8 @@ def test_board_at_a_grazing_view_is_found_though_opencv_checks_reject_it(tmp_pat
     joints = {"light_arm": 31.46484375, "camera_arm": -69.2578125, "tilt": 15.8203125,
               "turntable": 0.0}  # fmt: skip
     wi, wo = kin.forward(kin.joints_deg_to_pose(joints))
-    cam = open_imaging_camera(rig, tmp_path)
-    cap = cam.capture(Geometry(110, joints, wi, wo, wi * 0.6, wo * 0.8))
+    with imaging_camera(rig, tmp_path) as cam:
+        cap = cam.capture(Geometry(110, joints, wi, wo, wi * 0.6, wo * 0.8))
     assert cap.meta["pose_corners"] >= 20 and cap.meta["reprojection_px"] < 0.3
     _, wo_true = kin.forward(kin.joints_deg_to_pose(joints))
     assert np.degrees(np.arccos(np.clip(wo_true @ cap.meta["wo"], -1, 1))) < 0.05

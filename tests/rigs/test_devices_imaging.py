@@ -1,5 +1,6 @@
 """Camera and light backends: gphoto2 (a fake program on PATH), folder watch, LED protocol."""
 
+import dataclasses
 import os
 import shutil
 import stat
@@ -192,16 +193,22 @@ def test_serial_led_errors():
         SerialLEDLight("/dev/gonio-no-such-port")
 
 
-def test_camera_factory_decides_the_kind_in_one_place():
+def test_factory_decides_the_kind_in_one_place():
     from gonio.errors import RigConfigError
-    from gonio.rigs import camera_factory
+    from gonio.rigs import factory
     from gonio.rigs.config import load_rig
     from gonio.rigs.sim.sample import SimulatedSampleCamera
 
     sim, direct = load_rig("sim"), load_rig("sim_sample")
-    assert camera_factory.is_raw(sim) and not camera_factory.is_raw(direct)
-    assert camera_factory.channels(sim) == ("R", "G", "B")
-    assert camera_factory.channels(direct) == ("R", "G", "B")  # the Phong truth is RGB
-    assert isinstance(camera_factory.open_direct_camera(direct), SimulatedSampleCamera)
-    with pytest.raises(RigConfigError, match="is a RAW camera"):
-        camera_factory.open_direct_camera(sim)
+    light = factory.open_light(sim)
+    raw = factory.open_camera(sim, light, factory.holder(sim))
+    reading = factory.open_camera(direct, light, factory.holder(direct))
+    assert raw.takes_raw and not reading.takes_raw
+    assert raw.channels == ("R", "G", "B")
+    assert reading.channels == ("R", "G", "B")  # the Phong truth is RGB
+    assert isinstance(reading, SimulatedSampleCamera)
+    assert isinstance(light, SimulatedLight)
+    with pytest.raises(RigConfigError, match="has no backend"):
+        factory.open_camera(dataclasses.replace(sim, camera={"kind": "webcam"}), light, None)
+    with pytest.raises(RigConfigError, match="has no backend"):
+        factory.open_light(dataclasses.replace(sim, light={"kind": "candle"}))

@@ -261,18 +261,15 @@ def _print_plan(out: dict, plan, rig, costs, list_refused: int) -> None:
 def _acquire(args: argparse.Namespace) -> int:
     import functools
 
-    from gonio.acquire.engine import acquire
-    from gonio.rigs.session import open_rig
+    from gonio.acquire.engine import acquire, open_session
     from gonio.rigs.sim.bus import parse_faults
 
     faults = parse_faults(args.sim_faults) if args.sim_faults else None
     if args.time_scale is not None and not 0 < args.time_scale <= 1e6:  # as sim.time_scale
         raise ParameterError(f"--time-scale must be in (0, 1e6], got {args.time_scale:g}")
 
-    def devices(rig, run_dir):
-        # --sim-faults and --time-scale are the simulated rig's; hardware ignores them
-        return open_rig(rig, faults=faults, time_scale=args.time_scale, log_dir=run_dir)
-
+    # --sim-faults and --time-scale are the simulated rig's; hardware ignores them
+    devices = functools.partial(open_session, faults=faults, time_scale=args.time_scale)
     run = functools.partial(acquire, progress=not args.no_progress, open_devices=devices)
     if args.resume:
         if args.out and args.out != args.resume:

@@ -10,9 +10,14 @@
   (and ``sim_packets.jsonl``, every instruction packet, with ``[sim] packet_log = true``);
 * ``table.brdf.h5`` — the samples as a table through :mod:`gonio.io` when the run completes.
 
-The run directory appears with its complete journal (:mod:`gonio.acquire.rundir`). Each stage of
-the plan is planned once (inverse kinematics, refusals with reasons, travel-time ordering) and
-journaled atomically before any motion; later stages see earlier stages' samples. Once the servos
+The devices (light, camera, servos) come open from the rig session
+(:func:`gonio.rigs.session.open_rig`), which closes them in reverse once the engine has parked
+the rig; the engine measures through the camera and the light
+(:func:`gonio.acquire.imaging.measurement`: brackets -> HDR -> pose -> radiometry for a RAW
+camera). The run directory appears with its complete journal (:mod:`gonio.acquire.rundir`).
+Each stage of the plan is planned once (inverse kinematics, refusals with reasons, travel-time
+ordering) and journaled atomically before any motion; later stages see earlier stages'
+samples. Once the servos
 are powered every way out parks the rig, or turns torque off when it cannot
 (:mod:`gonio.acquire.stopping`). SIGINT/SIGTERM (:mod:`gonio.interrupts`): the first finishes the
 configuration in progress, parks and stops; a second abandons the configuration and parks.
@@ -23,7 +28,6 @@ finished for completeness and is not retried on resume.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
@@ -279,10 +283,11 @@ def acquire(
         it to inject faults into the emulator mid-run).
     exposure_planning : RAW cameras only: plan each configuration's exposures from the previous
         frame (default: the rig file's ``camera.planning``, true) or use fixed brackets.
-    open_devices : ``open_devices(rig, run_dir)``, a context manager yielding the connected
-        :class:`gonio.rigs.session.RigSession` (default: :func:`gonio.rigs.session.open_rig`
-        with the run directory for the simulator's logs). The command line binds
-        ``--sim-faults`` and ``--time-scale`` here.
+    open_devices : ``open_devices(rig, run_dir)``, a context manager yielding the
+        :class:`gonio.rigs.session.RigSession` with the rig's devices open (default:
+        :func:`open_session`); the run measures through its camera and light
+        (:func:`gonio.acquire.imaging.measurement`). The command line binds ``--sim-faults``
+        and ``--time-scale`` here.
 
     Every way out once the servos are powered parks the rig when it can and switches torque off
     when it cannot (:mod:`gonio.acquire.stopping`); the outcome is added to the exception as a
@@ -341,10 +346,18 @@ def _same_rig_or_refuse(journal: Journal, recorded: RigConfig, rig, run_dir: Pat
         )
 
 
-def _default_devices(rig: RigConfig, run_dir: Path):
+def open_session(rig: RigConfig, run_dir: Path, **options):
+    """The rig session of a run: :func:`gonio.rigs.session.open_rig` with the run directory for
+    the simulator's logs, raising a stop asked for while the camera opened before any servo is
+    powered. ``options`` go to ``open_rig`` (``faults``, ``time_scale``)."""
     from gonio.rigs.session import open_rig
 
-    return open_rig(rig, log_dir=run_dir)
+    return open_rig(rig, log_dir=run_dir, before_servos=_stop_if_asked, **options)
+
+
+def _stop_if_asked() -> None:
+    if interrupts.FLAG.requested:
+        raise interrupts.FLAG.interrupted()
 
 
 class _Run:
@@ -369,19 +382,15 @@ class _Run:
         self.stop_note = ""
         self._closed = False
         self.first_stage: StagePlan | None = first_stage  # stage 0 planned before the bus opened
+        self.channels: tuple[str, ...] = ()  # the camera's, once the devices are open
 
     def execute(self, open_devices, exposure_planning) -> None:
-        from gonio.acquire.imaging import open_run_camera
+        from gonio.acquire.imaging import measurement
 
         flag = self.flag
-        with contextlib.ExitStack() as stack:
-            # the camera first: a bad camera is found before the bus is opened
-            camera = open_run_camera(self.rig, self.run_dir, exposure_planning)
-            if hasattr(camera, "close"):
-                stack.callback(camera.close)
-            if flag.requested:
-                raise flag.interrupted()
-            ses = stack.enter_context((open_devices or _default_devices)(self.rig, self.run_dir))
+        # the session opens the light and the camera before the servos, and closes all of them
+        # in reverse on the way out; the rig is parked below, before that
+        with (open_devices or open_session)(self.rig, self.run_dir) as ses:
             chain = ses.chain
             self.started = True
             try:
@@ -389,6 +398,8 @@ class _Run:
                     chain.should_abort = lambda: flag.count >= 2
                     if flag.requested:
                         raise flag.interrupted()
+                    camera = measurement(ses, self.run_dir, exposure_planning)
+                    self.channels = tuple(camera.channels)
                     self._loop(chain, camera, ses)
                     chain.should_abort = lambda: False
             except BaseException as exc:
@@ -430,7 +441,7 @@ class _Run:
     def _loop(self, chain, camera, ses) -> None:
         rig, plan, journal, log, flag = self.rig, self.plan, self.journal, self.log, self.flag
         kin = Kinematics(rig)
-        scale = float(getattr(ses, "time_scale", 1.0))  # rig seconds per wall second
+        scale = float(ses.time_scale)  # rig seconds per wall second
         with _Progress(self.progress) as bar:
             start_deg = start_pose(rig)
             for stage in range(plan.n_stages):
@@ -494,7 +505,7 @@ class _Run:
         table, note = None, ""
         try:
             if complete and write_table:
-                table, note = write_run_table(journal, self.rig, camera_channels(self.rig))
+                table, note = write_run_table(journal, self.rig, self.channels)
                 if counts["rejected"]:
                     note += f"; {rejected_note(journal)}"
                 self.log("table", path=table, note=note)
@@ -540,13 +551,6 @@ def _refuse_if_any(sp: StagePlan) -> None:
             f"plan refused before any motion: {len(sp.refused)} pose(s) refused in stage"
             f" {sp.stage}, first #{c.idx}: {c.reason}"
         )
-
-
-def camera_channels(rig: RigConfig) -> tuple[str, ...]:
-    """Channel names of the rig's measurements (:func:`gonio.rigs.camera_factory.channels`)."""
-    from gonio.rigs.camera_factory import channels
-
-    return channels(rig)
 
 
 def rejected_note(journal: Journal) -> str:

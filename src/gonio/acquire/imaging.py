@@ -1,8 +1,9 @@
 """The imaging measurement of one configuration: brackets -> DNG -> HDR -> EXR -> pose -> f.
 
-:class:`ImagingCamera` is the run engine's camera (the :class:`gonio.rigs.devices.Camera`
-protocol: ``capture(geometry) -> Capture``) for rigs whose ``[camera] kind`` names a RAW camera
-(``"sim"``, ``"gphoto2"``, ``"folder"``). Per configuration it
+:class:`ImagingCamera` is the run engine's measurement (``capture(geometry) -> Capture``, as a
+:class:`gonio.rigs.devices.DirectCamera` measures) over a :class:`gonio.rigs.devices.RawCamera`
+and the rig's light, both opened by the rig session (:func:`measurement` picks it for the
+session's camera). Per configuration it
 
 1. plans the exposures from the previous frame's sample and white-reference rates
    (:func:`gonio.acquire.hdr.plan_exposures`: the fewest brackets keeping both unsaturated at the
@@ -37,7 +38,7 @@ import numpy as np
 from gonio.acquire.hdr import Bracket, NoiseModel, merge_brackets, plan_exposures
 from gonio.acquire.pose import BoardPose, estimate_pose, mosaic_to_gray, pose_samples, to_8bit
 from gonio.acquire.radiometry import measure_brdf, pixel_rays_to_plane
-from gonio.errors import DeviceError, FrameError, RigConfigError
+from gonio.errors import DeviceError, FrameError
 from gonio.io.dng import read_dng
 from gonio.rigs.devices import Capture, Geometry
 
@@ -98,8 +99,8 @@ class ImagingCamera:
 
     Parameters
     ----------
-    raw : a :class:`gonio.rigs.cameras.RawCamera`.
-    light : a :class:`gonio.rigs.lights.Light` (switched off for dark frames).
+    raw : a :class:`gonio.rigs.devices.RawCamera`.
+    light : a :class:`gonio.rigs.devices.Light` (switched off for dark frames).
     layout : :class:`gonio.rigs.sim.camera.HolderLayout` of the holder (board, sample, reference).
     camera_matrix : (3, 3) intrinsics K, pixels.
     sensor : the sensor's noise parameters: an object with ``gain``, ``read_noise``,
@@ -140,8 +141,7 @@ class ImagingCamera:
         """
         if geometry.light_pos_m is None or geometry.camera_pos_m is None:
             raise DeviceError("imaging needs the light and camera positions (rig layout)")
-        if hasattr(self.raw, "set_geometry"):
-            self.raw.set_geometry(geometry.light_pos_m, geometry.camera_pos_m)
+        self.raw.point(geometry)
         times = FrameTimes()
         tag = f"c{geometry.index:05d}"
         try:
@@ -178,11 +178,6 @@ class ImagingCamera:
                 "reprojection_px": pose.reprojection_px,
             },
         )
-
-    def close(self) -> None:
-        close = getattr(self.light, "close", None)
-        if close is not None:
-            close()
 
     # --- steps ----------------------------------------------------------------------------------
     def _measure(self, geometry: Geometry, exposure_s: float | None, tag: str, times):
@@ -266,7 +261,9 @@ class ImagingCamera:
                 self.light.off()
                 try:
                     t0, c0 = time.monotonic(), time.process_time()
-                    dark_path = self._raw_capture(t, dark_path, f"dark_t{t!r}", {"dark": True})
+                    dark_path = self.raw.capture(
+                        t, dark_path, key=f"dark_t{t!r}", meta={"dark": True}
+                    )
                     times.capture += time.monotonic() - t0
                     times.capture_cpu += time.process_time() - c0
                     times.exposure += t
@@ -280,16 +277,11 @@ class ImagingCamera:
             "light_pos_m": np.asarray(geometry.light_pos_m).tolist(),
             "camera_pos_m": np.asarray(geometry.camera_pos_m).tolist(),
         }
-        path = self._raw_capture(t, self.raw_dir / f"{name}.dng", name, meta)
+        path = self.raw.capture(t, self.raw_dir / f"{name}.dng", key=name, meta=meta)
         times.capture += time.monotonic() - t0
         times.capture_cpu += time.process_time() - c0
         times.exposure += t
         return path
-
-    def _raw_capture(self, t: float, path: Path, key: str, meta: dict) -> Path:
-        if hasattr(self.raw, "set_geometry"):  # the simulator takes a noise key and metadata
-            return self.raw.capture(t, path, key=key, meta=meta)
-        return self.raw.capture(t, path)
 
     def _merge(self, frames: dict[float, Path], times: FrameTimes):
         brackets, darks = [], []
@@ -520,45 +512,25 @@ def settings_from_rig(rig) -> ImagingSettings:
     return s
 
 
-def open_imaging_camera(rig, run_dir: str | Path, planning: bool | None = None) -> ImagingCamera:
-    """The :class:`ImagingCamera` of a rig whose ``[camera] kind`` is a RAW backend
-    (:func:`gonio.rigs.camera_factory.open_raw_camera` picks it).
+def measurement(session, run_dir: str | Path, planning: bool | None = None):
+    """The run's measurement over the devices of an open :class:`gonio.rigs.session.RigSession`:
+    :class:`ImagingCamera` over a camera that takes raw frames (and the session's light and
+    holder), the camera itself when it reads the BRDF directly (e.g. ``"sim-sample"``).
 
     ``planning`` overrides the rig file's ``camera.planning``.
     """
-    from gonio.rigs import camera_factory
-    from gonio.rigs.lights import open_light
-    from gonio.rigs.sim.camera import HolderLayout, PinholeCamera
-    from gonio.rigs.sim.sensor import SensorModel
-
-    if not camera_factory.is_raw(rig):
-        raise RigConfigError(
-            f"{rig.source}: camera.kind {camera_factory.camera_kind(rig)!r} is not a RAW camera"
-        )
-    c = rig.camera
-    settings = settings_from_rig(rig)
+    camera = session.camera
+    if not camera.takes_raw:
+        return camera
+    settings = settings_from_rig(session.rig)
     if planning is not None:
         settings.planning = planning
-    optics = PinholeCamera(
-        int(c.get("width", 640)), int(c.get("height", 480)), float(c.get("focal_px", 2400.0))
+    return ImagingCamera(
+        camera,
+        session.light,
+        session.holder,
+        camera.optics.matrix,
+        camera.sensor,
+        Path(run_dir),
+        settings,
     )
-    sensor = SensorModel(**dict(c.get("sensor", {})))
-    layout = HolderLayout()
-    light = open_light(rig)
-    try:
-        raw = camera_factory.open_raw_camera(rig, light, optics, sensor, layout)
-        light.on()
-    except BaseException:
-        light.close()
-        raise
-    return ImagingCamera(raw, light, layout, optics.matrix, sensor, Path(run_dir), settings)
-
-
-def open_run_camera(rig, run_dir: str | Path, planning: bool | None = None):
-    """The run engine's camera: :class:`ImagingCamera` for RAW kinds, else the rig's direct
-    camera (:func:`gonio.rigs.camera_factory.open_direct_camera`, e.g. ``"sim-sample"``)."""
-    from gonio.rigs import camera_factory
-
-    if camera_factory.is_raw(rig):
-        return open_imaging_camera(rig, run_dir, planning)
-    return camera_factory.open_direct_camera(rig)

@@ -53,7 +53,7 @@ MEASURED = {
 
 def default_costs(rig) -> Costs:
     """The costs of :data:`MEASURED` for the rig's camera kind; unknown capture for real ones."""
-    from gonio.rigs.camera_factory import camera_kind
+    from gonio.rigs.factory import camera_kind
 
     kind = camera_kind(rig)
     extra = float(rig.camera.get("capture_time_s", 0.0))

@@ -1,4 +1,5 @@
-"""RAW cameras: ``capture(exposure_s, path) -> Path`` of a raw file (DNG or the camera's own).
+"""RAW cameras (:class:`gonio.rigs.devices.RawCamera`): ``capture(exposure_s, path) -> Path``
+of a raw file (DNG or the camera's own).
 
 Backends (the rig file's ``[camera] kind``):
 
@@ -11,8 +12,9 @@ Backends (the rig file's ``[camera] kind``):
 * ``"folder"`` — :class:`FolderWatchCamera`: a camera driven by its own software that drops raw
   files into a folder; gonio waits for the next new file.
 
-The HDR pipeline (:mod:`gonio.acquire.imaging`) decodes every file with rawpy, so any raw format
-LibRaw reads works for the real backends.
+:mod:`gonio.rigs.factory` builds them from the rig file. The HDR pipeline
+(:mod:`gonio.acquire.imaging`) decodes every file with rawpy, so any raw format LibRaw reads works
+for the real backends.
 """
 
 from __future__ import annotations
@@ -24,20 +26,19 @@ import subprocess
 import time
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gonio.errors import DeviceError, ParameterError
 
+if TYPE_CHECKING:
+    from gonio.rigs.devices import Geometry
+    from gonio.rigs.sim.camera import PinholeCamera
+    from gonio.rigs.sim.sensor import SensorModel
 
-class RawCamera(Protocol):
-    """A camera that takes one raw exposure and leaves it as a file."""
-
-    def capture(self, exposure_s: float, path: str | os.PathLike) -> Path:
-        """Expose for ``exposure_s`` seconds and write the raw file at ``path`` (the suffix may
-        be changed to the camera's format); return where it is."""
-        ...
+#: Channels of a RAW camera's measurements (demosaicked).
+RGB = ("R", "G", "B")
 
 
 # --- simulated ------------------------------------------------------------------------------
@@ -52,12 +53,15 @@ class SimulatedRawCamera:
     light : :class:`gonio.rigs.lights.SimulatedLight` (its state scales the light's intensity).
     intensity_w_sr : radiant intensity of the light at full output, W/sr (per colour plane).
 
-    :meth:`set_geometry` is called by the run engine after every move with the light and camera
-    positions (sample frame, metres) from the read-back joint angles; the rendered electron-rate
-    image is cached until the geometry changes. Each file's noise is keyed by the frame ``key``
-    passed to :meth:`capture` (defaults to the file name), so the same (seed, configuration)
-    always gives the same file.
+    :meth:`point` is called by the imaging chain before every configuration's frames with the
+    light and camera positions (sample frame, metres) from the read-back joint angles; the
+    rendered electron-rate image is cached until the geometry changes. Each file's noise is
+    keyed by the frame ``key`` passed to :meth:`capture` (defaults to the file name), so the
+    same (seed, configuration) always gives the same file.
     """
+
+    takes_raw = True
+    channels = RGB
 
     def __init__(self, virtual: Any, light: Any, intensity_w_sr: float) -> None:
         self.virtual = virtual
@@ -66,10 +70,23 @@ class SimulatedRawCamera:
         self._geometry: tuple[np.ndarray, np.ndarray] | None = None
         self._rate: np.ndarray | None = None
 
-    def set_geometry(self, light_pos_m: np.ndarray, camera_pos_m: np.ndarray) -> None:
-        """Where the light and the camera are (sample frame, metres); the camera looks at the
-        holder centre."""
-        g = (np.asarray(light_pos_m, dtype=float), np.asarray(camera_pos_m, dtype=float))
+    @property
+    def optics(self) -> PinholeCamera:
+        return self.virtual.camera
+
+    @property
+    def sensor(self) -> SensorModel:
+        return self.virtual.sensor
+
+    def point(self, geometry: Geometry) -> None:
+        """Where the light and the camera are (``geometry.light_pos_m``, ``camera_pos_m``:
+        sample frame, metres); the camera looks at the holder centre."""
+        if geometry.light_pos_m is None or geometry.camera_pos_m is None:
+            raise DeviceError("simulated camera: the geometry has no light and camera positions")
+        g = (
+            np.asarray(geometry.light_pos_m, dtype=float),
+            np.asarray(geometry.camera_pos_m, dtype=float),
+        )
         if self._geometry is None or not all(
             np.array_equal(a, b) for a, b in zip(g, self._geometry, strict=True)
         ):
@@ -101,6 +118,31 @@ class SimulatedRawCamera:
         p, _ = self.virtual.capture(Path(path), rate, float(exposure_s), key=k, meta=meta)
         return p
 
+    def close(self) -> None:
+        pass
+
+
+class _TetheredCamera:
+    """What the real RAW backends share: frames in R, G, B, the rig file's optics and sensor
+    (defaults: :class:`~gonio.rigs.sim.camera.PinholeCamera` and
+    :class:`~gonio.rigs.sim.sensor.SensorModel`), nothing to point and nothing to close."""
+
+    takes_raw = True
+    channels = RGB
+
+    def __init__(self, optics: PinholeCamera | None, sensor: SensorModel | None) -> None:
+        from gonio.rigs.sim.camera import PinholeCamera
+        from gonio.rigs.sim.sensor import SensorModel
+
+        self.optics = optics if optics is not None else PinholeCamera()
+        self.sensor = sensor if sensor is not None else SensorModel()
+
+    def point(self, geometry: Geometry) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
 
 # --- command line (gphoto2) ----------------------------------------------------------------
 
@@ -118,7 +160,7 @@ def format_shutter(exposure_s: float) -> str:
     return f"{exposure_s:g}"
 
 
-class CommandLineCamera:
+class CommandLineCamera(_TetheredCamera):
     """A tethered camera driven by gphoto2 (or a compatible program) per exposure.
 
     Each capture runs::
@@ -137,6 +179,7 @@ class CommandLineCamera:
     shutter_key : the camera's config key for the shutter speed (``shutterspeed`` on most).
     timeout_s : longest a capture may take beyond its exposure, seconds.
     extra_args : more arguments inserted before the capture action (ISO, image format...).
+    optics, sensor : the camera's intrinsics and noise model (:class:`_TetheredCamera`).
     """
 
     def __init__(
@@ -146,7 +189,10 @@ class CommandLineCamera:
         shutter_key: str = "shutterspeed",
         timeout_s: float = 30.0,
         extra_args: tuple[str, ...] = (),
+        optics: PinholeCamera | None = None,
+        sensor: SensorModel | None = None,
     ) -> None:
+        super().__init__(optics, sensor)
         self.program = program
         self.port = port
         self.shutter_key = shutter_key
@@ -218,13 +264,14 @@ def parse_saved_path(output: str) -> Path | None:
 # --- folder watch ---------------------------------------------------------------------------
 
 
-class FolderWatchCamera:
+class FolderWatchCamera(_TetheredCamera):
     """A camera run by its own software, which writes raw files into ``folder``.
 
     :meth:`capture` notes the files already there, optionally calls ``trigger(exposure_s)``
     (e.g. to tell an operator or another program to shoot), then waits for a new file matching
     ``pattern`` whose size has stopped changing for ``stable_s``, and moves it to ``path``
-    (keeping its suffix). No new file within ``timeout_s`` is a DeviceError.
+    (keeping its suffix). No new file within ``timeout_s`` is a DeviceError. ``optics`` and
+    ``sensor`` as for :class:`_TetheredCamera`.
     """
 
     def __init__(
@@ -235,7 +282,10 @@ class FolderWatchCamera:
         stable_s: float = 0.2,
         poll_s: float = 0.05,
         trigger: Any = None,
+        optics: PinholeCamera | None = None,
+        sensor: SensorModel | None = None,
     ) -> None:
+        super().__init__(optics, sensor)
         self.folder = Path(folder)
         self.pattern = pattern
         self.timeout_s = float(timeout_s)

@@ -70,7 +70,7 @@ def _check(args: argparse.Namespace) -> int:
     from gonio.rigs.session import open_rig
 
     rig = load_rig(args.rig)
-    with open_rig(rig, initialize=False) as ses:
+    with open_rig(rig, initialize=False, devices=("servos",)) as ses:
         infos = ses.chain.check()
     bad = [i for i in infos if not i.ok]
     if args.json:

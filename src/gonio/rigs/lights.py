@@ -1,4 +1,5 @@
-"""Light sources: on/off/intensity, simulated or an LED driver speaking a line protocol.
+"""Light sources (:class:`gonio.rigs.devices.Light`): on/off/intensity, simulated or an LED
+driver speaking a line protocol. :mod:`gonio.rigs.factory` builds them from the rig file.
 
 Backends (the rig file's ``[light] kind``):
 
@@ -25,27 +26,10 @@ Backends (the rig file's ``[light] kind``):
 
 from __future__ import annotations
 
-from typing import Protocol
-
 from gonio.errors import DeviceError, ParameterError
 
 #: Levels are sent in per mille (0..1000), the resolution of a typical 10-bit PWM driver.
 LEVEL_MAX = 1000
-
-
-class Light(Protocol):
-    """A light source the run engine switches: ``intensity`` is relative, in [0, 1]."""
-
-    is_on: bool
-    intensity: float
-
-    def on(self) -> None: ...
-
-    def off(self) -> None: ...
-
-    def set_intensity(self, value: float) -> None: ...
-
-    def close(self) -> None: ...
 
 
 def _check_level(value: float) -> float:
@@ -163,23 +147,3 @@ class SerialLEDLight:
             pass
         finally:
             self._ser.close()
-
-
-def open_light(rig) -> Light:
-    """The light backend named by the rig file's ``[light] kind`` (default ``"sim"``)."""
-    from gonio.errors import RigConfigError
-
-    cfg = rig.light
-    kind = cfg.get("kind", "sim")
-    if kind == "sim":
-        return SimulatedLight(float(cfg.get("intensity", 1.0)))
-    if kind == "serial":
-        if "port" not in cfg:
-            raise RigConfigError(f"{rig.source}: light.port is required for kind 'serial'")
-        return SerialLEDLight(
-            cfg["port"],
-            int(cfg.get("baudrate", 115200)),
-            float(cfg.get("timeout_s", 1.0)),
-            float(cfg.get("intensity", 1.0)),
-        )
-    raise RigConfigError(f"{rig.source}: light.kind {kind!r} has no backend")

@@ -18,7 +18,10 @@ from gonio.rigs.devices import Capture, Geometry
 
 
 class SimulatedSampleCamera:
-    """Camera backend ``kind = "sim"``: BRDF reading of the rig file's ``[sim.sample]``."""
+    """Camera backend ``kind = "sim-sample"`` (a :class:`gonio.rigs.devices.DirectCamera`):
+    BRDF reading of the rig file's ``[sim.sample]``."""
+
+    takes_raw = False
 
     def __init__(self, rig: RigConfig) -> None:
         from gonio.rigs.sim.truth import load_truth
@@ -61,3 +64,6 @@ class SimulatedSampleCamera:
             channels=self.channels[: len(value)],
             meta={"exposure_s": exposure_s or self.exposure_s},
         )
+
+    def close(self) -> None:
+        pass
