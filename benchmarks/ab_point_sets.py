@@ -13,7 +13,7 @@ each point set in turn, a fresh randomization per pixel:
 - ``cmj``: correlated multi-jittered points (Kensler 2013: one permutation of the sub-columns
   for all columns and one of the sub-rows for all rows, then jitter), the pattern of Mitsuba
   3's ``multijitter`` sampler;
-- ``lattice``: the renderer's rank-1 lattice sequence (``gonio.render.sobol.padded_unit``,
+- ``lattice``: the renderer's rank-1 lattice sequence (``gonio.render.points.padded_unit``,
   pair 0), rotated per pixel;
 - ``random``: independent uniform points.
 
@@ -41,17 +41,17 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def sobol_xor(rng: np.random.Generator, n_pix: int, spp: int) -> np.ndarray:
-    from gonio.render import sobol
+    from gonio.brdf.sampling import points
 
-    pts = sobol.sobol_ints(spp, 2)
-    return np.asarray(sobol.to_unit(jnp.asarray(pts), jnp.asarray(sobol.shifts(rng, n_pix, 2))))
+    pts = points.sobol_ints(spp, 2)
+    return np.asarray(points.to_unit(jnp.asarray(pts), jnp.asarray(points.shifts(rng, n_pix, 2))))
 
 
 def sobol_owen(rng: np.random.Generator, n_pix: int, spp: int) -> np.ndarray:
-    from gonio.render import sobol
+    from gonio.brdf.sampling import points
 
     m = int(math.log2(spp))
-    top = (sobol.sobol_ints(spp, 2) >> np.uint32(32 - m)).astype(np.int64)  # (spp, 2), m bits
+    top = (points.sobol_ints(spp, 2) >> np.uint32(32 - m)).astype(np.int64)  # (spp, 2), m bits
     out = np.empty((n_pix, spp, 2))
     for d in range(2):
         x = top[:, d]
@@ -85,10 +85,10 @@ def cmj(rng: np.random.Generator, n_pix: int, spp: int) -> np.ndarray:
 
 
 def lattice(rng: np.random.Generator, n_pix: int, spp: int) -> np.ndarray:
-    from gonio.render import sobol
+    from gonio.brdf.sampling import points
 
-    pts = jnp.asarray(sobol.sobol_ints(spp, 1))
-    return np.asarray(sobol.padded_unit(pts, jnp.asarray(sobol.shifts(rng, n_pix, 2))))
+    pts = jnp.asarray(points.sobol_ints(spp, 1))
+    return np.asarray(points.padded_unit(pts, jnp.asarray(points.shifts(rng, n_pix, 2))))
 
 
 def random(rng: np.random.Generator, n_pix: int, spp: int) -> np.ndarray:
@@ -115,7 +115,7 @@ def main() -> None:
         if spp < 4 or spp & (spp - 1) or math.isqrt(spp) ** 2 != spp:
             raise SystemExit(f"ab_point_sets: --spp must be a power of 4, got {spp}")
 
-    from gonio.brdf import warp
+    from gonio.brdf.sampling import warps
     from gonio.render import Environment
     from gonio.render.lights import studio_environment
     from gonio.render.scene import intersect_sphere
@@ -128,7 +128,7 @@ def main() -> None:
 
     @jax.jit
     def estimate(u: jnp.ndarray) -> jnp.ndarray:  # u (P, S, 2) -> (P, 3)
-        wi = warp.square_to_cosine_hemisphere(u)
+        wi = warps.square_to_cosine_hemisphere(u)
         w = jnp.sum(frame[:, None, :, :] * wi[:, :, :, None], axis=-2)
         return 0.5 * jnp.mean(env.radiance(None, w), axis=1)
 

@@ -8,11 +8,12 @@ switched off by patching the module-level helper before anything is traced:
     :func:`gonio.brdf._xla.materialize` (store an intermediate by dividing it by a runtime 1.0)
     replaced by the identity in :mod:`gonio.brdf.lookup` and :mod:`gonio.brdf.tabulated`.
 ``materialize-cdf``
-    the same in :mod:`gonio.brdf.sampling` (the CDF binary search of inversion).
+    the same in :mod:`gonio.brdf.sampling.distributions` (the CDF binary search of inversion).
 ``atan2``
     the float32 polynomial :func:`gonio.brdf.lookup.atan2` replaced by ``jnp.arctan2``.
 ``materialize-direction``
-    the same identity in :mod:`gonio.brdf.table_buckets` (the direction built in a sampled cell).
+    the same identity in :mod:`gonio.brdf.sampling.table_buckets` (the direction built in a
+    sampled cell).
 ``cos-sin-series``
     the cell azimuth's Taylor series replaced by ``jnp.cos``/``jnp.sin``.
 

@@ -72,8 +72,8 @@ from gonio.brdf.models._base import (
     clamp_u,
     masked_outgoing,
 )
+from gonio.brdf.sampling import marginal2d as w2
 from gonio.errors import ParameterError
-from gonio.io import _warp2d as w2
 from gonio.io._common import PathLike
 
 Array = jnp.ndarray

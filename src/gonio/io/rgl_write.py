@@ -55,8 +55,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf.sampling import marginal2d as w2
 from gonio.errors import ParameterError
-from gonio.io import _warp2d as w2
 from gonio.io._common import PathLike, atomic_output, fail
 
 #: Resolutions of the written fields (those of the RGL database's files).
