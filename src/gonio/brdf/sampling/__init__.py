@@ -33,6 +33,7 @@ from gonio.brdf.sampling.distributions import (
     Distribution1D,
     Distribution2D,
 )
+from gonio.brdf.sampling.marginal2d import Marginal2D
 from gonio.brdf.sampling.quadtree import HierarchicalWarp2D
 from gonio.brdf.sampling.table import TableSampler
 from gonio.brdf.sampling.table_rejection import TableRejection
@@ -42,6 +43,7 @@ __all__ = [
     "Distribution1D",
     "Distribution2D",
     "HierarchicalWarp2D",
+    "Marginal2D",
     "TableRejection",
     "TableSampler",
     "marginal2d",
