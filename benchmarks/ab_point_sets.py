@@ -13,7 +13,7 @@ each point set in turn, a fresh randomization per pixel:
 - ``cmj``: correlated multi-jittered points (Kensler 2013: one permutation of the sub-columns
   for all columns and one of the sub-rows for all rows, then jitter), the pattern of Mitsuba
   3's ``multijitter`` sampler;
-- ``lattice``: the renderer's rank-1 lattice sequence (``gonio.render.points.padded_unit``,
+- ``lattice``: the renderer's rank-1 lattice sequence (``gonio.brdf.sampling.points.padded_unit``,
   pair 0), rotated per pixel;
 - ``random``: independent uniform points.
 
