@@ -1,4 +1,5 @@
-"""Tests of gonio.brdf.sampling (distributions, alias tables, rejection) and of table sampling.
+"""Tests of gonio.brdf.sampling.distributions (distributions, alias tables, rejection) and of
+table sampling.
 
 Statistical tests use fixed seeds; chi-square tests run at a family-wise level of 0.01 with a
 Sidak correction over the tests of each group (N_DISCRETE, N_TABLE).
@@ -16,7 +17,7 @@ from scipy import stats
 
 from gonio.brdf import frames
 from gonio.brdf.chi2 import chi2_test
-from gonio.brdf.sampling import (
+from gonio.brdf.sampling.distributions import (
     AliasTable,
     Distribution1D,
     Distribution2D,
@@ -104,7 +105,7 @@ def test_alias_two_numbers_keep_rare_outcomes_right_in_float32():
     """8192 outcomes, half of them 1e4 times rarer (keep thresholds 2e-4 < 2**-11): drawn with
     float32 numbers, the rare half must come up with its probability. Splitting one float32
     over 8192 columns leaves 11 bits for the keep decision and draws them 2.4x too often."""
-    from gonio.brdf.sampling import alias_sample_2d
+    from gonio.brdf.sampling.distributions import alias_sample_2d
 
     n = 8192
     w = np.where(np.arange(n) % 2 == 0, 1.0, 1e-4)
@@ -275,8 +276,8 @@ def test_rejection_chi2_majorant(glossy, theta_o):
 def test_majorant_bounds_g_cos_and_acceptance(glossy):
     """The per-cell bound of the majorant proposal is never exceeded by ``g cos`` for outgoing
     directions anywhere in a bucket, and it is tight enough to accept often."""
-    from gonio.brdf.table_buckets import bucket_ranges
-    from gonio.brdf.table_buckets import cell_of as _cell_of
+    from gonio.brdf.sampling.table_buckets import bucket_ranges
+    from gonio.brdf.sampling.table_buckets import cell_of as _cell_of
 
     smp = glossy._sampler().rejection
     geo = smp.geo_major

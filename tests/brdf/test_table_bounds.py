@@ -1,5 +1,6 @@
-"""The interval bounds behind exact rejection sampling of tables (gonio.brdf.table_rejection):
-half/difference angle ranges over boxes of directions, and rectangle maxima."""
+"""The interval bounds behind exact rejection sampling of tables
+(gonio.brdf.sampling.table_rejection): half/difference angle ranges over boxes of directions, and
+rectangle maxima."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gonio.brdf import frames
-from gonio.brdf.table_rejection import half_diff_ranges as _half_diff_ranges
-from gonio.brdf.table_rejection import rect_max
+from gonio.brdf.sampling.table_rejection import half_diff_ranges as _half_diff_ranges
+from gonio.brdf.sampling.table_rejection import rect_max
 
 HALF_PI = math.pi / 2
 

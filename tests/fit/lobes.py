@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from gonio.brdf import warp
 from gonio.brdf.models import BRDFModel, Param
 from gonio.brdf.models._base import channel_mean
+from gonio.brdf.sampling import warps
 
 
 class TestLobe(BRDFModel):
@@ -33,10 +33,10 @@ class TestLobe(BRDFModel):
         return rho * (n + 2) / (2 * jnp.pi) * lobe
 
     def _pdf(self, wi, wo):
-        return warp.cosine_hemisphere_pdf(wi)
+        return warps.cosine_hemisphere_pdf(wi)
 
     def _sample(self, wo, u):
-        return warp.square_to_cosine_hemisphere(u)
+        return warps.square_to_cosine_hemisphere(u)
 
     def sampling_weight(self, wo):
         return jnp.broadcast_to(channel_mean(self.rho_s).astype(wo.dtype), wo.shape[:-1])

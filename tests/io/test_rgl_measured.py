@@ -96,22 +96,17 @@ def test_pdf_equals_mitsuba_measured_pdf(name):
 
 
 @pytest.mark.parametrize("name", FILES)
-def test_f_equals_the_reference_readers(name):
-    """Against the NumPy reader (:class:`gonio.io.rgl.RGLBSDF`) on every file, and the
-    scalar pure-Python reference of the test suite on one, which always run."""
+def test_f_equals_the_reference_reader(name):
+    """Against the scalar pure-Python reference of the test suite on every file, which always
+    runs (Mitsuba's reader is compared above where it is installed)."""
     path = shared_file("rgl", name)
     m = load_rgl(path)
-    b = rgl.read_rgl(path)
-    wi, wo = _pairs(2000, seed=3)
+    wi, wo = _pairs(60, seed=3)
     ours = np.asarray(m.f(wi, wo))
-    rel = _rel(ours, b.f(wi, wo))
-    assert np.median(rel) <= 1e-10 and rel.max() <= 1e-8
-    if name == FILES[0]:
-        ref = _SlowReference(b.fields)
-        k = 60
-        slow = np.array([ref(wo[j], wi[j]) for j in range(k)])  # ref(w_c, w_s) = F / cos(w_s)
-        rel = _rel(ours[:k], slow)
-        assert np.median(rel) <= 1e-6 and rel.max() <= 1e-4
+    ref = _SlowReference(rgl.read_rgl(path).fields)
+    slow = np.array([ref(wo[j], wi[j]) for j in range(len(wi))])  # ref(w_c, w_s) = F / cos(w_s)
+    rel = _rel(ours, slow)
+    assert np.median(rel) <= 1e-6 and rel.max() <= 1e-4
 
 
 def test_float32_evaluation_matches_float64():

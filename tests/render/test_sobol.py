@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from gonio.render import sobol
+from gonio.brdf.sampling import points as sobol
 
 
 @pytest.mark.parametrize("dims", [1, 2, 4, 8])
@@ -117,8 +117,8 @@ def test_lattice_sequence_is_a_korobov_lattice_at_every_power_of_two():
 
 
 def test_lattice_generator_maximizes_the_worst_zaremba_index():
-    """The generator's claim in gonio.render.sobol: among the odd numbers below 2^14 none has
-    a larger minimum of Zaremba index / N over N = 2^4 ... 2^11, and that minimum is 0.113."""
+    """The generator's claim in gonio.brdf.sampling.points: among the odd numbers below 2^14 none
+    has a larger minimum of Zaremba index / N over N = 2^4 ... 2^11, and that minimum is 0.113."""
 
     def worst(g: int) -> float:
         return min(_zaremba(g % (1 << m), 1 << m) / (1 << m) for m in range(4, 12))

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from gonio.brdf.sampling.quadtree import HierarchicalWarp2D
 from gonio.errors import ParameterError
 from gonio.render.lights import Environment, studio_environment
-from gonio.render.warp2d import HierarchicalWarp2D
 
 #: Significance level of each chi-square test (the chance that a correct sampler fails it).
 ALPHA = 1e-3

@@ -2,7 +2,7 @@
 
 Used only where a same-run A/B (``benchmarks/ab_xla.py``) shows switching it off costs more than
 10 %: the table lookup's index arithmetic (lookup 0.63x without it) and the CDF binary search of
-:func:`gonio.brdf.sampling.find_interval` (inversion 0.67x).
+:func:`gonio.brdf.sampling.distributions.find_interval` (inversion 0.67x).
 """
 
 from __future__ import annotations

@@ -37,8 +37,9 @@ JAX
 :meth:`TabulatedBRDF.f` is pure JAX, vectorized over any batch shape, and keeps float32 inputs in
 float32. A table is also a registered pytree (its leaves are the float32 lookup arrays), so it can
 be passed to ``jax.jit`` as an argument or closed over. The sampling structures (see
-:mod:`gonio.brdf.sampling` and :meth:`TabulatedBRDF.sample`) are built lazily, on the host, from the
-table's values; they are shared by every copy of the table that a pytree round trip makes.
+:mod:`gonio.brdf.sampling.distributions` and :meth:`TabulatedBRDF.sample`) are built lazily, on
+the host, from the table's values; they are shared by every copy of the table that a pytree round
+trip makes.
 """
 
 from __future__ import annotations
@@ -403,7 +404,7 @@ class TabulatedBRDF:
 
     # -- sampling ----------------------------------------------------------------------------------
     def _sampler(self) -> Any:
-        from gonio.brdf.table_sampling import TableSampler
+        from gonio.brdf.sampling.table import TableSampler
 
         sampler = self._host.samplers.get("table")
         if sampler is None:
@@ -428,12 +429,12 @@ class TabulatedBRDF:
         u : ``(..., 2)`` uniform numbers in [0, 1).
         method : ``"inversion"``, ``"alias"`` (piecewise-constant density per incident-grid cell
             and outgoing bucket) or ``"rejection"`` (exactly ``g cos / rho(wo)``, the reference
-            density); see :mod:`gonio.brdf.table_sampling`.
+            density); see :mod:`gonio.brdf.sampling.table`.
         rng : rejection only: where the extra random numbers come from (a NumPy Generator, an
             int seed or a JAX key); default: derived deterministically from ``u``.
         proposal : rejection only: ``"majorant"`` (default: a piecewise-constant bound of
             ``g cos`` per incident-grid cell and outgoing bucket, drawn from an alias table) or
-            ``"cosine"``; see :mod:`gonio.brdf.table_rejection`. The sampled density is the
+            ``"cosine"``; see :mod:`gonio.brdf.sampling.table_rejection`. The sampled density is the
             same for both.
         state : the sampling structures from :meth:`sampling_state` (same ``method`` and
             ``proposal``), to trace this call inside ``jit`` with them as arguments: nothing is
@@ -488,7 +489,7 @@ class TabulatedBRDF:
         image before it starts, builds once and then never waits on the host. ``wo``:
         directions ``(..., 3)``, or a list of such arrays (e.g. an image's tiles, whose fixed
         shapes compile the bucket histogram once). Directions in other buckets: see
-        :meth:`gonio.brdf.table_sampling.TableSampler.state` (rejection needs each
+        :meth:`gonio.brdf.sampling.table.TableSampler.state` (rejection needs each
         direction's own bucket). The arrays are in ``dtype`` (that of the ``wo`` the calls will
         get); the pytree's shapes grow when more buckets are built (capacity a power of 2), so
         a jitted caller recompiles only when the count passes one.

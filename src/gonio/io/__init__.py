@@ -96,7 +96,8 @@ def load(
 def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
     """Save ``obj`` in the format named by the extension of ``path``, atomically.
 
-    An object with ``to_table()`` (e.g. :class:`gonio.io.rgl.RGLBSDF`) is tabulated first.
+    An object with ``to_table()`` (e.g. :class:`gonio.io.rgl_measured.RGLMeasured`) is tabulated
+    first.
     ``.brdf.h5`` (or ``.h5``): native (``lossy``: guaranteed relative precision, e.g. 0.005);
     ``.binary``: MERL (RGB half/diff tables; others are resampled); ``.exr``: one image per
     ``phi_d`` slice of a half/diff table (multi-part EXR); ``.bsdf``: an RGL tensor file, from

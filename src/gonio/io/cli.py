@@ -191,10 +191,10 @@ def cmd_convert(args: argparse.Namespace) -> int:
     with progress:
         task = progress.add_task(f"reading {fmt}", total=1)
         if fmt == "rgl" and not out_name.endswith(".bsdf"):
-            from gonio.io.rgl import read_rgl
+            from gonio.io.rgl_measured import load_rgl
 
             progress.update(task, description="tabulating RGL BSDF")
-            obj = read_rgl(args.input).to_table(
+            obj = load_rgl(args.input).to_table(
                 progress=lambda done, total: progress.update(task, completed=done, total=total)
             )
         else:

@@ -6,6 +6,21 @@ reader) and implements the interface of every gonio BRDF (:class:`~gonio.brdf.mo
 ``f``, ``pdf``, ``sample``, ``directional_albedo``. It is pure JAX and a registered pytree, so the
 renderer traces it into its kernels and ``jax.jit`` takes it as an argument.
 
+Evaluation
+----------
+The file's fields are checked by :meth:`gonio.io.rgl.RGLFile.from_fields`; its four tables are
+continuous 2-D warps (:mod:`gonio.brdf.sampling.marginal2d`). ``F(w_c, w_s)`` is computed as the
+reference reader computes it:
+
+1. the half vector ``m = normalize(w_c + w_s)`` and ``w_c`` are turned into unit coordinates
+   ``u(theta) = sqrt(2 theta / pi)``, ``u(phi) = (phi + pi) / (2 pi)`` (for isotropic data the
+   half vector's azimuth is taken relative to ``phi_c`` and wrapped to [0, 1));
+2. the ``vndf`` warp, linearly interpolated in the parameters ``(phi_c, theta_c)``, is
+   *inverted* at ``u(m)``;
+3. the colour table (``rgb`` or ``spectra``) is bilinearly interpolated at the resulting point,
+   conditioned on ``(phi_c, theta_c)``, at each channel;
+4. if ``jacobian`` is set the value is multiplied by ``ndf(u(m)) / (4 sigma(u(w_c)))``.
+
 Argument order
 --------------
 A tensor file tabulates ``F(w_c, w_s) = f_r cos(theta_s)`` conditioned on one direction ``w_c``
@@ -72,8 +87,8 @@ from gonio.brdf.models._base import (
     clamp_u,
     masked_outgoing,
 )
+from gonio.brdf.sampling import marginal2d as w2
 from gonio.errors import ParameterError
-from gonio.io import _warp2d as w2
 from gonio.io._common import PathLike
 
 Array = jnp.ndarray
@@ -373,21 +388,12 @@ class RGLMeasured(BRDFModel):
             static, self._ndf, self._sigma, self._vndf, self._lum, self._colour, matrix
         )
 
-    def to_table(self, **kwargs: Any) -> Any:
-        """Resample onto a half/diff grid (:meth:`gonio.io.rgl.RGLBSDF.to_table`); this is the
-        only place where the file is resampled."""
-        from gonio.io.rgl import RGLBSDF, read_rgl
+    def to_table(self, *args: Any, **kwargs: Any) -> Any:
+        """Resample onto a half/diff grid (:func:`gonio.io.rgl_table.tabulate`, which takes
+        the arguments); this is the only place where the file is resampled."""
+        from gonio.io.rgl_table import tabulate
 
-        bsdf = read_rgl(self._static.path)
-        if self._static.negative == "clamp":
-            key = "spectra" if bsdf.spectral else "rgb"
-            fields = {**bsdf.fields, key: np.maximum(bsdf.fields[key], np.float32(0))}
-            bsdf = RGLBSDF.from_fields(fields, bsdf.path)
-        table = bsdf.to_table(**kwargs)
-        if self._static.to_rgb:
-            vals = np.asarray(table.values, np.float64) @ np.asarray(self._matrix)
-            table = table.replace(values=vals.astype(np.float32), channels=self.channel_info)
-        return table
+        return tabulate(self, *args, **kwargs)
 
     def to_samples(self, theta_max_deg: float = 90.0) -> Any:
         """The file's own nodes as :class:`~gonio.brdf.tabulated.MeasuredSamples` (for fits).
@@ -524,13 +530,14 @@ def load_rgl(
     if color not in (None, "keep", "spectral", "rgb"):
         raise ParameterError(f"color must be 'rgb', 'spectral' or 'keep', got {color!r}")
     bsdf = read_rgl(path)
-    return from_rglbsdf(bsdf, negative=negative, color=color, illuminant=illuminant)
+    return from_rgl_file(bsdf, negative=negative, color=color, illuminant=illuminant)
 
 
-def from_rglbsdf(
+def from_rgl_file(
     bsdf: Any, *, negative: str = "keep", color: str | None = None, illuminant: str = "D65"
 ) -> RGLMeasured:
-    """:class:`RGLMeasured` from a validated :class:`gonio.io.rgl.RGLBSDF`."""
+    """:class:`RGLMeasured` from a checked :class:`gonio.io.rgl.RGLFile` (options as
+    :func:`load_rgl`)."""
     f = bsdf.fields
     phi_i = f["phi_i"].astype(np.float64)
     theta_i = f["theta_i"].astype(np.float64)

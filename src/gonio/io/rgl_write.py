@@ -55,8 +55,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from gonio.brdf.sampling import marginal2d as w2
 from gonio.errors import ParameterError
-from gonio.io import _warp2d as w2
 from gonio.io._common import PathLike, atomic_output, fail
 
 #: Resolutions of the written fields (those of the RGL database's files).
@@ -72,7 +72,9 @@ Array = jnp.ndarray
 
 
 @jax.jit
-def _forward(warp: w2.Warp2D, ndf: w2.Warp2D, s: Array, theta: Array) -> tuple[Array, Array]:
+def _forward(
+    warp: w2.Marginal2D, ndf: w2.Marginal2D, s: Array, theta: Array
+) -> tuple[Array, Array]:
     """Images ``u_m`` of the sample-space points ``s`` under the vndf warp at ``theta``, and
     the file's ``ndf`` there."""
     th = jnp.full(s.shape[:-1], theta)
@@ -279,12 +281,12 @@ def write_rgl(obj: Any, path: PathLike, description: str | None = None) -> None:
     isotropic BRDF with ``f(wi, wo)``: a table, an acquisition's gridded table, an analytic
     model. Scattered samples and anisotropic tables are refused (grid them first).
     """
-    from gonio.io.rgl import RGLBSDF, read_rgl, tensor_file_bytes
+    from gonio.io.rgl import RGLFile, read_rgl, tensor_file_bytes
     from gonio.io.rgl_measured import RGLMeasured
 
     if isinstance(obj, RGLMeasured) and os.path.exists(obj.path):
         fields = _loaded_fields(obj, read_rgl(obj.path).fields)
-    elif hasattr(obj, "f_cos") and hasattr(obj, "fields"):  # a gonio.io.rgl.RGLBSDF
+    elif isinstance(obj, RGLFile):  # a file's checked fields, written back unchanged
         fields = dict(obj.fields)
     else:
         if not hasattr(obj, "f"):
@@ -301,7 +303,7 @@ def write_rgl(obj: Any, path: PathLike, description: str | None = None) -> None:
         for name, arr in fields.items():
             if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
                 raise fail(path, f"computed field {name!r} is not finite (source returns NaN?)")
-    RGLBSDF.from_fields(dict(fields), path)  # the reader's checks, before anything is written
+    RGLFile.from_fields(dict(fields), path)  # the reader's checks, before anything is written
     data = tensor_file_bytes(fields)
     with atomic_output(path) as tmp:
         tmp.write_bytes(data)

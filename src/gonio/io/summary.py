@@ -124,6 +124,7 @@ def summarize(path: PathLike) -> dict[str, Any]:
     out: dict[str, Any] = {"file": os.fspath(path), "format": fmt, "size_bytes": size}
     if fmt == "rgl":
         from gonio.io.rgl import read_rgl
+        from gonio.io.rgl_measured import from_rgl_file
 
         b = read_rgl(path)
         colour = b.fields["spectra" if b.spectral else "rgb"]
@@ -133,7 +134,7 @@ def summarize(path: PathLike) -> dict[str, Any]:
             isotropic=b.isotropic,
             grid={name: list(b.fields[name].shape) for name in ("theta_i", "phi_i", "vndf")},
             channels=_channels(b.channels),
-            value_range=_rgl_brdf_stats(b),
+            value_range=_rgl_brdf_stats(from_rgl_file(b)),
             value_range_note=RGL_VALUES_NOTE,
             stored_range=_value_stats(np.moveaxis(colour, 2, -1), None),
             valid_fraction=1.0,

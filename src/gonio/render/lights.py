@@ -34,8 +34,8 @@ import numpy as np
 
 from gonio.brdf._trig import cos_sin_turns
 from gonio.brdf.lookup import atan2
+from gonio.brdf.sampling.quadtree import HierarchicalWarp2D
 from gonio.errors import ParameterError
-from gonio.render.warp2d import HierarchicalWarp2D
 
 Array = jnp.ndarray
 
@@ -349,7 +349,8 @@ class Environment(Light):
     scale : multiplies the radiance.
 
     The importance map (a 2-D piecewise-constant distribution proportional to the channel mean
-    times sin(theta), sampled down a quadtree: :class:`gonio.render.warp2d.HierarchicalWarp2D`)
+    times sin(theta), sampled down a quadtree:
+    :class:`gonio.brdf.sampling.quadtree.HierarchicalWarp2D`)
     is built the first time the light is sampled, so a render that never samples the
     environment (BRDF sampling only) never builds it.
     """

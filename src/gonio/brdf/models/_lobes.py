@@ -12,9 +12,9 @@ from collections.abc import Sequence
 
 import jax.numpy as jnp
 
-from gonio.brdf import warp
 from gonio.brdf.frames import safe_sqrt
 from gonio.brdf.models._base import choose_lobe, mixture_sample
+from gonio.brdf.sampling import warps
 
 Array = jnp.ndarray
 
@@ -34,7 +34,7 @@ def power_lobe_local(u: Array, n: Array) -> Array:
 
     Inversion of the marginal CDF: ``cos theta = (1 - u0)^(1/(n+1))``. ``1 - cos theta`` is
     taken from ``expm1`` so that ``sin theta`` keeps full relative precision for ``n`` up to
-    1e5 in float32 (``warp.square_to_cosine_power_lobe`` forms ``1 - cos**2`` directly, which
+    1e5 in float32 (``warps.square_to_cosine_power_lobe`` forms ``1 - cos**2`` directly, which
     cancels there).
     """
     lg = jnp.log1p(-u[..., 0]) / (n + 1.0)
@@ -63,7 +63,7 @@ def lobe_probabilities(shape: tuple[int, ...], dtype, weights: Sequence[Array]) 
 
 
 def _cosine(wo: Array, u: Array) -> Array:
-    return warp.square_to_cosine_hemisphere(u)
+    return warps.square_to_cosine_hemisphere(u)
 
 
 class DiffusePlusLobe:

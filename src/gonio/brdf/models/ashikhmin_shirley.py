@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from gonio.brdf import frames, warp
+from gonio.brdf import frames
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
 from gonio.brdf.models.fresnel import Schlick
+from gonio.brdf.sampling import warps
 
 Array = jnp.ndarray
 
@@ -131,10 +132,10 @@ class AshikhminShirley(BRDFModel):
         ws = self._weights(wo)
         total = ws[0] + ws[1]
         p_s = jnp.where(total > 0, frames.safe_div(ws[0], total), 0.5)
-        return p_s * self._spec_pdf(wi, wo) + (1.0 - p_s) * warp.cosine_hemisphere_pdf(wi)
+        return p_s * self._spec_pdf(wi, wo) + (1.0 - p_s) * warps.cosine_hemisphere_pdf(wi)
 
     def _sample(self, wo: Array, u: Array) -> Array:
-        samplers = [self._sample_spec, lambda w, uu: warp.square_to_cosine_hemisphere(uu)]
+        samplers = [self._sample_spec, lambda w, uu: warps.square_to_cosine_hemisphere(uu)]
         wi, _ = mixture_sample(wo, u, self._weights(wo), samplers)
         return wi
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from gonio.brdf import warp
 from gonio.brdf.frames import dot, safe_div, safe_sqrt
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean
 from gonio.brdf.models._lobes import (
@@ -13,6 +12,7 @@ from gonio.brdf.models._lobes import (
     pow_one_minus,
     power_lobe_local,
 )
+from gonio.brdf.sampling import warps
 
 Array = jnp.ndarray
 
@@ -100,7 +100,7 @@ class BlinnPhong(DiffusePlusLobe, BRDFModel):
         p_d, p_s = lobe_probabilities(wi.shape[:-1], wi.dtype, self._weights(wo))
         one_minus, norm = self._half(wi, wo)
         p_h = (n + 1.0) / (2.0 * jnp.pi) * pow_one_minus(one_minus, n)
-        return p_d * warp.cosine_hemisphere_pdf(wi) + p_s * safe_div(p_h, 2.0 * norm)
+        return p_d * warps.cosine_hemisphere_pdf(wi) + p_s * safe_div(p_h, 2.0 * norm)
 
     def _sample_lobe(self, wo: Array, u: Array) -> Array:
         n = jnp.asarray(self.n).astype(wo.dtype)

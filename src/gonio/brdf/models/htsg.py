@@ -59,7 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import erfc, gammainc, gammaincc
 
-from gonio.brdf import frames, warp
+from gonio.brdf import frames
 from gonio.brdf.frames import safe_div, safe_sqrt, upper
 from gonio.brdf.models._base import (
     BRDFModel,
@@ -73,6 +73,7 @@ from gonio.brdf.models._base import (
     sample_inputs,
 )
 from gonio.brdf.models.fresnel import Conductor
+from gonio.brdf.sampling import warps
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -388,14 +389,14 @@ class HTSG(BRDFModel):
         # consistent there, with its delta lobe never sampled). The public ``pdf`` and
         # ``sample`` scale it by the probability of not choosing the delta lobe.
         p_dd, p_ud = self._smooth_probs(wo)
-        return p_dd * self._dd_pdf(wi, wo) + p_ud * warp.cosine_hemisphere_pdf(wi)
+        return p_dd * self._dd_pdf(wi, wo) + p_ud * warps.cosine_hemisphere_pdf(wi)
 
     def _sample(self, wo: Array, u: Array) -> Array:
         p_dd, p_ud = self._smooth_probs(wo)
         index, u0, _ = choose_lobe(u[..., 0], [p_dd, p_ud])
         uu = jnp.stack([u0, u[..., 1]], -1)
         return jnp.where(
-            (index == 0)[..., None], self._sample_dd(wo, uu), warp.square_to_cosine_hemisphere(uu)
+            (index == 0)[..., None], self._sample_dd(wo, uu), warps.square_to_cosine_hemisphere(uu)
         )
 
     def pdf(self, wi: Array, wo: Array) -> Array:
@@ -417,7 +418,9 @@ class HTSG(BRDFModel):
         index, u0, probs = choose_lobe(u[..., 0], self._weights(wo_s))
         uu = jnp.stack([u0, u[..., 1]], -1)
         wi = jnp.where(
-            (index == 1)[..., None], self._sample_dd(wo_s, uu), warp.square_to_cosine_hemisphere(uu)
+            (index == 1)[..., None],
+            self._sample_dd(wo_s, uu),
+            warps.square_to_cosine_hemisphere(uu),
         )
         is_delta = index == 0
         wi = jnp.where(is_delta[..., None], frames.reflect(wo_s), wi)

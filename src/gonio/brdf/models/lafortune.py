@@ -23,8 +23,9 @@ from typing import Literal
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf import frames, warp
+from gonio.brdf import frames
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean, mixture_sample
+from gonio.brdf.sampling import warps
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -192,9 +193,9 @@ class Lafortune(BRDFModel):
         _, _, _, n = self._coeffs(wi.dtype)
         axes, _ = self._axes(wo)
         cos_a = jnp.sum(axes * wi[..., None, :], -1)  # (..., L)
-        lobe_pdf = warp.cosine_power_lobe_pdf(cos_a, n)
+        lobe_pdf = warps.cosine_power_lobe_pdf(cos_a, n)
         probs = self._probs(wo)
-        total = probs[-1] * warp.cosine_hemisphere_pdf(wi)
+        total = probs[-1] * warps.cosine_hemisphere_pdf(wi)
         for k in range(self.lobe_count):
             total = total + probs[k] * lobe_pdf[..., k]
         return total
@@ -205,13 +206,13 @@ class Lafortune(BRDFModel):
 
         def lobe_sampler(k: int):
             def sample(w: Array, uu: Array) -> Array:
-                local = warp.square_to_cosine_power_lobe(uu, n[k])
+                local = warps.square_to_cosine_power_lobe(uu, n[k])
                 return frames.to_world(frames.frame_from_normal(axes[..., k, :]), local)
 
             return sample
 
         samplers = [lobe_sampler(k) for k in range(self.lobe_count)]
-        samplers.append(lambda w, uu: warp.square_to_cosine_hemisphere(uu))
+        samplers.append(lambda w, uu: warps.square_to_cosine_hemisphere(uu))
         wi, _ = mixture_sample(wo, u, self._weights(wo), samplers)
         return wi
 

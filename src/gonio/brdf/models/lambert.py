@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from gonio.brdf import warp
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean
+from gonio.brdf.sampling import warps
 
 Array = jnp.ndarray
 
@@ -31,10 +31,10 @@ class Lambert(BRDFModel):
         return jnp.broadcast_to(a / jnp.pi, (*wi.shape[:-1], a.shape[-1]))
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
-        return warp.cosine_hemisphere_pdf(wi)
+        return warps.cosine_hemisphere_pdf(wi)
 
     def _sample(self, wo: Array, u: Array) -> Array:
-        return warp.square_to_cosine_hemisphere(u)
+        return warps.square_to_cosine_hemisphere(u)
 
     def sampling_weight(self, wo: Array) -> Array:
         return jnp.broadcast_to(channel_mean(self.albedo).astype(wo.dtype), wo.shape[:-1])

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from gonio.brdf import warp
 from gonio.brdf.frames import safe_sqrt
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean
+from gonio.brdf.sampling import warps
 
 Array = jnp.ndarray
 
@@ -69,10 +69,10 @@ class OrenNayar(BRDFModel):
         return (alb / jnp.pi) * (a + b * g)[..., None]
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
-        return warp.cosine_hemisphere_pdf(wi)
+        return warps.cosine_hemisphere_pdf(wi)
 
     def _sample(self, wo: Array, u: Array) -> Array:
-        return warp.square_to_cosine_hemisphere(u)
+        return warps.square_to_cosine_hemisphere(u)
 
     def sampling_weight(self, wo: Array) -> Array:
         # The exact directional albedo (class docstring), with (1 - s^3)/(3c) rewritten as

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from gonio.brdf import warp
 from gonio.brdf.frames import dot, reflect
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean
 from gonio.brdf.models._lobes import (
@@ -14,6 +13,7 @@ from gonio.brdf.models._lobes import (
     pow_one_minus,
     power_lobe_local,
 )
+from gonio.brdf.sampling import warps
 
 Array = jnp.ndarray
 
@@ -84,7 +84,7 @@ class Phong(DiffusePlusLobe, BRDFModel):
         n = jnp.asarray(self.n).astype(wi.dtype)
         p_d, p_s = lobe_probabilities(wi.shape[:-1], wi.dtype, self._weights(wo))
         spec = (n + 1.0) / (2.0 * jnp.pi) * self._lobe(wi, wo, n)
-        return p_d * warp.cosine_hemisphere_pdf(wi) + p_s * spec
+        return p_d * warps.cosine_hemisphere_pdf(wi) + p_s * spec
 
     def _sample_lobe(self, wo: Array, u: Array) -> Array:
         n = jnp.asarray(self.n).astype(wo.dtype)

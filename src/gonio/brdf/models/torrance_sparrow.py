@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf import warp
 from gonio.brdf.frames import dot, normalize, reflect, safe_div, upper
 from gonio.brdf.models import microfacet as mf
 from gonio.brdf.models._base import (
@@ -20,6 +19,7 @@ from gonio.brdf.models._base import (
     on_channel_axis,
 )
 from gonio.brdf.models.fresnel import Conductor, Fresnel, Schlick
+from gonio.brdf.sampling import warps
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -223,7 +223,7 @@ class TorranceSparrow(BRDFModel):
         if self._diffuse_free():
             return self.specular_pdf(wi, wo)
         p_d, p_s = self._probs(wo)
-        return p_d * warp.cosine_hemisphere_pdf(wi) + p_s * self.specular_pdf(wi, wo)
+        return p_d * warps.cosine_hemisphere_pdf(wi) + p_s * self.specular_pdf(wi, wo)
 
     def _sample(self, wo: Array, u: Array) -> Array:
         if self._diffuse_free():
@@ -231,7 +231,7 @@ class TorranceSparrow(BRDFModel):
         w_d, w_s = self._weights(wo)
 
         def diffuse(wo_: Array, uu: Array) -> Array:
-            return warp.square_to_cosine_hemisphere(uu)
+            return warps.square_to_cosine_hemisphere(uu)
 
         wi, _ = mixture_sample(wo, u, [w_d, w_s], [diffuse, self.sample_specular])
         return wi

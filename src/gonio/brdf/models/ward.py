@@ -7,10 +7,10 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf import warp
 from gonio.brdf.frames import dot, normalize, safe_sqrt
 from gonio.brdf.models._base import BRDFModel, Param, channel_mean
 from gonio.brdf.models._lobes import DiffusePlusLobe, lobe_probabilities
+from gonio.brdf.sampling import warps
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -168,7 +168,7 @@ class Ward(DiffusePlusLobe, BRDFModel):
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
         p_d, p_s = lobe_probabilities(wi.shape[:-1], wi.dtype, self._weights(wo))
-        return p_d * warp.cosine_hemisphere_pdf(wi) + p_s * self._lobe_pdf(wi, wo)
+        return p_d * warps.cosine_hemisphere_pdf(wi) + p_s * self._lobe_pdf(wi, wo)
 
     def sample_half_vector(self, u: Array, dtype: Any = None) -> Array:
         """Unit half vectors ``(..., 3)`` with density ``exp(-T)/(pi ax ay cos^3 theta_h)``."""

@@ -16,10 +16,10 @@ Measured RGB tables can hold small negative values where a spectral measurement 
 RGB; a reflectance cannot be negative, so the ground truth clamps them to zero.
 
 An RGL file is tabulated with its reciprocal part, ``(f(wi, wo) + f(wo, wi)) / 2``
-(:meth:`gonio.io.rgl.RGLBSDF.to_table` with ``reciprocal=True``). Taken from one half of ``phi_d``
-only, the folded table of a not-quite-reciprocal measurement has a one-cell ramp on the plane of
-incidence (~5 % of f within 1 degree of ``phi_d`` for the acrylic felt), far sharper than any real
-surface: the measured spot (a few tenths of a degree wide) straddles it at every in-plane
+(:meth:`gonio.io.rgl_measured.RGLMeasured.to_table` with ``reciprocal=True``). Taken from one half
+of ``phi_d`` only, the folded table of a not-quite-reciprocal measurement has a one-cell ramp on the
+plane of incidence (~5 % of f within 1 degree of ``phi_d`` for the acrylic felt), far sharper than
+any real surface: the measured spot (a few tenths of a degree wide) straddles it at every in-plane
 geometry, which biased the simulated measurements by up to ~3 sigma against the truth at the
 spot centre.
 
@@ -81,9 +81,9 @@ def _load_table(path: str, mtime_ns: int) -> ClampedTable:
     from gonio.io.detect import detect_format
 
     if detect_format(path) == "rgl":
-        from gonio.io.rgl import read_rgl
+        from gonio.io.rgl_measured import load_rgl
 
-        obj = read_rgl(path).to_table(reciprocal=True)
+        obj = load_rgl(path).to_table(reciprocal=True)
     else:
         obj = io.load(path)
     if not hasattr(obj, "values") or not hasattr(obj, "axes"):

@@ -3,10 +3,10 @@
 The sampled density is exactly ``g(wi, wo) cos(theta_i) / rho(wo)``, ``g = max(mean over
 channels of f, 0)`` (not piecewise constant like inversion and alias): the reference the faster
 samplers are checked against, not a fast path. Proposals: ``"majorant"`` (default), per outgoing
-bucket (:mod:`gonio.brdf.table_buckets`) a bound ``m_c`` of ``g cos`` over each cell ``c`` of an
-incident grid twice as fine as the inversion's and every ``wo`` in the bucket, cells drawn in
-proportion to ``m_c Omega_c`` (acceptance ``rho / sum_c m_c Omega_c``); or ``"cosine"``, the
-cosine-weighted hemisphere with a bound of ``pi g`` over the bucket.
+bucket (:mod:`gonio.brdf.sampling.table_buckets`) a bound ``m_c`` of ``g cos`` over each cell
+``c`` of an incident grid twice as fine as the inversion's and every ``wo`` in the bucket, cells
+drawn in proportion to ``m_c Omega_c`` (acceptance ``rho / sum_c m_c Omega_c``); or
+``"cosine"``, the cosine-weighted hemisphere with a bound of ``pi g`` over the bucket.
 
 The bounds are rigorous: interval ranges of the Rusinkiewicz angles theta_h and theta_d over the
 cell and the bucket (:func:`half_diff_ranges`), then the largest valid table node those ranges
@@ -15,7 +15,7 @@ use (interpolation with renormalized weights never exceeds it), times the cell's
 midpoint quadrature over the half vector (sqrt-warped theta_h, as the tables' nodes) at 9
 theta_o nodes per bucket (5 x 5 (theta_o, phi_o) nodes for anisotropic tables), interpolated
 linearly in between. Proposals and acceptance tests run in float32 in one traced loop
-(:func:`gonio.brdf.sampling.rejection_sample_traced`), eagerly or under ``jit``.
+(:func:`gonio.brdf.sampling.distributions.rejection_sample_traced`), eagerly or under ``jit``.
 """
 
 from __future__ import annotations
@@ -29,16 +29,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf import warp
 from gonio.brdf.lookup import atan2
-from gonio.brdf.sampling import (
+from gonio.brdf.sampling import warps
+from gonio.brdf.sampling.distributions import (
     alias_arrays,
     alias_sample_2d,
     rejection_sample_traced,
     seeds_from_rng,
     seeds_from_u,
 )
-from gonio.brdf.table_buckets import (
+from gonio.brdf.sampling.table_buckets import (
     HALF_PI,
     TWO_PI,
     BucketGeometry,
@@ -224,7 +224,7 @@ def _run(geo, proposal, table, slot_of, arrays, cos_desc, wo, u, seeds):
 
     def cosine_round(wo, up, ua):
         M = jnp.take(arrays["bound"], jnp.take(slot_of, bucket_of(geo, wo)))
-        wi = warp.square_to_cosine_hemisphere(up).astype(wo.dtype)
+        wi = warps.square_to_cosine_hemisphere(up).astype(wo.dtype)
         return wi, (ua * M < _g_of(table, wi, wo) * jnp.pi) & (wi[..., 2] > 0)
 
     one = majorant_round if proposal == "majorant" else cosine_round

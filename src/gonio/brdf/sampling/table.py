@@ -2,9 +2,9 @@
 
 The sampled density is proportional to ``g(wi, wo) cos(theta_i)`` where ``g = max(mean over
 channels of f, 0)``. Outgoing directions are grouped in buckets and incident directions on a
-grid (:mod:`gonio.brdf.table_buckets`); every per-bucket structure is built the first time a
-direction in that bucket is sampled or evaluated, and cached; nothing is built for buckets nobody
-asks about. ``cache_size(method)`` says how many buckets are built.
+grid (:mod:`gonio.brdf.sampling.table_buckets`); every per-bucket structure is built the first
+time a direction in that bucket is sampled or evaluated, and cached; nothing is built for
+buckets nobody asks about. ``cache_size(method)`` says how many buckets are built.
 
 Methods
 -------
@@ -14,7 +14,8 @@ Methods
     (anisotropic) outgoing directions in the bucket, times the cell's solid angle, plus 0.1 % of
     a uniform density so that no cell where ``f > 0`` has zero probability. A cell is picked
     by marginal/conditional CDF inversion (one batched
-    :class:`gonio.brdf.sampling.Distribution2D`, a distribution per bucket) and the direction is
+    :class:`gonio.brdf.sampling.distributions.Distribution2D`, a distribution per bucket) and the
+    direction is
     uniform in (cos theta, phi) inside it, so the pdf is piecewise constant per unit solid
     angle: ``P_cell / Omega_cell``.
 ``"alias"``
@@ -22,8 +23,8 @@ Methods
     number picks the column, the other decides between the column and its alias, so that
     float32 keeps every cell's probability to 2^-24).
 ``"rejection"``
-    Exact sampling of ``g cos / rho(wo)`` (:mod:`gonio.brdf.table_rejection`), the reference
-    density.
+    Exact sampling of ``g cos / rho(wo)`` (:mod:`gonio.brdf.sampling.table_rejection`), the
+    reference density.
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf.sampling import Distribution2D, alias_arrays, alias_sample_2d
-from gonio.brdf.table_buckets import (
+from gonio.brdf.sampling.distributions import Distribution2D, alias_arrays, alias_sample_2d
+from gonio.brdf.sampling.table_buckets import (
     TWO_PI,
     BucketGeometry,
     LazyBuckets,
@@ -47,7 +48,7 @@ from gonio.brdf.table_buckets import (
     direction_in_cell,
     incident_grid,
 )
-from gonio.brdf.table_rejection import TableRejection
+from gonio.brdf.sampling.table_rejection import TableRejection
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray

@@ -1,4 +1,8 @@
-"""Continuous marginal/conditional 2-D warps over bilinear grids, in JAX (for RGL tensor files).
+"""Continuous marginal/conditional 2-D warps over bilinear grids, in JAX (:class:`Marginal2D`).
+
+The one implementation behind RGL tensor files: :mod:`gonio.io.rgl_measured` evaluates, inverts
+and samples a file's ``ndf``, ``sigma``, ``vndf``, ``luminance`` and colour tables with it, and
+:mod:`gonio.io.rgl_write` builds a file's colour table through the same ``vndf`` warp.
 
 A warp holds ``S`` slices of an ``H x W`` grid of non-negative values (``(*param_res, H, W)`` in
 the file, the last axis contiguous) and the parameter values ``(p_0, ..., p_{D-1})`` at which the
@@ -35,8 +39,9 @@ Array = jnp.ndarray
 _CONST_TOL = 1e-4
 
 
-class Warp2D(NamedTuple):
-    """Arrays of one warp (a JAX pytree).
+class Marginal2D(NamedTuple):
+    """Arrays of one continuous 2-D warp (a JAX pytree); build with :func:`build` or
+    :func:`build_channels`.
 
     Attributes
     ----------
@@ -62,7 +67,7 @@ def _f32(*arrays):
     return tuple(None if a is None else jnp.asarray(np.asarray(a, np.float32)) for a in arrays)
 
 
-def _in(warp: Warp2D, dtype) -> Warp2D:
+def _in(warp: Marginal2D, dtype) -> Marginal2D:
     """``warp`` with its tables in the query dtype (float32 copies for float32 queries)."""
     if warp.single is None or jnp.dtype(dtype) != jnp.float32:
         return warp
@@ -70,8 +75,8 @@ def _in(warp: Warp2D, dtype) -> Warp2D:
     return warp._replace(data=data, cond=cond, marg=marg)
 
 
-def build(values: np.ndarray, params: list[np.ndarray], cdf: bool) -> Warp2D:
-    """A :class:`Warp2D` from ``values`` ``(*param_res, H, W)`` (host-side, float64 sums).
+def build(values: np.ndarray, params: list[np.ndarray], cdf: bool) -> Marginal2D:
+    """A :class:`Marginal2D` from ``values`` ``(*param_res, H, W)`` (host-side, float64 sums).
 
     With ``cdf`` the slices are normalized and their CDFs built (for ``sample``/``invert``);
     without, ``eval`` interpolates the raw values.
@@ -93,7 +98,7 @@ def build(values: np.ndarray, params: list[np.ndarray], cdf: bool) -> Warp2D:
         data = slices
         cond_j = marg_j = None
     data_j = jnp.asarray(data.reshape(len(slices), -1))
-    return Warp2D(
+    return Marginal2D(
         data_j,
         cond_j,
         marg_j,
@@ -103,7 +108,7 @@ def build(values: np.ndarray, params: list[np.ndarray], cdf: bool) -> Warp2D:
     )
 
 
-def _hw(warp: Warp2D) -> tuple[int, int]:
+def _hw(warp: Marginal2D) -> tuple[int, int]:
     return int(warp.shape.shape[0]), int(warp.shape.shape[1])
 
 
@@ -126,7 +131,7 @@ def find_interval(size: int, pred, like: Array) -> Array:
     return jax.lax.fori_loop(0, n_steps, body, i0)
 
 
-def _corners(warp: Warp2D, params: tuple[Array, ...], dtype) -> list[tuple[Array, Array]]:
+def _corners(warp: Marginal2D, params: tuple[Array, ...], dtype) -> list[tuple[Array, Array]]:
     """Parameter interpolation: ``(slice index, weight)`` of each of the 2^D' corners (axes of
     a single value contribute one corner of weight 1), computed once (materialized)."""
     corners: list[tuple[Array, Array]] = [(jnp.zeros((), jnp.int32), jnp.ones((), dtype))]
@@ -169,7 +174,7 @@ def _lookup(arr: Array, row: int, corners, idx: Array, dtype) -> Array:
     return out
 
 
-def _patch(warp: Warp2D, pos: Array) -> tuple[Array, Array, Array, Array]:
+def _patch(warp: Marginal2D, pos: Array) -> tuple[Array, Array, Array, Array]:
     h, w = _hw(warp)
     x = jnp.clip(pos[..., 0], 0.0, 1.0) * (w - 1)
     y = jnp.clip(pos[..., 1], 0.0, 1.0) * (h - 1)
@@ -178,7 +183,7 @@ def _patch(warp: Warp2D, pos: Array) -> tuple[Array, Array, Array, Array]:
     return px, py, x - px.astype(x.dtype), y - py.astype(y.dtype)
 
 
-def _patch_values(warp: Warp2D, corners, px: Array, py: Array, dtype):
+def _patch_values(warp: Marginal2D, corners, px: Array, py: Array, dtype):
     h, w = _hw(warp)
     n = h * w
     i = py * w + px
@@ -191,7 +196,7 @@ def _patch_values(warp: Warp2D, corners, px: Array, py: Array, dtype):
     )
 
 
-def eval_warp(warp: Warp2D, pos: Array, params: tuple[Array, ...] = ()) -> Array:
+def eval_warp(warp: Marginal2D, pos: Array, params: tuple[Array, ...] = ()) -> Array:
     """Density (or interpolated raw value, for warps without CDFs) at ``pos`` ``(..., 2)``."""
     dtype = pos.dtype
     warp = _in(warp, dtype)
@@ -203,7 +208,7 @@ def eval_warp(warp: Warp2D, pos: Array, params: tuple[Array, ...] = ()) -> Array
     return val * ((w - 1) * (h - 1)) if warp.cond is not None else val
 
 
-def eval_channels(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> Array:
+def eval_channels(warp: Marginal2D, pos: Array, params: tuple[Array, ...]) -> Array:
     """Raw interpolant of a multi-channel table at ``pos`` ``(..., 2)`` -> ``(..., C)``.
 
     ``warp`` comes from :func:`build_channels`: each slice holds C grids (a channel axis before
@@ -231,12 +236,12 @@ def eval_channels(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> Array:
     return jnp.stack(out, -1)
 
 
-def build_channels(values: np.ndarray, params: list[np.ndarray]) -> Warp2D:
+def build_channels(values: np.ndarray, params: list[np.ndarray]) -> Marginal2D:
     """A multi-channel table ``(*param_res, C, H, W)`` for :func:`eval_channels`."""
     values = np.asarray(values, dtype=np.float64)
     c, h, w = values.shape[-3:]
     data = values.reshape(-1, c * h * w)
-    return Warp2D(
+    return Marginal2D(
         jnp.asarray(data),
         None,
         None,
@@ -246,7 +251,7 @@ def build_channels(values: np.ndarray, params: list[np.ndarray]) -> Warp2D:
     )
 
 
-def invert(warp: Warp2D, pos: Array, params: tuple[Array, ...]) -> tuple[Array, Array]:
+def invert(warp: Marginal2D, pos: Array, params: tuple[Array, ...]) -> tuple[Array, Array]:
     """Inverse of :func:`sample`: the uniform point ``(..., 2)`` that maps to ``pos``, and the
     density at ``pos``."""
     dtype = pos.dtype
@@ -281,7 +286,7 @@ def _solve_linear_cdf(a: Array, b: Array, s: Array) -> Array:
     return jnp.where(den != 0, num / jnp.where(den != 0, den, 1.0), num)
 
 
-def sample(warp: Warp2D, u: Array, params: tuple[Array, ...]) -> tuple[Array, Array]:
+def sample(warp: Marginal2D, u: Array, params: tuple[Array, ...]) -> tuple[Array, Array]:
     """Warp uniform ``u`` ``(..., 2)`` to a point of the density; returns ``(pos, pdf)``."""
     dtype = u.dtype
     warp = _in(warp, dtype)

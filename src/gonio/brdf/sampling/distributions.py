@@ -69,7 +69,7 @@ def bin_of(x: Array, n: int) -> Array:
     """Bin ``k`` of ``x`` with the edges ``k / n`` computed in ``x``'s dtype (int32, clamped).
 
     Public with :func:`bin_position` for samplers outside this module that must agree with these
-    distributions on bin edges (:mod:`gonio.render.warp2d`)."""
+    distributions on bin edges (:mod:`gonio.brdf.sampling.quadtree`)."""
     k = jnp.clip(jnp.floor(x * n).astype(jnp.int32), 0, n - 1)
     kf = k.astype(x.dtype)
     k = jnp.where((x < kf / n) & (k > 0), k - 1, k)

@@ -1,8 +1,8 @@
 """Hierarchical sample warping of a 2-D piecewise-constant density (environment lights).
 
-The density is the one of :class:`gonio.brdf.sampling.Distribution2D` (a grid of ``ny x nx``
-cells, each of constant density proportional to its weight), but a sample is drawn down a
-quadtree instead of by marginal-then-conditional CDF inversion (McCool and Harwood 1997,
+The density is the one of :class:`gonio.brdf.sampling.distributions.Distribution2D` (a grid of
+``ny x nx`` cells, each of constant density proportional to its weight), but a sample is drawn
+down a quadtree instead of by marginal-then-conditional CDF inversion (McCool and Harwood 1997,
 "Probability trees"; Clarberg et al. 2005, "Wavelet importance sampling"): at each level the
 node's four children are chosen by two binary splits, top/bottom by ``u[..., 0]`` and then
 left/right by ``u[..., 1]``, and each number is rescaled to [0, 1) by the split it went
@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf._xla import materialize
-from gonio.brdf.sampling import bin_of, bin_position
+from gonio.brdf.sampling.distributions import bin_of, bin_position
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -56,7 +56,7 @@ def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class HierarchicalWarp2D:
     """Piecewise-constant density on ``[0, 1)^2`` over an ``ny x nx`` grid, sampled down a
     quadtree. Row ``iy`` covers ``y in [iy / ny, (iy + 1) / ny)``, column ``ix`` covers ``x``
-    likewise (the convention of :class:`gonio.brdf.sampling.Distribution2D`).
+    likewise (the convention of :class:`gonio.brdf.sampling.distributions.Distribution2D`).
 
     Parameters
     ----------
