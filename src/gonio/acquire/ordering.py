@@ -320,14 +320,10 @@ class _Route:
 
     def __init__(self, points: np.ndarray, joints: Sequence[JointConfig], path: np.ndarray):
         self.pts = points.tolist()
-        self.prof = [
-            (
-                j.profile_velocity_deg_s,
-                j.profile_acceleration_deg_s2,
-                j.profile_velocity_deg_s**2 / j.profile_acceleration_deg_s2,
-            )
-            for j in joints
-        ]
+        self.prof = []  # per joint: v, a, ramp distance v^2 / a, ramp time v / a
+        for j in joints:
+            v, a = j.profile_velocity_deg_s, j.profile_acceleration_deg_s2
+            self.prof.append((v, a, v * v / a, v / a))
         self.p = np.array(path, dtype=np.intp)
         self.last = len(self.p) - 1
         self.pos = np.empty_like(self.p)
@@ -335,11 +331,10 @@ class _Route:
 
     def cost(self, u: int, w: int) -> float:
         """Move time (s) between nodes ``u`` and ``w`` (as :meth:`JointConfig.move_time`)."""
-        pu, pw = self.pts[u], self.pts[w]
         t = 0.0
-        for c, (v, a, ramp) in enumerate(self.prof):
-            d = abs(pu[c] - pw[c])
-            tc = d / v + v / a if d >= ramp else 2.0 * math.sqrt(d / a)
+        for x, y, (v, a, ramp, ramp_t) in zip(self.pts[u], self.pts[w], self.prof, strict=True):
+            d = abs(x - y)
+            tc = d / v + ramp_t if d >= ramp else 2.0 * math.sqrt(d / a)
             if tc > t:
                 t = tc
         return t
@@ -356,16 +351,18 @@ class _Route:
         if flip:
             seg = seg[::-1]
         rest = np.concatenate([self.p[:s], self.p[e + 1 :]])
-        at = int(np.flatnonzero(rest == after)[0]) + 1
+        at = int(self.pos[after]) + 1
+        if at > s:
+            at -= len(seg)
         self.p = np.concatenate([rest[:at], seg, rest[at:]])
         self.pos[self.p] = np.arange(len(self.p))
 
 
-def _two_opt(r: _Route, a: int, nbrs: list, succ: bool) -> tuple[int, ...] | None:
+def _two_opt(r: _Route, a: int, nbrs, succ: bool) -> tuple[int, ...] | None:
     """Try 2-opt moves adding edge (a, c) for listed neighbours c; apply the first that helps.
 
-    ``succ``: the edges removed leave ``a`` and ``c`` forward (else backward). Returns the nodes
-    whose edges changed, or None.
+    ``nbrs``: (neighbour, move time) pairs of ``a``, cheapest first. ``succ``: the edges removed
+    leave ``a`` and ``c`` forward (else backward). Returns the nodes whose edges changed, or None.
     """
     i = int(r.pos[a])
     if succ:
@@ -403,10 +400,11 @@ def _two_opt(r: _Route, a: int, nbrs: list, succ: bool) -> tuple[int, ...] | Non
     return None
 
 
-def _or_opt(r: _Route, a: int, nbr_of: list) -> tuple[int, ...] | None:
+def _or_opt(r: _Route, a: int, nbr_of) -> tuple[int, ...] | None:
     """Try moving a segment that starts at ``a`` (1 to 3 poses, forward) next to a listed
-    neighbour of either of its ends; apply the first move that helps. Returns the nodes whose
-    edges changed, or None."""
+    neighbour of either of its ends; apply the first move that helps. ``nbr_of(u)``: the
+    (neighbour, move time) pairs of node ``u``, cheapest first. Returns the nodes whose edges
+    changed, or None."""
     s = int(r.pos[a])
     if s == 0:
         return None
@@ -419,7 +417,7 @@ def _or_opt(r: _Route, a: int, nbr_of: list) -> tuple[int, ...] | None:
         if nxt >= 0:
             gain += r.cost(last, nxt) - r.cost(prev, nxt)
         for x, y in ((a, last), (last, a)):  # x joins the neighbour c, y the far side
-            for c, d_cx in nbr_of[x]:
+            for c, d_cx in nbr_of(x):
                 if d_cx >= gain - _EPS:
                     break
                 if c in seg:
@@ -467,10 +465,12 @@ def improve(
     (n + 1,) the improved path, still starting at node 0.
     """
     r = _Route(points, joints, path)
-    nbrs = [
-        list(zip(i, c, strict=True))
-        for i, c in zip(nbr_idx.tolist(), nbr_cost.tolist(), strict=True)
-    ]
+    idx, cost = nbr_idx.tolist(), nbr_cost.tolist()
+
+    def nbrs(u: int):
+        """(neighbour, move time) pairs of node ``u``, cheapest first."""
+        return zip(idx[u], cost[u], strict=True)
+
     queue = deque(r.p.tolist())
     queued = np.ones(len(r.p), dtype=bool)
     steps = 0
@@ -481,7 +481,7 @@ def improve(
         a = queue.popleft()
         queued[a] = False
         changed = (
-            _two_opt(r, a, nbrs[a], True) or _two_opt(r, a, nbrs[a], False) or _or_opt(r, a, nbrs)
+            _two_opt(r, a, nbrs(a), True) or _two_opt(r, a, nbrs(a), False) or _or_opt(r, a, nbrs)
         )
         if changed:
             for u in changed:
