@@ -31,7 +31,7 @@ import numpy as np
 from gonio.rigs.config import JointConfig
 
 #: Largest pose count ordered on the full cost matrix; above it, on neighbour lists.
-MATRIX_MAX_POSES = 2000
+MATRIX_MAX_POSES = 1000
 #: Neighbours kept per pose on the neighbour-list path.
 NEIGHBOURS = 10
 #: Rows of the cost matrix computed at a time (bounds the temporaries to this many rows).
