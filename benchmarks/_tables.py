@@ -29,6 +29,7 @@ BENCHMARKS = (
     "bench_acquisition_accuracy",
     "bench_imaging",
     "bench_rig",
+    "bench_route",
     "bench_formats",
     "bench_fit",
     "bench_published",
