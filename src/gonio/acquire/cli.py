@@ -35,7 +35,8 @@ def register(sub) -> None:
         description=(
             "Plan an acquisition without touching hardware: inverse kinematics for every target,"
             " refusals (joint limits, keep-out sectors, light/camera too close, grazing angles)"
-            " with their reasons, travel-time ordering (nearest neighbour + 2-opt; a move costs its"
+            " with their reasons, travel-time ordering (nearest neighbour, then 2-opt; above"
+            " 1,000 poses on neighbour lists with Or-opt too; a move costs its"
             " slowest joint under the trapezoidal profile; motion times are rig time in seconds)."
             "\n\nThe total is a wall-clock estimate: the motion (divided by the time scale on a"
             " simulated rig), plus per move the bus traffic and settling beyond the profile, plus"
