@@ -103,7 +103,7 @@ class DemoSummary:
     files: dict[str, Any]
 
     def to_json(self) -> dict[str, Any]:
-        from gonio.fit.result import to_jsonable
+        from gonio.io.fit_result import to_jsonable
 
         d = asdict(self)
         for m, md in zip(self.models, d["models"], strict=True):
@@ -328,7 +328,7 @@ def run_demo(
         files=files,
     )
     from gonio.demo.report import write_report
-    from gonio.fit.result import write_json
+    from gonio.io.fit_result import write_json
 
     # writing the report takes milliseconds: the total is taken just before it
     timings["total"] = time.monotonic() - t0

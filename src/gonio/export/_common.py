@@ -56,7 +56,7 @@ class Export:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready report (what ``gonio export --json`` prints)."""
-        from gonio.fit.result import to_jsonable
+        from gonio.io.fit_result import to_jsonable
 
         refit = None
         if self.refit is not None:

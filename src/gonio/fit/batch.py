@@ -119,7 +119,7 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     import gonio.brdf  # noqa: F401  (float64)
     from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
-    from gonio.fit.result import write_json
+    from gonio.io.fit_result import write_json
 
     src = Path(path)
     name = options.get("material") or material_name(src)
