@@ -113,3 +113,14 @@ def test_an_unsupported_version_is_named(tmp_path):
     path.write_text(json.dumps({**_record(), "version": 2}))
     with pytest.raises(FormatError, match="schema version 2 is not supported"):
         fit_result.read_result(path)
+
+
+def test_a_model_family_needs_no_line_in_the_reader(tmp_path):
+    """A model family is its module (here one defined in the tests) plus its import line: the
+    reader finds it through the model registry, with nothing to add here."""
+    from tests.fit.lobes import TestLobe
+
+    model = models.Lambert(0.2) + TestLobe(rho_s=0.3, n=40.0)
+    path = fit_result.write_json(_record(model), tmp_path / "fit.json")
+    back = fit_result.load_model(path)
+    assert type(back.lobes[1]).__name__ == "TestLobe" and float(back.lobes[1].n) == 40.0

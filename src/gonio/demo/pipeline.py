@@ -291,7 +291,10 @@ def run_demo(
     results, models_summary = _fit_all(out, material, settings, progress)
     timings["fit"] = time.monotonic() - t
 
-    console.rule("[bold]export[/]: every fit for Mitsuba 3, pbrt-v4, Blender, OpenPBR and USD")
+    from gonio.export import registry
+
+    titles = registry.listing([m.TITLE for m in registry.targets().values()], "and")
+    console.rule(f"[bold]export[/]: every fit for {titles}")
     t = time.monotonic()
     from gonio.demo.exports import export_fits
 
