@@ -29,7 +29,7 @@ import numpy as np
 from gonio._bounded import bad_number_path, read_json
 from gonio.errors import FormatError
 from gonio.io.atomic import atomic_output
-from gonio.io.schemas import register_schema
+from gonio.io.schemas import default_dir, register_schema, render
 
 SCHEMA_ID = "gonio/fit-result"
 SCHEMA_VERSION = 1
@@ -357,9 +357,9 @@ def check_model_spec(spec: Any, source: str, where: str = "model_spec") -> None:
 
 def schema_path() -> Path:
     """Where the generated schema lives in a source checkout."""
-    return Path(__file__).resolve().parents[3] / "data-schema" / "fit-result.schema.json"
+    return default_dir() / "fit-result.schema.json"
 
 
 def schema_text() -> str:
-    """The schema as written to data-schema/fit-result.schema.json."""
-    return json.dumps(SCHEMA, indent=2) + "\n"
+    """The schema as written to data-schema/fit-result.schema.json (:mod:`gonio.io.schemas`)."""
+    return render(fit_result_schema())

@@ -8,10 +8,8 @@ under its file name. Adding one is a one-liner in the owning module::
     @register_schema("rig.schema.json")
     def rig_schema() -> dict: ...
 
-The generator imports the modules in :data:`SCHEMA_MODULES`; the rig and fit-result schemas are
-expected in ``gonio.rigs.schema`` and ``gonio.io.fit_result`` (already listed; a listed module
-that does not exist yet is skipped), so their owners only create that module. Other owners append
-their module's name.
+The generator imports the modules in :data:`SCHEMA_MODULES` (a listed module that does not
+exist is skipped); a new schema's owner appends its module's name.
 ``python -m gonio.io.schemas --write`` regenerates every file; ``--check`` (and the test suite)
 fails when a committed copy differs from what the code generates.
 """
