@@ -203,8 +203,6 @@ def validate(record: Any, source: str = "fit result") -> dict[str, Any]:
     FormatError
         ``"<source>: ..."``, one line naming the field at fault.
     """
-    import jsonschema
-
     if isinstance(record, dict) and record.get("schema") == SCHEMA_ID:
         v = record.get("version")
         if v != SCHEMA_VERSION:
@@ -212,14 +210,22 @@ def validate(record: Any, source: str = "fit result") -> dict[str, Any]:
                 f"{source}: unsupported fit file (fit-result schema version {v!r} is not "
                 f"supported; this gonio reads version {SCHEMA_VERSION})"
             )
-    try:
-        jsonschema.validate(record, SCHEMA)
-    except jsonschema.ValidationError as exc:
-        where = "/".join(str(p) for p in exc.absolute_path) or "top level"
-        message = " ".join(exc.message.split())[:120]
-        raise FormatError(f"{source}: not a fit result ({where}: {message})") from None
+    _check(record, SCHEMA, source, "not a fit result")
     check_model_spec(record["model_spec"], source)
     return record
+
+
+def _check(instance: Any, schema: dict[str, Any], source: str, what: str, at: str = "") -> None:
+    """FormatError ``"<source>: <what> (<field path>: <problem>)"`` unless ``instance`` is valid
+    under ``schema``; ``at`` prefixes the field path."""
+    import jsonschema
+
+    try:
+        jsonschema.validate(instance, schema)
+    except jsonschema.ValidationError as exc:
+        where = "/".join([*([at] if at else []), *map(str, exc.absolute_path)]) or "top level"
+        message = " ".join(exc.message.split())[:120]
+        raise FormatError(f"{source}: {what} ({where}: {message})") from None
 
 
 def read_result(path: str | Path) -> dict[str, Any]:
@@ -260,8 +266,6 @@ def load_fit(path: str | Path, *, descriptions: bool = False) -> tuple[dict[str,
     a fit's, ``data`` against the schema's; ``record`` is then the document itself (a bare
     description: an empty dictionary).
     """
-    import jsonschema
-
     source = str(path)
     doc = read_json(path)
     if not descriptions or not isinstance(doc, dict) or "schema" in doc or "version" in doc:
@@ -274,12 +278,8 @@ def load_fit(path: str | Path, *, descriptions: bool = False) -> tuple[dict[str,
     if not isinstance(spec, dict):
         raise FormatError(f"{source}: no model description (expected a 'model_spec' object)")
     check_model_spec(spec, source)
-    try:
-        data_fields = {k: v for k, v in SCHEMA["properties"]["data"].items() if k != "required"}
-        jsonschema.validate(doc.get("data", {}), data_fields)
-    except jsonschema.ValidationError as exc:
-        where = "/".join(["data", *map(str, exc.absolute_path)])
-        raise FormatError(f"{source}: {where}: {' '.join(exc.message.split())[:120]}") from None
+    data_fields = {k: v for k, v in SCHEMA["properties"]["data"].items() if k != "required"}
+    _check(doc.get("data", {}), data_fields, source, "not a model description", "data")
     return doc, model_of(spec, source)
 
 
