@@ -222,18 +222,11 @@ def _write_figure_image(out: Path, img: np.ndarray, exposure: float) -> None:
 
 def check_environment_file(path: str | Path) -> None:
     """Refuse an EXR that is not a lat-long radiance image: a BRDF slice file written by
-    ``gonio convert ... .exr`` (its parts carry ``gonio_phi_d_rad``/``gonio_units``)."""
-    if not str(path).lower().endswith(".exr"):
-        return
-    try:
-        import OpenEXR
+    ``gonio convert ... .exr`` (:func:`gonio.io.exr.is_table_slices`)."""
+    from gonio.io.exr import is_table_slices
 
-        with OpenEXR.File(str(path), header_only=True) as f:
-            # read the keys while the file is open (the header is not kept after closing)
-            keys = [set(part.header.keys()) for part in f.parts]
-    except Exception:  # unreadable here: the environment loader reports it in its own words
-        return
-    if any({"gonio_phi_d_rad", "gonio_units"} & k for k in keys):
+    # an unreadable file passes here: the environment loader reports it in its own words
+    if str(path).lower().endswith(".exr") and is_table_slices(path):
         raise ParameterError(
             f"--env {path}: a BRDF slice image (theta_h x theta_d per phi_d, values in 1/sr), "
             "not a lat-long environment map"
