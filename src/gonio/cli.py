@@ -66,7 +66,7 @@ LAZY_COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "export": (
         "gonio.export.cli",
-        "write a fit as a Mitsuba, pbrt-v4, Blender, OpenPBR/MaterialX or USD material",
+        "write a fit as a renderer's material (gonio export --help lists the targets)",
     ),
 }
 

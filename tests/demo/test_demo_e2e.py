@@ -102,7 +102,7 @@ def test_outputs_exist_and_are_readable(demo):
 def test_fit_files_validate_against_the_published_schema(demo):
     import jsonschema
 
-    from gonio.fit.result import schema_text
+    from gonio.io.fit_result import schema_text
 
     out, _, _ = demo
     schema = json.loads(schema_text())

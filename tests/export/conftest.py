@@ -18,7 +18,7 @@ SIZE, SS = 64, 8
 
 def fit_record(model, channels=("R", "G", "B"), loss=0.0, metric="wls", **data) -> dict:
     """A fit-result dictionary (schema version 1) holding ``model``."""
-    from gonio.fit.result import to_jsonable
+    from gonio.io.fit_result import to_jsonable
 
     return to_jsonable(
         {

@@ -12,7 +12,7 @@ from gonio.fit.data import from_arrays
 from gonio.fit.losses import get_loss
 from gonio.fit.objective import Problem
 from gonio.fit.params import Layout
-from gonio.fit.result import SCHEMA, read_result, schema_path, schema_text
+from gonio.io.fit_result import SCHEMA, read_result, schema_path, schema_text
 from tests.fit.lobes import TestLobe
 from tests.fit.synth import cosine_directions, synthetic
 

@@ -314,7 +314,7 @@ def fit_json(tmp_path_factory):
     ],
 )
 def test_fit_results_that_cannot_be_right_are_refused(tmp_path, fit_json, edit, match):
-    from gonio.fit.result import load_model
+    from gonio.io.fit_result import load_model
 
     p = tmp_path / "fit.json"
     p.write_bytes(edit(fit_json))

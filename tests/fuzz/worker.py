@@ -303,7 +303,7 @@ def _spec_params(spec: Any) -> set[str]:
 
 
 def c_fit(path: str) -> str:
-    from gonio.fit.result import load_model, read_result
+    from gonio.io.fit_result import load_model, read_result
 
     obj = read_result(path)
     model = load_model(path)

@@ -50,8 +50,8 @@ def test_every_output_kind_honours_the_umask(tmp_path, umask_022, monkeypatch):
     from gonio.brdf import models
     from gonio.brdf.tabulated import TabulatedBRDF
     from gonio.demo import report
-    from gonio.fit.result import write_json
     from gonio.io.exr import write_exr
+    from gonio.io.fit_result import write_json
     from gonio.render.output import write_png
 
     img = np.random.default_rng(0).random((8, 8, 3)).astype(np.float32)

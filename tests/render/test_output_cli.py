@@ -7,7 +7,7 @@ from gonio.brdf import models
 from gonio.cli import main
 from gonio.errors import FormatError, ParameterError
 from gonio.render import Directional, render_sphere
-from gonio.render.cli import load_fit_model, parse_light
+from gonio.render.cli import load_fitted, parse_light
 from gonio.render.compare import compare_images, comparison_figure, image_errors
 from gonio.render.output import read_exr, tonemap, write_exr, write_png
 
@@ -84,6 +84,10 @@ def _fit_file(tmp_path, model, name="fit.json"):
     p = tmp_path / name
     p.write_text(json.dumps({"model": "lambert", "model_spec": model.to_dict(), "loss": "wls"}))
     return p
+
+
+def load_fit_model(path):
+    return load_fitted(path)[0]
 
 
 def test_load_fit_model(tmp_path):

@@ -11,7 +11,7 @@ def export_fits(out: Path, models: list[Any], say: Any = None) -> None:
     """Export each model's fit (``m.files["fit"]``) to every target; records the rows in
     ``m.files["exports"]``: ``{target, mapping, family, files, metric, refit_data, refit_loss,
     original_loss}``."""
-    from gonio.export import TARGETS, export
+    from gonio.export import export, registry
 
     folder = out / "export"
     folder.mkdir(exist_ok=True)
@@ -20,7 +20,7 @@ def export_fits(out: Path, models: list[Any], say: Any = None) -> None:
         stem = fit_path.stem
         cache: dict[Any, Any] = {}
         rows = []
-        for target, mod in TARGETS.items():
+        for target, mod in registry.targets().items():
             if say is not None:
                 say(f"{m.label} -> {target}")
             e = export(fit_path, target, cache=cache)

@@ -103,7 +103,7 @@ class DemoSummary:
     files: dict[str, Any]
 
     def to_json(self) -> dict[str, Any]:
-        from gonio.fit.result import to_jsonable
+        from gonio.io.fit_result import to_jsonable
 
         d = asdict(self)
         for m, md in zip(self.models, d["models"], strict=True):
@@ -291,7 +291,10 @@ def run_demo(
     results, models_summary = _fit_all(out, material, settings, progress)
     timings["fit"] = time.monotonic() - t
 
-    console.rule("[bold]export[/]: every fit for Mitsuba 3, pbrt-v4, Blender, OpenPBR and USD")
+    from gonio.export import registry
+
+    titles = registry.listing([m.TITLE for m in registry.targets().values()], "and")
+    console.rule(f"[bold]export[/]: every fit for {titles}")
     t = time.monotonic()
     from gonio.demo.exports import export_fits
 
@@ -328,7 +331,7 @@ def run_demo(
         files=files,
     )
     from gonio.demo.report import write_report
-    from gonio.fit.result import write_json
+    from gonio.io.fit_result import write_json
 
     # writing the report takes milliseconds: the total is taken just before it
     timings["total"] = time.monotonic() - t0

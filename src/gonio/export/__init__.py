@@ -4,30 +4,38 @@
 >>> e = export.to_mitsuba("fits/lambert-ts.json")
 >>> e.mapping, e.params, e.write("material.xml")
 
-Each target lives in its own module (:mod:`~gonio.export.mitsuba`, :mod:`~gonio.export.pbrt`,
-:mod:`~gonio.export.blender`, :mod:`~gonio.export.openpbr`, :mod:`~gonio.export.usd`), whose
-docstring states its parameter mapping and what it refits. A fit the target expresses exactly is
-written unchanged (``mapping == "exact"``); otherwise the target's family is refitted to the
-fit's data with :func:`gonio.fit.fit` and the refit's loss is reported next to the original's
-(``mapping == "refit"``, ``Export.refit``).
+Each target lives in its own module, listed once in :mod:`gonio.export.registry`
+(:mod:`~gonio.export.mitsuba`, :mod:`~gonio.export.pbrt`, ...), whose docstring states its
+parameter mapping and what it refits; ``to_<target>`` exists for every registered target. A fit
+the target expresses exactly is written unchanged (``mapping == "exact"``); otherwise the
+target's family is refitted to the fit's data with :func:`gonio.fit.fit` and the refit's loss is
+reported next to the original's (``mapping == "refit"``, ``Export.refit``).
 """
 
+from importlib import import_module
 from typing import Any
 
-_API = ("REFIT_FROM", "TARGETS", "export", "to_blender", "to_mitsuba", "to_openpbr", "to_pbrt",
-        "to_usd")  # fmt: skip
-
-__all__ = ["Export", *_API]
+_API = ("REFIT_FROM", "export")
 
 
 def __getattr__(name: str) -> Any:
-    # Lazy: ``gonio export --help`` (which imports gonio.export.cli) must not load JAX.
+    # Lazy: ``gonio export --help`` (which imports gonio.export.cli) must not load JAX. The
+    # submodules are imported by name: ``from gonio.export import x`` asks this function first.
     if name in _API:
-        from gonio.export import _api
-
-        return getattr(_api, name)
+        return getattr(import_module("gonio.export._api"), name)
     if name == "Export":
-        from gonio.export._common import Export
-
-        return Export
+        return import_module("gonio.export._common").Export
+    if name == "registry" or (name.startswith("_") and name != "__all__"):
+        raise AttributeError(f"module 'gonio.export' has no attribute {name!r}")
+    registry = import_module("gonio.export.registry")
+    if name == "TARGETS":
+        return registry.targets()
+    if name.startswith("to_") and name[3:] in registry.names():
+        return import_module("gonio.export._api").to_target(name[3:])
+    if name == "__all__":
+        return ["Export", "TARGETS", *_API, *(f"to_{n}" for n in registry.names())]
     raise AttributeError(f"module 'gonio.export' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__getattr__("__all__")})

@@ -10,26 +10,17 @@ the original's: parameters are never approximated silently.
 
 from __future__ import annotations
 
-from types import ModuleType
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from gonio.errors import ParameterError
-from gonio.export import blender, mitsuba, openpbr, pbrt, usd
+from gonio.export import registry
 from gonio.export._common import Export
 from gonio.export._lobes import Lobes, NotRepresentable, Specular, describe, split
 from gonio.export._refit import refit, refit_data
 from gonio.export._source import FitSource, load, rgb_matrix
-
-#: Target name -> module (``check``, ``refit_template``, ``build``, ``SUFFIXES``, ``FAMILY``).
-TARGETS: dict[str, ModuleType] = {
-    "mitsuba": mitsuba,
-    "pbrt": pbrt,
-    "blender": blender,
-    "openpbr": openpbr,
-    "usd": usd,
-}
 
 REFIT_FROM = ("auto", "measurement", "model")
 
@@ -73,7 +64,7 @@ def export(
     Parameters
     ----------
     fit : a fit-result JSON path, a :class:`gonio.fit.FitResult` or its ``to_json()`` dict.
-    target : ``"mitsuba"``, ``"pbrt"``, ``"blender"``, ``"openpbr"`` or ``"usd"``.
+    target : a registered target's name (:mod:`gonio.export.registry`), e.g. ``"mitsuba"``.
     refit_from : where a refit takes its data: ``"auto"`` (the measurement file recorded in the
         fit when readable, else the fitted model sampled densely), ``"measurement"`` (only the
         file: an error when it is gone) or ``"model"`` (always the sampled model).
@@ -93,15 +84,11 @@ def export(
     FormatError
         For a file that is not a fit result of a known schema version.
     """
-    if target not in TARGETS:
-        raise ParameterError(
-            f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}"
-        )
+    mod = registry.target(target)
     if refit_from not in REFIT_FROM:
         raise ParameterError(
             f"refit_from must be one of {', '.join(REFIT_FROM)}, got {refit_from!r}"
         )
-    mod = TARGETS[target]
     src = load(fit)
     lobes, reason, notes = _lobes_of(src)
     if lobes is not None:
@@ -157,29 +144,14 @@ def _data_for(src: FitSource, refit_from: str, target: str, reason: str) -> Any:
     return rd
 
 
-def to_mitsuba(fit: Any, **kw: Any) -> Export:
-    """Mitsuba 3 ``load_dict`` dictionary (``.data``, ``.files[".json"]``) and XML fragment
-    (``.files[".xml"]``); see :mod:`gonio.export.mitsuba`."""
-    return export(fit, "mitsuba", **kw)
+def to_target(name: str) -> Callable[..., Export]:
+    """``to_<name>(fit, **kw)``: :func:`export` to target ``name``, documented by its module."""
+    mod = registry.target(name)
 
+    def to(fit: Any, **kw: Any) -> Export:
+        return export(fit, name, **kw)
 
-def to_pbrt(fit: Any, **kw: Any) -> Export:
-    """pbrt-v4 material block (``.text``); see :mod:`gonio.export.pbrt`."""
-    return export(fit, "pbrt", **kw)
-
-
-def to_blender(fit: Any, **kw: Any) -> Export:
-    """Blender ``bpy`` script building the node tree (``.text``); see
-    :mod:`gonio.export.blender`."""
-    return export(fit, "blender", **kw)
-
-
-def to_openpbr(fit: Any, **kw: Any) -> Export:
-    """MaterialX document with ``open_pbr_surface`` (``.text``); see
-    :mod:`gonio.export.openpbr`."""
-    return export(fit, "openpbr", **kw)
-
-
-def to_usd(fit: Any, **kw: Any) -> Export:
-    """USD layer with a ``UsdPreviewSurface`` (``.text``); see :mod:`gonio.export.usd`."""
-    return export(fit, "usd", **kw)
+    to.__name__ = to.__qualname__ = f"to_{name}"
+    what = mod.HELP.strip().split("\n", 1)[0]
+    to.__doc__ = f"{mod.TITLE}: {what} See :mod:`{mod.__name__}`; keywords as :func:`export`."
+    return to

@@ -4,14 +4,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gonio.brdf import models
-from gonio.brdf.models import BRDFModel
 from gonio.export._lobes import Lobes
 from gonio.io.atomic import atomic_output
+
+if (
+    TYPE_CHECKING
+):  # gonio.brdf imports JAX; the target modules load without it (gonio export --help)
+    from gonio.brdf.models import BRDFModel, Fresnel
 
 #: Fit-result JSON of an export (``gonio export --json``), version of its layout.
 REPORT_VERSION = 1
@@ -23,7 +26,7 @@ class Export:
 
     Attributes
     ----------
-    target : ``"mitsuba"``, ``"pbrt"``, ``"blender"``, ``"openpbr"`` or ``"usd"``.
+    target : the target's name (:mod:`gonio.export.registry`), e.g. ``"mitsuba"``.
     name : material name used inside the files.
     files : ``{suffix: text}``; the first entry is the main file (e.g. ``".xml"``; Mitsuba also
         gives ``".json"``, its ``load_dict`` dictionary).
@@ -56,7 +59,7 @@ class Export:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready report (what ``gonio export --json`` prints)."""
-        from gonio.fit.result import to_jsonable
+        from gonio.io.fit_result import to_jsonable
 
         refit = None
         if self.refit is not None:
@@ -114,6 +117,8 @@ def start_values(model: BRDFModel) -> tuple[np.ndarray | float, float]:
     """A refit's starting diffuse albedo and roughness from the original model's lobes: the
     summed diffuse albedos, and the first roughness-like value (``alpha``, Ward's ``alpha_x``,
     else 0.2)."""
+    from gonio.brdf import models
+
     lobes = model.lobes if isinstance(model, models.Sum) else (model,)
     rho: Any = 0.0
     alpha = None
@@ -137,13 +142,15 @@ def start_values(model: BRDFModel) -> tuple[np.ndarray | float, float]:
 def template(
     model: BRDFModel,
     distribution: str,
-    fresnel: models.Fresnel,
+    fresnel: Fresnel,
     scales: tuple[float, float] | None = None,
 ) -> tuple[BRDFModel, dict[str, Any]]:
     """A refit template ``Lambert + TorranceSparrow(distribution, smith, fresnel)`` started from
     ``model``'s values, with the lobe's own ``rho_d`` held at 0 (one diffuse term); with
     ``scales = (s_d, s_s)`` each lobe is wrapped in a :class:`~gonio.brdf.models.Scaled` whose
     factor is held fixed. Returns ``(template, fixed)``."""
+    from gonio.brdf import models
+
     rho, alpha = start_values(model)
     diffuse: BRDFModel = models.Lambert(albedo=rho)
     spec: BRDFModel = models.TorranceSparrow(

@@ -9,11 +9,14 @@ why not (a Ward or Oren-Nayar lobe, two specular lobes, ...), which sends the ex
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gonio.brdf import models
-from gonio.brdf.models import BRDFModel
+if (
+    TYPE_CHECKING
+):  # gonio.brdf imports JAX; the target modules load without it (gonio export --help)
+    from gonio.brdf.models import BRDFModel
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,8 @@ def _vec(x: object, c: int) -> np.ndarray:
 
 
 def _fresnel(fr: object, c: int) -> dict[str, object]:
+    from gonio.brdf import models
+
     if isinstance(fr, models.Schlick):
         return {"fresnel": "schlick", "f0": _vec(fr.f0, c)}
     if isinstance(fr, models.Conductor):
@@ -74,6 +79,8 @@ def _fresnel(fr: object, c: int) -> dict[str, object]:
 def split(model: BRDFModel) -> Lobes:
     """The diffuse and microfacet lobes of ``model``; NotRepresentable (with the reason) when the
     model holds anything else."""
+    from gonio.brdf import models
+
     c = int(model.channels)
     lobes = model.lobes if isinstance(model, models.Sum) else (model,)
     diffuse = np.zeros(c)
@@ -114,6 +121,8 @@ def split(model: BRDFModel) -> Lobes:
 def describe(model: BRDFModel) -> str:
     """Short name of a model's structure, e.g. ``"Lambert + TorranceSparrow(ggx, smith,
     Schlick)"``."""
+    from gonio.brdf import models
+
     lobes = model.lobes if isinstance(model, models.Sum) else (model,)
     parts = []
     for lobe in lobes:

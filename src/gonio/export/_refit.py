@@ -118,7 +118,7 @@ def refit(
     """
     from gonio.fit import fit
     from gonio.fit.losses import evaluate
-    from gonio.fit.result import to_jsonable
+    from gonio.io.fit_result import to_jsonable
 
     rd = data or refit_data(src)
     metric = str(src.record.get("metric") or "wls")

@@ -1,4 +1,4 @@
-"""The fit being exported: its JSON record (read through :mod:`gonio.fit.result`), its model,
+"""The fit being exported: its JSON record (read through :mod:`gonio.io.fit_result`), its model,
 and the RGB form of a spectral fit.
 
 Spectral fits (channels named ``"450nm"``, ...) are converted to linear sRGB with gonio's
@@ -12,7 +12,6 @@ non-linearly and are never converted: such a fit is refitted on the RGB-converte
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from gonio.brdf.models import BRDFModel, Node
-from gonio.errors import FormatError, ParameterError
+from gonio.brdf.models import BRDFModel
+from gonio.errors import ParameterError
 
 _NM = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*nm\s*$")
 
@@ -32,7 +31,7 @@ class FitSource:
 
     Attributes
     ----------
-    record : the fit-result JSON (validated against :data:`gonio.fit.result.SCHEMA`).
+    record : the fit-result JSON (validated by :func:`gonio.io.fit_result.validate`).
     model : the fitted model as stored (channels as fitted).
     path : the JSON file it came from (None for an in-memory result).
     wavelengths_nm : the channels' wavelengths for a spectral fit, else None.
@@ -85,45 +84,18 @@ def load(fit: Any) -> FitSource:
         For a file that is not a fit result, a schema version this gonio does not read, or a
         model description that cannot be rebuilt.
     """
-    from gonio.fit.result import SCHEMA_ID, SCHEMA_VERSION, FitResult, read_result
+    from gonio.fit.result import FitResult
+    from gonio.io import fit_result
 
     path: Path | None = None
     if isinstance(fit, FitResult):
-        record = fit.to_json()
+        record = fit_result.validate(fit.to_json())
     elif isinstance(fit, dict):
-        record = fit
+        record = fit_result.validate(fit)
     elif isinstance(fit, (str, Path)):
         path = Path(fit)
-        try:
-            raw = json.loads(path.read_text())
-        except OSError as exc:
-            raise FormatError(f"{path}: cannot read ({exc.strerror})") from None
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            raise FormatError(f"{path}: not JSON, so not a gonio fit result") from None
-        if isinstance(raw, dict) and raw.get("schema") == SCHEMA_ID:
-            v = raw.get("version")
-            if v != SCHEMA_VERSION:
-                raise FormatError(
-                    f"{path}: fit-result schema version {v!r} is not supported "
-                    f"(this gonio reads version {SCHEMA_VERSION})"
-                )
-        record = read_result(path)
+        record = fit_result.read_result(path)
     else:
         raise ParameterError(f"cannot export a {type(fit).__name__}: give a fit-result file")
-    if path is None:
-        import jsonschema
-
-        from gonio.fit.result import SCHEMA
-
-        try:
-            jsonschema.validate(record, SCHEMA)
-        except jsonschema.ValidationError as exc:
-            raise FormatError(f"not a fit result ({exc.message[:120]})") from None
-    try:
-        model = Node.from_dict(record["model_spec"])
-    except (ParameterError, TypeError, KeyError) as exc:
-        where = path or "fit result"
-        raise FormatError(f"{where}: model_spec cannot be rebuilt ({exc})") from None
-    if not isinstance(model, BRDFModel):
-        raise FormatError(f"{path or 'fit result'}: model_spec is not a BRDF model")
+    model = fit_result.model_of(record["model_spec"], str(path or "fit result"))
     return FitSource(record, model, path, wavelengths_of(list(record["data"]["channels"])))

@@ -19,12 +19,20 @@ from __future__ import annotations
 
 from typing import Any
 
-from gonio.brdf import models
 from gonio.export._common import Export, family_name, fmt, rgb, template, uniform
 from gonio.export._lobes import Lobes
 
 TARGET = "blender"
+TITLE = "Blender"
 SUFFIXES = (".py",)
+#: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
+HELP = """\
+Python script building the node tree with bpy (.py): blender --python FILE.py.
+[Lambert + TorranceSparrow(ggx, smith, Schlick|Dielectric)]
+Diffuse BSDF (Color = albedo, Roughness 0) + Principled BSDF (distribution GGX,
+Roughness = sqrt(alpha); Schlick: Metallic 1, Base Color = f0, Specular Tint white;
+Dielectric: Metallic 0, Base Color black, IOR = eta) joined by an Add Shader.
+"""
 FAMILY = "Lambert + TorranceSparrow(ggx, smith, Schlick | Dielectric)"
 
 
@@ -50,6 +58,8 @@ def check(lobes: Lobes) -> str | None:
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
     """Lambert + TS(ggx, smith, Schlick) started from ``model``."""
+    from gonio.brdf import models  # JAX: imported when a refit is built
+
     tmpl, fixed = template(model, "ggx", models.Schlick(0.04))
     return tmpl, fixed, "Lambert + TorranceSparrow(ggx, smith, Schlick)"
 

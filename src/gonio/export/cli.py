@@ -11,51 +11,21 @@ from typing import Any
 from gonio.errors import ParameterError
 from gonio.io.atomic import same_file
 
-TARGET_NAMES = ("mitsuba", "pbrt", "blender", "openpbr", "usd")
-SUFFIX = {
-    "mitsuba": ".xml",
-    "pbrt": ".pbrt",
-    "blender": ".py",
-    "openpbr": ".mtlx",
-    "usd": ".usda",
-}
+#: ``gonio export``'s one-line help (``gonio --help`` shows it without importing this module).
+HELP = "write a fit as a renderer's material (gonio export --help lists the targets)"
 
-EPILOG = """\
+EPILOG_HEAD = """\
 targets and parameter mapping (gonio's alpha is its microfacet roughness; models in brackets
 are the families a target expresses exactly):
+"""
 
-  mitsuba   Mitsuba 3 XML <bsdf> fragment (.xml) and its load_dict dictionary (.json).
-            [Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor|Dielectric)]
-            diffuse: reflectance = albedo; roughconductor: distribution as fitted,
-            alpha = alpha (unchanged), eta/k = the conductor's index (k = 0 for Dielectric);
-            a sum is a blendbsdf of weight w = min(0.5, 1 - max albedo) with reflectance
-            albedo / (1 - w) and specular_reflectance 1 / w. Mitsuba's Smith term is separable,
-            gonio's height-correlated (0.9 % relative RMSE at GGX alpha 0.5 on a sphere).
-  pbrt      pbrt-v4 MakeNamedMaterial block + NamedMaterial (.pbrt).
-            [Lambert, TorranceSparrow(ggx, smith, Conductor|Dielectric), (1-a) Lambert + a TS]
-            diffuse: reflectance = albedo; conductor: eta, k, roughness = alpha with
-            "bool remaproughness" false; a sum is "mix" with amount a.
-  blender   Python script building the node tree with bpy (.py): blender --python FILE.py.
-            [Lambert + TorranceSparrow(ggx, smith, Schlick|Dielectric)]
-            Diffuse BSDF (Color = albedo, Roughness 0) + Principled BSDF (distribution GGX,
-            Roughness = sqrt(alpha); Schlick: Metallic 1, Base Color = f0, Specular Tint white;
-            Dielectric: Metallic 0, Base Color black, IOR = eta) joined by an Add Shader.
-  openpbr   MaterialX document with open_pbr_surface shaders (.mtlx).
-            [Lambert, TorranceSparrow(ggx, smith, Schlick), (1-m) Lambert + m TS]
-            diffuse: base_color = albedo, specular_weight 0; metal: base_metalness 1,
-            base_color = f0, specular_color (F82 tint) white, specular_roughness = sqrt(alpha);
-            a sum is a MaterialX mix of the two with mix = m.
-  usd       USD layer with a UsdPreviewSurface material (.usda).
-            [Lambert + TorranceSparrow(ggx, smith, Schlick)]
-            useSpecularWorkflow 1, diffuseColor = albedo, specularColor = f0,
-            roughness = sqrt(alpha); read additively (the spec leaves the coupling open).
-
-what is refitted: any fit outside the target's family (Ward, Phong, Blinn-Phong, Oren-Nayar,
-HTSG, Lafortune, Ashikhmin-Shirley, V-cavity shadowing, Beckmann outside Mitsuba, a Fresnel term the
-target lacks, an unscaled sum for pbrt/openpbr, a Lambert-only fit for usd). The family is then
-fitted with gonio.fit under the original fit's metric and angle cutoff to the measurement file
-recorded in the fit (data.path), or, when that file is gone, to the fitted model sampled on a
-dense half/difference grid; the output reports the refit loss next to the original fit's loss.
+EPILOG_TAIL = """\
+what is refitted: any fit outside the target's families in brackets (Ward, Phong, Blinn-Phong,
+Oren-Nayar, HTSG, Lafortune, Ashikhmin-Shirley, V-cavity shadowing, a distribution, Fresnel
+term or form of sum the target lacks, a Lambert-only fit where none is listed). The family is
+then fitted with gonio.fit under the original fit's metric and angle cutoff to the measurement
+file recorded in the fit (data.path), or, when that file is gone, to the fitted model sampled on
+a dense half/difference grid; the output reports the refit loss next to the original fit's loss.
 Layered materials (Mitsuba roughplastic/principled, pbrt coateddiffuse, OpenPBR's dielectric
 base) are not used: no gonio model expresses them, so they could be neither exact nor refitted.
 Spectral fits are exported in linear sRGB (CIE 1931, D65; gonio.io.spectral); their indices of
@@ -66,18 +36,32 @@ summary (mapping, target parameters, refit losses, notes) is printed as JSON on 
 """
 
 
+def epilog(targets: dict[str, Any]) -> str:
+    """``gonio export --help``'s text below the options: each target's ``HELP`` entry, then
+    what is refitted and how."""
+    rows = []
+    for name, mod in targets.items():
+        first, *rest = mod.HELP.strip("\n").split("\n")
+        rows.append(f"  {name:<9} {first}")
+        rows += [f"{'':12}{line}" for line in rest]
+    return EPILOG_HEAD + "\n" + "\n".join(rows) + "\n\n" + EPILOG_TAIL
+
+
 def register(subparsers: Any) -> None:
     """Add ``gonio export`` to the top-level parser."""
+    from gonio.export import registry
+
+    targets = registry.targets()
     p = subparsers.add_parser(
         "export",
-        help="write a fit as a Mitsuba, pbrt-v4, Blender, OpenPBR/MaterialX or USD material",
+        help=HELP,
         description=(
             "Write a fit result (from 'gonio fit') as a renderer's material. Parameters are\n"
             "exact where the target has the fitted model family; otherwise the target's family\n"
             "is refitted to the fit's own data and both losses are reported. Nothing is\n"
             "written when the input is bad."
         ),
-        epilog=EPILOG,
+        epilog=epilog(targets),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("fit", metavar="FIT.json", help="fit result JSON written by 'gonio fit'")
@@ -85,7 +69,7 @@ def register(subparsers: Any) -> None:
         "--to",
         required=True,
         metavar="TARGET",
-        help="mitsuba, pbrt, blender, openpbr or usd (see below)",
+        help=f"{registry.listing(list(targets))} (see below)",
     )
     p.add_argument(
         "--out",
@@ -127,10 +111,9 @@ def _summary_lines(e: Any) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``gonio export``."""
-    if args.to not in TARGET_NAMES:
-        raise ParameterError(
-            f"unknown export target {args.to!r}; choose one of {', '.join(TARGET_NAMES)}"
-        )
+    from gonio.export import registry
+
+    registry.target(args.to)  # an unknown target is refused before the fit is read
     if not Path(args.fit).is_file():
         raise ParameterError(f"fit file not found: {args.fit}")
     from gonio.export import export

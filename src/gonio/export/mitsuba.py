@@ -25,12 +25,22 @@ from typing import Any
 
 import numpy as np
 
-from gonio.brdf import models
 from gonio.export._common import Export, family_name, fmt, rgb, template, uniform
 from gonio.export._lobes import Lobes
 
 TARGET = "mitsuba"
+TITLE = "Mitsuba 3"
 SUFFIXES = (".xml", ".json")
+#: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
+HELP = """\
+Mitsuba 3 XML <bsdf> fragment (.xml) and its load_dict dictionary (.json).
+[Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor|Dielectric)]
+diffuse: reflectance = albedo; roughconductor: distribution as fitted,
+alpha = alpha (unchanged), eta/k = the conductor's index (k = 0 for Dielectric);
+a sum is a blendbsdf of weight w = min(0.5, 1 - max albedo) with reflectance
+albedo / (1 - w) and specular_reflectance 1 / w. Mitsuba's Smith term is separable,
+gonio's height-correlated (0.9 % relative RMSE at GGX alpha 0.5 on a sphere).
+"""
 FAMILY = "Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor(eta, k))"
 SEPARABLE_NOTE = (
     "Mitsuba's Smith shadowing is separable (G1(wi) G1(wo)), gonio's height-correlated: they "
@@ -59,6 +69,8 @@ def check(lobes: Lobes) -> str | None:
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
     """Lambert + TS(ggx or the fitted beckmann, smith, Conductor) started from ``model``."""
+    from gonio.brdf import models  # JAX: imported when a refit is built
+
     dist = (
         "beckmann"
         if lobes and lobes.specular and lobes.specular.distribution == "beckmann"

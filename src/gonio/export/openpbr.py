@@ -18,12 +18,20 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from typing import Any
 
-from gonio.brdf import models
 from gonio.export._common import Export, family_name, fmt, mix_amount, rgb, template
 from gonio.export._lobes import Lobes
 
 TARGET = "openpbr"
+TITLE = "OpenPBR/MaterialX"
 SUFFIXES = (".mtlx",)
+#: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
+HELP = """\
+MaterialX document with open_pbr_surface shaders (.mtlx).
+[Lambert, TorranceSparrow(ggx, smith, Schlick), (1-m) Lambert + m TS]
+diffuse: base_color = albedo, specular_weight 0; metal: base_metalness 1,
+base_color = f0, specular_color (F82 tint) white, specular_roughness = sqrt(alpha);
+a sum is a MaterialX mix of the two with mix = m.
+"""
 FAMILY = "Lambert, TorranceSparrow(ggx, smith, Schlick), or (1 - m) Lambert + m TS"
 MIX = 0.5
 MTLX_VERSION = "1.39"
@@ -51,6 +59,8 @@ def check(lobes: Lobes) -> str | None:
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
     """0.5 Lambert + 0.5 TS(ggx, smith, Schlick) started from ``model``."""
+    from gonio.brdf import models  # JAX: imported when a refit is built
+
     tmpl, fixed = template(model, "ggx", models.Schlick(0.04), scales=(1 - MIX, MIX))
     return tmpl, fixed, f"{1 - MIX:g} Lambert + {MIX:g} TorranceSparrow(ggx, smith, Schlick)"
 

@@ -22,12 +22,19 @@ from typing import Any
 
 import numpy as np
 
-from gonio.brdf import models
 from gonio.export._common import Export, family_name, fmt, mix_amount, rgb, template
 from gonio.export._lobes import Lobes
 
 TARGET = "pbrt"
+TITLE = "pbrt-v4"
 SUFFIXES = (".pbrt",)
+#: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
+HELP = """\
+pbrt-v4 MakeNamedMaterial block + NamedMaterial (.pbrt).
+[Lambert, TorranceSparrow(ggx, smith, Conductor|Dielectric), (1-a) Lambert + a TS]
+diffuse: reflectance = albedo; conductor: eta, k, roughness = alpha with
+"bool remaproughness" false; a sum is "mix" with amount a.
+"""
 FAMILY = "Lambert, TorranceSparrow(ggx, smith, Conductor), or (1 - a) Lambert + a TS of them"
 MIX_AMOUNT = 0.5
 
@@ -59,6 +66,8 @@ def check(lobes: Lobes) -> str | None:
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
     """0.5 Lambert + 0.5 TS(ggx, smith, Conductor) started from ``model``."""
+    from gonio.brdf import models  # JAX: imported when a refit is built
+
     tmpl, fixed = template(
         model, "ggx", models.Conductor(eta=1.5, k=0.0), scales=(1 - MIX_AMOUNT, MIX_AMOUNT)
     )

@@ -15,12 +15,19 @@ from __future__ import annotations
 
 from typing import Any
 
-from gonio.brdf import models
 from gonio.export._common import Export, family_name, fmt, rgb, template
 from gonio.export._lobes import Lobes
 
 TARGET = "usd"
+TITLE = "USD"
 SUFFIXES = (".usda",)
+#: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
+HELP = """\
+USD layer with a UsdPreviewSurface material (.usda).
+[Lambert + TorranceSparrow(ggx, smith, Schlick)]
+useSpecularWorkflow 1, diffuseColor = albedo, specularColor = f0,
+roughness = sqrt(alpha); read additively (the spec leaves the coupling open).
+"""
 FAMILY = "Lambert + TorranceSparrow(ggx, smith, Schlick)"
 ADDITIVE_NOTE = (
     "UsdPreviewSurface does not define how diffuse and specular combine; these values read "
@@ -47,6 +54,8 @@ def check(lobes: Lobes) -> str | None:
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
     """Lambert + TS(ggx, smith, Schlick) started from ``model``."""
+    from gonio.brdf import models  # JAX: imported when a refit is built
+
     tmpl, fixed = template(model, "ggx", models.Schlick(0.04))
     return tmpl, fixed, "Lambert + TorranceSparrow(ggx, smith, Schlick)"
 

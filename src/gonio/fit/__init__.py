@@ -10,7 +10,8 @@ Modules: :mod:`~gonio.fit.data` (flatten and mask input), :mod:`~gonio.fit.losse
 :mod:`~gonio.fit.params` (reparameterization), :mod:`~gonio.fit.objective` (compiled
 objective), :mod:`~gonio.fit.lm` and :mod:`~gonio.fit.optimize` (optimizers),
 :mod:`~gonio.fit.uncertainty` (Laplace, MCMC), :mod:`~gonio.fit.compare` (model comparison),
-:mod:`~gonio.fit.result` (JSON), :mod:`~gonio.fit.plots`, :mod:`~gonio.fit.batch`,
+:mod:`~gonio.fit.result` (the result record; its file format is :mod:`gonio.io.fit_result`),
+:mod:`~gonio.fit.plots`, :mod:`~gonio.fit.batch`,
 :mod:`~gonio.fit.score` (the literature's metrics on any model), :mod:`~gonio.fit.presets`
 (model names; ``FAMILIES`` lists the literature's families as published).
 """
@@ -29,8 +30,8 @@ _LAZY = {
     "LOSSES": ("gonio.fit.losses", "LOSSES"),
     "available_models": ("gonio.fit.presets", "available"),
     "FitResult": ("gonio.fit.result", "FitResult"),
-    "load_model": ("gonio.fit.result", "load_model"),
-    "read_result": ("gonio.fit.result", "read_result"),
+    "load_model": ("gonio.io.fit_result", "load_model"),
+    "read_result": ("gonio.io.fit_result", "read_result"),
 }
 
 

@@ -99,13 +99,20 @@ def fit_options_key(options: dict[str, Any]) -> Any:
     return json.loads(json.dumps(options.get("fit", {}), sort_keys=True, default=str))
 
 
-def _previous_models(folder: Path, key: Any) -> list[str]:
-    """Models of an earlier run on this material with the same fit options (none otherwise)."""
+def _summary(folder: Path) -> dict[str, Any]:
+    """A material folder's ``summary.json`` as written by an earlier run ({} when it is absent
+    or unreadable: the material is then fitted again)."""
     try:
         prev = json.loads((folder / "summary.json").read_text())
     except (OSError, ValueError):
-        return []
-    if not isinstance(prev, dict) or prev.get("fit_options") != key:
+        return {}
+    return prev if isinstance(prev, dict) else {}
+
+
+def _previous_models(folder: Path, key: Any) -> list[str]:
+    """Models of an earlier run on this material with the same fit options (none otherwise)."""
+    prev = _summary(folder)
+    if prev.get("fit_options") != key:
         return []
     return [m for m in prev.get("models", []) if isinstance(m, str)]
 
@@ -119,7 +126,7 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     import gonio.brdf  # noqa: F401  (float64)
     from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
-    from gonio.fit.result import write_json
+    from gonio.io.fit_result import write_json
 
     src = Path(path)
     name = options.get("material") or material_name(src)
@@ -192,10 +199,7 @@ def pending(
         ok = (folder / "summary.json").exists()
         ok = ok and all((folder / f"{safe_stem(m)}.json").exists() for m in models)
         if ok and key is not None:
-            try:
-                ok = json.loads((folder / "summary.json").read_text()).get("fit_options") == key
-            except (OSError, ValueError, AttributeError):
-                ok = False
+            ok = _summary(folder).get("fit_options") == key
         (done if ok else todo).append(p)
     return todo, done
 

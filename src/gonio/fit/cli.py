@@ -241,7 +241,7 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     from gonio.fit.batch import safe_stem
     from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
-    from gonio.fit.result import write_json
+    from gonio.io.fit_result import write_json
 
     console = Console(stderr=True)
     opts = dict(options["fit"])

@@ -44,7 +44,7 @@ class Comparison:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary (without the per-model details)."""
-        from gonio.fit.result import to_jsonable
+        from gonio.io.fit_result import to_jsonable
 
         d = {"table": self.table, "recommended": self.recommended, "reason": self.reason}
         return to_jsonable(d)

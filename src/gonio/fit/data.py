@@ -213,6 +213,8 @@ def prepare(
         v = meta.get(key)
         if isinstance(v, dict):  # e.g. a reader's provenance (what an NBRDF reader clamped)
             v = {str(k): x for k, x in v.items() if _jsonable(x)}
+        if key != "source" and not isinstance(v, str):
+            continue  # the fit-result format holds a name and a path as text
         if key in meta and _jsonable(v):
             source.setdefault("name" if key == "material" else key, v)
     if name is not None:

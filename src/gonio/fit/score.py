@@ -85,7 +85,7 @@ def load_scored_model(spec: str, material: str | None) -> tuple[str, BRDFModel]:
     the data's name) or ``ngan_FAMILY.fit::MATERIAL``.
     """
     from gonio.brdf import ngan
-    from gonio.fit.result import load_model
+    from gonio.io.fit_result import load_model
 
     path, _, mat = spec.partition("::")
     if path.endswith(".json"):

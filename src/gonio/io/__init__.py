@@ -1,4 +1,5 @@
-"""File formats: native ``*.brdf.h5`` tables, MERL, RGL tensor files, Cornell, ALTA, EXR.
+"""File formats: native ``*.brdf.h5`` tables, MERL, RGL tensor files, Cornell, ALTA, EXR, and
+fit results (:mod:`gonio.io.fit_result`, the one reader and writer of ``gonio fit``'s JSON).
 
 >>> from gonio import io
 >>> t = io.load("material.binary")          # format detected from the content

@@ -186,6 +186,21 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
     return len(parts)
 
 
+#: Part attributes that mark a table slice file (see the module docstring).
+SLICE_KEYS = frozenset({"gonio_phi_d_rad", "gonio_units"})
+
+
+def is_table_slices(path: PathLike) -> bool:
+    """True when ``path`` is an EXR file whose header marks it as table slices
+    (:func:`write_table_slices`); False for any other file, readable or not (header only)."""
+    try:
+        with _openexr().File(str(path), header_only=True) as f:
+            # read the keys while the file is open (the header is not kept after closing)
+            return any(SLICE_KEYS & set(part.header.keys()) for part in f.parts)
+    except Exception:  # OpenEXR raises plain exceptions on files it cannot read
+        return False
+
+
 def read_table_slices(path: PathLike) -> dict[str, Any]:
     """Read a file written by :func:`write_table_slices`.
 

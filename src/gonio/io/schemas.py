@@ -8,10 +8,8 @@ under its file name. Adding one is a one-liner in the owning module::
     @register_schema("rig.schema.json")
     def rig_schema() -> dict: ...
 
-The generator imports the modules in :data:`SCHEMA_MODULES`; the rig and fit-result schemas are
-expected in ``gonio.rigs.schema`` and ``gonio.fit.schema`` (already listed; a listed module that
-does not exist yet is skipped), so their owners only create that module. Other owners append
-their module's name.
+The generator imports the modules in :data:`SCHEMA_MODULES` (a listed module that does not
+exist is skipped); a new schema's owner appends its module's name.
 ``python -m gonio.io.schemas --write`` regenerates every file; ``--check`` (and the test suite)
 fails when a committed copy differs from what the code generates.
 """
@@ -29,7 +27,7 @@ from pathlib import Path
 SCHEMA_MODULES: tuple[str, ...] = (
     "gonio.io.native_schema",  # table-metadata.schema.json
     "gonio.rigs.schema",  # rig.schema.json (owned by rigs)
-    "gonio.fit.schema",  # fit-result.schema.json (owned by fit)
+    "gonio.io.fit_result",  # fit-result.schema.json
 )
 
 #: JSON Schema dialect of every generated schema.

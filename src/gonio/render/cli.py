@@ -13,96 +13,25 @@ import numpy as np
 
 from gonio.errors import FormatError, ParameterError
 
-# Fit files hold a model description made by ``Node.to_dict``; they are parsed through the model
-# registry (gonio.brdf) so that gonio.render never imports gonio.fit (DESIGN.md dependency rule).
-MAX_FIT_BYTES = 16 * 1024 * 1024
 #: Largest --spp: 2^16 samples per pixel already takes minutes at 256^2 (3.4e9 samples); the
 #: 10^8 of a typo would run for days with no sign of it but the progress bar.
 MAX_SPP = 1 << 16
-#: The fit-result format read here (``gonio.fit.result.SCHEMA_ID`` / ``SCHEMA_VERSION``; not
-#: imported from gonio.fit, which gonio.render must not depend on).
-FIT_SCHEMA = "gonio/fit-result"
-FIT_VERSION = 1
-
-
-def missing_parameters(desc: Any, where: str = "") -> list[str]:
-    """Parameters a model description (``Node.to_dict`` form) leaves out, as ``"path.name"``."""
-    from gonio.brdf.models import registry
-
-    out: list[str] = []
-    if isinstance(desc, list):
-        for i, d in enumerate(desc):
-            out += missing_parameters(d, f"{where}{i}.")
-        return out
-    if not isinstance(desc, dict) or "type" not in desc:
-        return out
-    cls = registry().get(desc["type"])
-    if cls is None:
-        return out  # Node.from_dict names the unknown type
-    params = desc.get("params") or {}
-    out += [f"{where}{p.name}" for p in cls.PARAMS if p.name not in params]
-    for name, child in (desc.get("children") or {}).items():
-        out += missing_parameters(child, f"{where}{name}.")
-    return out
-
-
-def load_fit_model(path: str | Path) -> Any:
-    """The model of a fit result JSON (key ``"model"``) or of a bare model description."""
-    from gonio.brdf.models import Node
-
-    path = Path(path)
-    if not path.is_file():
-        raise ParameterError(f"fit file not found: {path}")
-    if path.stat().st_size > MAX_FIT_BYTES:
-        raise FormatError(f"{path}: larger than {MAX_FIT_BYTES} bytes; not a fit file")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FormatError(f"{path}: not valid JSON ({exc})") from None
-    # A fit result keeps the description under "model_spec" ("model" is the preset's name);
-    # a bare to_dict() (or {"model": {...}}) is accepted too.
-    desc = doc
-    if isinstance(doc, dict) and ("schema" in doc or "version" in doc):
-        if doc.get("schema") != FIT_SCHEMA or doc.get("version") != FIT_VERSION:
-            raise FormatError(
-                f"{path}: unsupported fit file (schema {doc.get('schema')!r} version "
-                f"{doc.get('version')!r}; this gonio reads {FIT_SCHEMA!r} version {FIT_VERSION})"
-            )
-    if isinstance(doc, dict) and "type" not in doc:
-        desc = doc.get("model_spec", doc.get("model"))
-    if not isinstance(desc, dict) or "type" not in desc:
-        raise FormatError(f"{path}: no model description (expected a 'model_spec' object)")
-    missing = missing_parameters(desc)
-    if missing:
-        raise FormatError(
-            f"{path}: the model description lacks parameter(s) {', '.join(missing)} "
-            "(a fit file states every parameter; none is filled in with a default)"
-        )
-    try:
-        model = Node.from_dict(desc)
-    except ParameterError as exc:
-        raise FormatError(f"{path}: {exc}") from None
-    except (TypeError, ValueError, KeyError) as exc:
-        raise FormatError(f"{path}: bad model description ({exc})") from None
-    if not hasattr(model, "sample") or not hasattr(model, "f"):
-        raise FormatError(f"{path}: describes a {type(model).__name__}, not a BRDF model")
-    return model
 
 
 def load_fitted(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[str]]:
-    """``(model, notes)`` of a fit file, a spectral model projected to linear sRGB
+    """``(model, notes)`` of a fit file (:func:`gonio.io.fit_result.load_fit`: a fit result or a
+    bare model description), a spectral model projected to linear sRGB
     (:mod:`gonio.render.spectral`) using the wavelengths named in the fit's ``data.channels``."""
+    from gonio.io.fit_result import load_fit
     from gonio.render.spectral import to_rgb, wavelengths_from_names
 
-    model = load_fit_model(path)
+    if not Path(path).is_file():
+        raise ParameterError(f"fit file not found: {path}")
+    record, model = load_fit(path, descriptions=True)
     c = int(getattr(model, "channels", 1))
     if c in (1, 3):
         return model, []
-    try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-        names = (doc.get("data") or {}).get("channels") if isinstance(doc, dict) else None
-    except (OSError, ValueError, AttributeError):
-        names = None
+    names = record.get("data", {}).get("channels")
     wl = wavelengths_from_names(names or ())
     if wl is None or wl.size != c:
         raise FormatError(
@@ -293,18 +222,11 @@ def _write_figure_image(out: Path, img: np.ndarray, exposure: float) -> None:
 
 def check_environment_file(path: str | Path) -> None:
     """Refuse an EXR that is not a lat-long radiance image: a BRDF slice file written by
-    ``gonio convert ... .exr`` (its parts carry ``gonio_phi_d_rad``/``gonio_units``)."""
-    if not str(path).lower().endswith(".exr"):
-        return
-    try:
-        import OpenEXR
+    ``gonio convert ... .exr`` (:func:`gonio.io.exr.is_table_slices`)."""
+    from gonio.io.exr import is_table_slices
 
-        with OpenEXR.File(str(path), header_only=True) as f:
-            # read the keys while the file is open (the header is not kept after closing)
-            keys = [set(part.header.keys()) for part in f.parts]
-    except Exception:  # unreadable here: the environment loader reports it in its own words
-        return
-    if any({"gonio_phi_d_rad", "gonio_units"} & k for k in keys):
+    # an unreadable file passes here: the environment loader reports it in its own words
+    if str(path).lower().endswith(".exr") and is_table_slices(path):
         raise ParameterError(
             f"--env {path}: a BRDF slice image (theta_h x theta_d per phi_d, values in 1/sr), "
             "not a lat-long environment map"

@@ -35,81 +35,32 @@ def _as_image(img: np.ndarray) -> np.ndarray:
     return a
 
 
-def _io_exr():
-    try:
-        from gonio.io import exr
-    except ImportError:
-        return None
-    return exr if hasattr(exr, "write_exr") and hasattr(exr, "read_exr") else None
-
-
 def write_exr(
     path: str | os.PathLike, img: np.ndarray, names: list[str] | tuple[str, ...] | None = None
 ) -> Path:
-    """Write linear float32 ``img`` (H, W, C) as a ZIP-compressed scanline OpenEXR file.
+    """Write linear float32 ``img`` (H, W, C) as a ZIP-compressed scanline OpenEXR file
+    (:func:`gonio.io.exr.write_exr`, atomically).
 
     ``names`` are the channel names (spectral images: ``"400nm"``, ...; a spectral material's
     ``channels.names``); default ``R, G, B`` / ``Y`` / ``c<i>``.
     """
-    import OpenEXR
-
-    # gonio.io owns the file formats; its EXR helper is used when present, this is the fallback
-    # with the same layout (float32, ZIP, R G B / Y / c<i> channels).
-    io_exr = _io_exr()
-    if io_exr is not None:
-        a = _as_image(img)
-        io_exr.write_exr(path, a, list(names) if names else _channel_names(a.shape[2]))
-        return Path(path)
+    from gonio.io import exr
 
     a = _as_image(img)
-    path = Path(path)
-    names = list(names) if names else _channel_names(a.shape[2])
-    if len(names) != a.shape[2]:
-        raise ParameterError(f"{len(names)} channel names for {a.shape[2]} channels")
-    channels = {n: np.ascontiguousarray(a[..., i]) for i, n in enumerate(names)}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with atomic_output(path, ".exr", make_parents=True) as tmp, OpenEXR.File(header, channels) as f:
-        f.write(str(tmp))
-    return path
+    exr.write_exr(path, a, list(names) if names else _channel_names(a.shape[2]))
+    return Path(path)
 
 
 def read_exr(path: str | os.PathLike) -> np.ndarray:
-    """Read an OpenEXR file as float32 ``(H, W, C)``; RGB(A) in that order, alpha dropped."""
-    io_exr = _io_exr()
-    if io_exr is not None:
-        img, names = io_exr.read_exr(path)
-        keep = [i for i, n in enumerate(names) if n != "A"]
-        if not keep:
-            raise FormatError(f"{path}: no image channels")
-        return np.asarray(img, dtype=np.float32)[..., keep]
+    """Read an OpenEXR file (:func:`gonio.io.exr.read_exr`) as float32 ``(H, W, C)``; RGB(A) in
+    that order, alpha dropped."""
+    from gonio.io import exr
 
-    import OpenEXR
-
-    path = Path(path)
-    try:
-        with OpenEXR.File(str(path)) as f:
-            chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
-    except Exception as exc:  # OpenEXR raises plain exceptions on corrupt files
-        raise FormatError(f"{path}: not a readable OpenEXR file ({exc})") from None
-    planes: list[np.ndarray] = []
-    for key in sorted(chans, key=_order):
-        a = chans[key]
-        if key in ("A", "RGBA") and a.ndim == 2:
-            continue
-        a = a[..., :3] if key == "RGBA" else a
-        planes.append(a if a.ndim == 3 else a[..., None])
-    if not planes:
+    img, names = exr.read_exr(path)
+    keep = [i for i, n in enumerate(names) if n != "A"]
+    if not keep:
         raise FormatError(f"{path}: no image channels")
-    try:
-        out = np.concatenate(planes, axis=-1).astype(np.float32)
-    except ValueError:
-        raise FormatError(f"{path}: channels of different sizes") from None
-    return out
-
-
-def _order(name: str) -> tuple[int, str]:
-    rank = {"RGBA": 0, "RGB": 0, "R": 1, "G": 2, "B": 3, "Y": 4}
-    return rank.get(name, 10), name
+    return np.asarray(img, dtype=np.float32)[..., keep]
 
 
 def luminance(img: np.ndarray) -> np.ndarray:

@@ -12,7 +12,6 @@ anything containing a path separator or ending in ``.toml`` is a path.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass, field
@@ -673,8 +672,11 @@ def _build(data: dict, text: str, source: str, check_sample_model: bool = True) 
 
 
 def schema_json() -> str:
-    """The schema as the text committed in ``data-schema/rig.schema.json``."""
-    return json.dumps(rig_schema(), indent=2) + "\n"
+    """The schema as the text committed in ``data-schema/rig.schema.json`` (written by
+    :mod:`gonio.io.schemas`, which :mod:`gonio.rigs.schema` registers it with)."""
+    from gonio.io.schemas import render
+
+    return render(rig_schema())
 
 
 if __name__ == "__main__":  # pragma: no cover
