@@ -19,6 +19,8 @@ MAX_FIT_BYTES = 16 * 1024 * 1024
 #: Largest --spp: 2^16 samples per pixel already takes minutes at 256^2 (3.4e9 samples); the
 #: 10^8 of a typo would run for days with no sign of it but the progress bar.
 MAX_SPP = 1 << 16
+#: --sampler values every material takes (the others name a table's own methods).
+_GENERIC_SAMPLERS = ("auto", "mis", "brdf", "cosine", "light")
 #: The fit-result format read here (``gonio.fit.result.SCHEMA_ID`` / ``SCHEMA_VERSION``; not
 #: imported from gonio.fit, which gonio.render must not depend on).
 FIT_SCHEMA = "gonio/fit-result"
@@ -95,7 +97,7 @@ def load_fitted(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[st
     from gonio.render.spectral import to_rgb, wavelengths_from_names
 
     model = load_fit_model(path)
-    c = int(getattr(model, "channels", 1))
+    c = model.n_channels
     if c in (1, 3):
         return model, []
     try:
@@ -385,8 +387,8 @@ def run(args: argparse.Namespace) -> int:
                 bar.update(task, completed=done / max(total, 1))
 
             sampler = args.sampler
-            if sampler in ("inversion", "alias", "rejection") and not hasattr(material, "values"):
-                sampler = "auto"  # table methods apply to the measured table only
+            if sampler not in (*material.sampling_methods, *_GENERIC_SAMPLERS):
+                sampler = "auto"  # a table's methods apply to the measured table only
             images[label] = render_sphere(
                 material,
                 lights,
