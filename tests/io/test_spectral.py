@@ -57,3 +57,36 @@ def test_linearity_and_bad_input():
         spectral.spectrum_to_xyz(a, wl[::-1])
     with pytest.raises(ParameterError):
         spectral.spectrum_to_xyz(np.ones(2), np.array([1000.0, 1100.0]))
+
+
+def test_one_spectral_to_rgb_matrix_for_renderer_exporter_and_rgl_reader():
+    """The matrix is the documented XYZ weights times the sRGB matrix, and a flat spectrum
+    maps to (c, c, c) under D65 (the renderer's, exporter's and RGL reader's conversion)."""
+    wl = np.arange(400.0, 701.0, 10.0)
+    m = spectral.spectral_to_rgb_matrix(wl)
+    expected = spectral.spectral_weights(wl, "D65") @ spectral.XYZ_TO_LINEAR_SRGB.T
+    np.testing.assert_array_equal(m, expected)
+    np.testing.assert_allclose(np.full(wl.size, 0.4) @ m, [0.4, 0.4, 0.4], atol=3e-3)
+    e = spectral.spectral_weights(wl, "E") @ spectral.XYZ_TO_LINEAR_SRGB.T
+    np.testing.assert_array_equal(spectral.spectral_to_rgb_matrix(list(wl), "E"), e)
+
+
+@pytest.mark.parametrize(
+    ("names", "expected"),
+    [
+        (["450nm", "550nm", "650nm"], [450.0, 550.0, 650.0]),
+        ([" 400 nm", "532.5nm"], [400.0, 532.5]),
+        (["450nm"], None),  # one wavelength is not a spectrum
+        (["R", "G", "B"], None),
+        (["450nm", "G"], None),
+        (["550nm", "450nm"], None),  # not increasing
+        (None, None),
+        ((), None),
+    ],
+)
+def test_wavelengths_from_channel_names(names, expected):
+    wl = spectral.wavelengths_from_names(names)
+    if expected is None:
+        assert wl is None
+    else:
+        np.testing.assert_array_equal(wl, expected)

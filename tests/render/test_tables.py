@@ -134,3 +134,17 @@ def test_table_channel_selection(glossy_pair):
     one = render_sphere(table, light, resolution=16, channels=[1])
     assert one.shape == (16, 16, 1)
     np.testing.assert_allclose(one[..., 0], full[..., 1], rtol=1e-5, atol=1e-7)
+
+
+def test_any_material_takes_an_analytic_proposal():
+    """Lobe sampling is a generic wrapper (gonio.brdf.sampled.LobeSampled), not a table
+    branch: a Lambert sphere sampled by another Lambert lobe under a uniform environment,
+    without MIS, has weight f cos / pdf = albedo on every sample, so every pixel is exact."""
+    _, hit = ortho_normals(8)
+    img = render_sphere(models.Lambert(0.3), Environment(1.0), resolution=8, spp=4,
+                        sampler="brdf", proposal=models.Lambert(0.7), mis=False)  # fmt: skip
+    np.testing.assert_allclose(img[hit][..., 0], 0.3, rtol=1e-5)
+    mirror = models.Lambert(0.3) + models.SpecularReflection()
+    with pytest.raises(ParameterError, match="delta"):
+        render_sphere(mirror, Environment(1.0), resolution=4, spp=1, sampler="brdf",
+                      proposal=models.Lambert(0.7))  # fmt: skip

@@ -103,6 +103,11 @@ class MeasuredSamples:
     def n_channels(self) -> int:
         return len(self.channels)
 
+    @property
+    def channel_info(self) -> Channels:
+        """The channel description (the same as :attr:`channels`)."""
+        return self.channels
+
     def __repr__(self) -> str:
         return f"MeasuredSamples(N={len(self)}, {self.channels!r})"
 

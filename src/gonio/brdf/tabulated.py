@@ -64,12 +64,16 @@ from gonio.brdf.grid import (
 )
 from gonio.brdf.lookup import LookupSpec, corner_bits, eval_kernel, interpolate
 from gonio.brdf.measured import MeasuredSamples
-from gonio.brdf.models._base import BRDFSample
+from gonio.brdf.sample_record import BRDFSample
+from gonio.brdf.sampled import TableSampled, bind_generic
 from gonio.errors import FormatError, ParameterError
 
 Array = jnp.ndarray
 
 _EPS_ANGLE = 1e-9
+
+#: A table's own sampling methods (:meth:`TabulatedBRDF.sample`), the default first.
+TABLE_METHODS = ("inversion", "alias", "rejection")
 
 
 def _one_minus_eps(dtype: Any) -> float:
@@ -368,6 +372,49 @@ class TabulatedBRDF:
     @property
     def isotropic(self) -> bool:
         return self.parameterization == "half_diff_iso"
+
+    # -- the material interface (gonio.brdf.material.Material) ---------------------------------
+    #: Sampling methods, the default first (:meth:`sample`); "cosine" and "lobe" too.
+    sampling_methods = TABLE_METHODS
+    has_delta = False
+    broadcasts_outgoing = False
+
+    @property
+    def channel_info(self) -> Channels:
+        """The channel description (the same as :attr:`channels`)."""
+        return self.channels
+
+    def select_channels(self, idx: Sequence[int]) -> TabulatedBRDF | None:
+        """The table with only channels ``idx`` (values, sigma and channel description cut), or
+        None when the selection has no :class:`Channels` description (two channels of an RGB
+        table): the caller then evaluates every channel and cuts afterwards."""
+        ch = self.channels
+        names = tuple(ch.names[i] for i in idx)
+        if ch.kind == "spectral":
+            wl = np.asarray(ch.wavelengths_nm)[idx]
+            new = Channels("spectral", names=names, wavelengths_nm=wl)
+        elif len(idx) == 1:
+            new = Channels("mono", names=names)
+        elif list(idx) == list(range(len(ch.names))):
+            return self
+        else:
+            return None
+        sigma = None if self.sigma is None else np.asarray(self.sigma)[..., idx]
+        return self.replace(values=np.asarray(self.values)[..., idx], sigma=sigma, channels=new)
+
+    def with_sampling(self, method: str | None = None, *, proposal: Any = None,
+                      wo: Any = None) -> Any:  # fmt: skip
+        """The table bound to ``method`` (default ``"inversion"``) as a pytree
+        (:class:`gonio.brdf.sampled.TableSampled`), with the sampling structures built for the
+        outgoing directions ``wo`` (see :meth:`sampling_state`; None: built when sampled,
+        eagerly only); or the generic ``"cosine"`` / ``"lobe"`` (with ``proposal``) wrappers."""
+        method = self.sampling_methods[0] if method is None else method
+        if method not in self.sampling_methods:
+            return bind_generic(self, method, proposal)
+        if proposal is not None:
+            raise ParameterError("proposal= is used by lobe sampling only")
+        state = None if wo is None else self.sampling_state(method, wo)
+        return TableSampled(self, method, state)
 
     @property
     def valid_fraction(self) -> float:

@@ -100,7 +100,7 @@ def export(
         out.notes = notes + out.notes
         out.source = source
         return out
-    if src.model.is_delta or getattr(src.model, "has_delta", False):
+    if src.model.has_delta:
         raise ParameterError(
             f"{describe(src.model)} has no {target} mapping ({reason}) and no data to refit from: "
             "a delta lobe has no values to sample"

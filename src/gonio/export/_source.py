@@ -21,8 +21,7 @@ import numpy as np
 
 from gonio.brdf.models import BRDFModel
 from gonio.errors import ParameterError
-
-_NM = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*nm\s*$")
+from gonio.io.spectral import spectral_to_rgb_matrix, wavelengths_from_names
 
 
 @dataclass(frozen=True)
@@ -59,19 +58,10 @@ class FitSource:
         return self.wavelengths_nm is not None
 
 
-def wavelengths_of(channels: list[str]) -> np.ndarray | None:
-    """Wavelengths (nm) when every channel name reads like ``"450nm"`` (and there are >= 2)."""
-    found = [_NM.match(str(c)) for c in channels]
-    if len(found) < 2 or not all(found):
-        return None
-    return np.array([float(m.group(1)) for m in found if m is not None])
-
-
 def rgb_matrix(wavelengths_nm: np.ndarray) -> np.ndarray:
-    """``T`` (n, 3): linear sRGB = spectrum @ T (gonio.io.spectral, illuminant D65)."""
-    from gonio.io import spectral
-
-    return spectral.spectral_weights(wavelengths_nm, "D65") @ spectral.XYZ_TO_LINEAR_SRGB.T
+    """``T`` (n, 3): linear sRGB = spectrum @ T under illuminant D65, the exporter's
+    (:func:`gonio.io.spectral.spectral_to_rgb_matrix`)."""
+    return spectral_to_rgb_matrix(wavelengths_nm, "D65")
 
 
 def load(fit: Any) -> FitSource:
@@ -98,4 +88,4 @@ def load(fit: Any) -> FitSource:
     else:
         raise ParameterError(f"cannot export a {type(fit).__name__}: give a fit-result file")
     model = fit_result.model_of(record["model_spec"], str(path or "fit result"))
-    return FitSource(record, model, path, wavelengths_of(list(record["data"]["channels"])))
+    return FitSource(record, model, path, wavelengths_from_names(record["data"]["channels"]))

@@ -132,8 +132,10 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
     int
         Number of parts written.
     """
+    from gonio.brdf.tabulated import TabulatedBRDF
+
     ox = _openexr()
-    if getattr(table, "parameterization", None) != "half_diff_iso":
+    if not isinstance(table, TabulatedBRDF) or table.parameterization != "half_diff_iso":
         raise ParameterError(
             "EXR slices need an isotropic half/diff table (theta_h, theta_d, phi_d)"
         )

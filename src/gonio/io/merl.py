@@ -194,18 +194,19 @@ def write_merl(table: Any, path: PathLike) -> None:
     as -1.
     """
     from gonio.brdf import frames
+    from gonio.brdf.tabulated import MeasuredSamples, TabulatedBRDF
 
-    channels = getattr(table, "channels", None)  # Channels for tables, an int for models
-    n_channels = channels if isinstance(channels, int) else len(channels or ())
-    if n_channels not in (0, 1, 3):
+    n_channels = table.n_channels
+    if n_channels not in (1, 3):
         raise fail(path, f"MERL stores RGB only; this table has {n_channels} channels")
-    if not hasattr(table, "f"):
+    if isinstance(table, MeasuredSamples):
         from gonio.errors import ParameterError
 
         raise ParameterError(
             f"{os.fspath(path)}: scattered samples cannot be written as MERL (grid them first)"
         )
-    if hasattr(table, "axes") and _on_merl_grid(table) and table.shape[:3] == MERL_DIMS:
+    on_grid = isinstance(table, TabulatedBRDF) and _on_merl_grid(table)
+    if on_grid and table.shape[:3] == MERL_DIMS:
         values = np.asarray(table.values, dtype=np.float64)
         mask = None if table.mask is None else np.asarray(table.mask, dtype=bool)
     else:

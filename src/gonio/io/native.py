@@ -195,10 +195,11 @@ def write_native(
     """
     import h5py
 
+    from gonio.brdf.tabulated import MeasuredSamples, TabulatedBRDF
     from gonio.errors import ParameterError
 
-    gridded = hasattr(obj, "axes")
-    if not gridded and not hasattr(obj, "wi"):
+    gridded = isinstance(obj, TabulatedBRDF)
+    if not gridded and not isinstance(obj, MeasuredSamples):
         raise ParameterError(f"cannot save a {type(obj).__name__} as {SUFFIX}")
     if lossy is not None and not gridded:
         raise ParameterError("lossy encoding applies to gridded tables only")
@@ -207,7 +208,7 @@ def write_native(
         atomic_output(path, suffix=".h5.tmp") as tmp,
         h5py.File(tmp, "w", libver=("v108", "v108")) as h5,
     ):
-        meta = dict(getattr(obj, "meta", None) or {})
+        meta = dict(obj.meta or {})
         _common_attrs(h5, "gridded" if gridded else "scattered", meta)
         _write_channels(h5, obj.channels)
         if _hook is not None:
@@ -220,9 +221,10 @@ def write_native(
             if name in h5 or not name.isidentifier():
                 raise ParameterError(f"bad or reserved group name {name!r}")
             g = h5.create_group(name)
-            _common_attrs(g, "gridded" if hasattr(extra, "axes") else "scattered", extra.meta)
+            extra_gridded = isinstance(extra, TabulatedBRDF)
+            _common_attrs(g, "gridded" if extra_gridded else "scattered", extra.meta)
             _write_channels(g, extra.channels)
-            if hasattr(extra, "axes"):
+            if extra_gridded:
                 _write_gridded(g, extra, path, None, level, None)
             else:
                 _write_scattered(g, extra, path, level)
@@ -293,10 +295,10 @@ def _write_scattered(h5: Any, s: Any, path: PathLike, level: int) -> None:
     ds = _dataset(h5, "values", values, True, level)
     ds.attrs["encoding"] = "float32"
     ds.attrs["units"] = UNITS
-    if getattr(s, "sigma", None) is not None:
+    if s.sigma is not None:
         ds = _dataset(h5, "sigma", np.asarray(s.sigma, dtype=np.float32), True, level)
         ds.attrs["units"] = UNITS
-    if getattr(s, "weights", None) is not None:
+    if s.weights is not None:
         _dataset(h5, "weights", np.asarray(s.weights, dtype=np.float64), False, level)
 
 

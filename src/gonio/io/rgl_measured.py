@@ -548,9 +548,9 @@ def from_rgl_file(
     wl = np.asarray(bsdf.wavelengths, np.float64)
     to_rgb = bool(color == "rgb" and bsdf.spectral)
     if to_rgb:
-        from gonio.io.spectral import spectral_weights
+        from gonio.io.spectral import spectral_to_rgb_matrix
 
-        matrix = spectral_weights(wl, illuminant) @ _xyz_to_srgb().T
+        matrix = spectral_to_rgb_matrix(wl, illuminant)
     else:
         matrix = np.eye(len(wl))
     static = _Static(
@@ -574,9 +574,3 @@ def from_rgl_file(
         w2.build_channels(colour, params),
         jnp.asarray(matrix),
     )
-
-
-def _xyz_to_srgb() -> np.ndarray:
-    from gonio.io.spectral import XYZ_TO_LINEAR_SRGB
-
-    return np.asarray(XYZ_TO_LINEAR_SRGB)

@@ -20,6 +20,9 @@ primaries, D65 white), no transfer curve.
 
 from __future__ import annotations
 
+import re
+from typing import Any
+
 import numpy as np
 
 from gonio.errors import ParameterError
@@ -212,3 +215,33 @@ def spectrum_to_linear_srgb(
 ) -> np.ndarray:
     """Spectra ``(..., n)`` -> linear sRGB ``(..., 3)`` via CIE 1931 XYZ under ``illuminant``."""
     return xyz_to_linear_srgb(spectrum_to_xyz(values, wavelengths_nm, illuminant))
+
+
+def spectral_to_rgb_matrix(wavelengths_nm: Any, illuminant: str = "D65") -> np.ndarray:
+    """``M`` (n, 3) with ``linear sRGB = spectrum @ M``: CIE 1931 XYZ under ``illuminant``
+    (:func:`spectral_weights`), then :data:`XYZ_TO_LINEAR_SRGB`; a flat spectrum of value c
+    gives Y = c (RGB (c, c, c) under D65). The one spectral -> RGB conversion of gonio's
+    renderer, exporter and RGL reader."""
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    return spectral_weights(wl, illuminant) @ XYZ_TO_LINEAR_SRGB.T
+
+
+_NM = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*nm\s*$")
+
+
+def wavelengths_from_names(names: Any) -> np.ndarray | None:
+    """Wavelengths (nm) of channel names like ``"450nm"`` (``"450 nm"``, ``"532.5nm"``), or
+    None unless there are at least two, every name reads so and they strictly increase."""
+    try:
+        items = list(names)
+    except TypeError:
+        return None
+    wl = []
+    for n in items:
+        m = _NM.match(str(n))
+        if m is None:
+            return None
+        wl.append(float(m.group(1)))
+    if len(wl) < 2 or np.any(np.diff(wl) <= 0):
+        return None
+    return np.asarray(wl)

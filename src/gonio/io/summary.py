@@ -144,11 +144,12 @@ def summarize(path: PathLike) -> dict[str, Any]:
     elif fmt == "native" and _native_summary(path, out):
         pass
     else:
+        from gonio.brdf.tabulated import TabulatedBRDF
         from gonio.io import load
 
         obj = load(path)
         meta = dict(getattr(obj, "meta", {}) or {})
-        if hasattr(obj, "axes"):
+        if isinstance(obj, TabulatedBRDF):
             mask = None if obj.mask is None else np.asarray(obj.mask, dtype=bool)
             values = np.asarray(obj.values)
             out.update(

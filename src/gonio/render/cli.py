@@ -16,6 +16,8 @@ from gonio.errors import FormatError, ParameterError
 #: Largest --spp: 2^16 samples per pixel already takes minutes at 256^2 (3.4e9 samples); the
 #: 10^8 of a typo would run for days with no sign of it but the progress bar.
 MAX_SPP = 1 << 16
+#: --sampler values every material takes (the others name a table's own methods).
+_GENERIC_SAMPLERS = ("auto", "mis", "brdf", "cosine", "light")
 
 
 def load_fitted(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[str]]:
@@ -23,12 +25,13 @@ def load_fitted(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[st
     bare model description), a spectral model projected to linear sRGB
     (:mod:`gonio.render.spectral`) using the wavelengths named in the fit's ``data.channels``."""
     from gonio.io.fit_result import load_fit
-    from gonio.render.spectral import to_rgb, wavelengths_from_names
+    from gonio.io.spectral import wavelengths_from_names
+    from gonio.render.spectral import to_rgb
 
     if not Path(path).is_file():
         raise ParameterError(f"fit file not found: {path}")
     record, model = load_fit(path, descriptions=True)
-    c = int(getattr(model, "channels", 1))
+    c = model.n_channels
     if c in (1, 3):
         return model, []
     names = record.get("data", {}).get("channels")
@@ -307,8 +310,8 @@ def run(args: argparse.Namespace) -> int:
                 bar.update(task, completed=done / max(total, 1))
 
             sampler = args.sampler
-            if sampler in ("inversion", "alias", "rejection") and not hasattr(material, "values"):
-                sampler = "auto"  # table methods apply to the measured table only
+            if sampler not in (*material.sampling_methods, *_GENERIC_SAMPLERS):
+                sampler = "auto"  # a table's methods apply to the measured table only
             images[label] = render_sphere(
                 material,
                 lights,

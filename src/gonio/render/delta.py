@@ -1,8 +1,8 @@
 """Delta lights (directional, point) evaluated exactly: ``f E cos`` once per pixel, no samples.
 
-Analytic models and tables (registered pytrees whose ``f`` is JAX code) run in one jitted kernel
-per tile, and the tiles' results stay on the device until one transfer at the end; only a
-material that is not a pytree is evaluated light by light outside ``jit``.
+Every material is a registered pytree whose ``f`` is JAX code
+(:class:`gonio.brdf.material.Material`): it runs in one jitted kernel per tile, and the tiles'
+results stay on the device until one transfer at the end.
 """
 
 from __future__ import annotations
@@ -11,18 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from gonio.brdf.models import BRDFModel
 from gonio.render.scene import SphereHits
 from gonio.render.tiling import device_array, pad_rows, pixel_tile, stack_by_kind, tile_spans
-
-
-def traceable(material) -> bool:
-    """``material`` can be a ``jax.jit`` argument: a model or a table registered as a pytree
-    (an unregistered object is its own single leaf)."""
-    if isinstance(material, BRDFModel):
-        return True
-    leaves = jax.tree_util.tree_leaves(material)
-    return not (len(leaves) == 1 and leaves[0] is material)
 
 
 @jax.jit
@@ -51,25 +41,16 @@ def render_delta(
     ``channels``: the image's channel count C (grey lights are broadcast to it)."""
     n = hits.count
     size = pixel_tile(n, tile_samples)
-    traced = traceable(material)
-    groups = stack_by_kind(lights, channels) if traced else ()
+    groups = stack_by_kind(lights, channels)
     out = []
     for a, b in tile_spans(n, size):
         pos = device_array(pad_rows(hits.position[a:b], size))
         frame = device_array(pad_rows(hits.frame[a:b], size))
         wo = device_array(pad_rows(hits.wo[a:b], size))
-        if traced:
-            r = delta_kernel_model(material, groups, pos, frame, wo)
-        else:
-            r = 0.0
-            for light in lights:
-                ls = light.sample(pos, jnp.zeros((size, 2), jnp.float32))
-                wi = np.asarray(jnp.einsum("pij,pj->pi", frame, ls.wi))
-                f = np.asarray(material.f(wi, np.asarray(wo)), np.float32)
-                r = r + f * np.asarray(ls.value) * np.maximum(wi[..., 2], 0.0)[..., None]
+        r = delta_kernel_model(material, groups, pos, frame, wo)
         stats.calls += 1
         out.append(r)
-    # one transfer for all tiles (traced materials: every tile stays on the device until here)
+    # one transfer for all tiles (every tile stays on the device until here)
     res = jax.device_get(out)
     spans = list(tile_spans(n, size))
     return np.concatenate(

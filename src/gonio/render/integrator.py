@@ -79,27 +79,18 @@ import numpy as np
 
 from gonio.brdf._xla import materialize
 from gonio.brdf.frames import dot
-from gonio.brdf.models import BRDFModel
+from gonio.brdf.material import Material
 from gonio.brdf.sampling import points as _sobol_mod
-from gonio.brdf.sampling import warps as warp
 from gonio.errors import ParameterError
 from gonio.render.delta import render_delta
 from gonio.render.lights import Environment, Light, LightSample, light_list, merge_environments
-from gonio.render.materials import (
-    has_delta,
-    is_table,
-    material_channel_names,
-    material_channels,
-    restrict_model_channels,
-    restrict_table_channels,
-)
+from gonio.render.materials import channel_index, restrict_channels
 from gonio.render.scene import Camera, SphereHits, intersect_sphere
 from gonio.render.tiling import device_array, pad_rows, sample_tile, sampled_groups, tile_spans
 
 Array = jnp.ndarray
 
 SAMPLERS = ("auto", "mis", "brdf", "cosine", "inversion", "alias", "rejection", "light")
-TABLE_METHODS = ("inversion", "alias", "rejection")
 
 #: Samples (pixels x spp) processed per kernel call: bounds memory to a few tens of MB.
 DEFAULT_TILE_SAMPLES = 1 << 17
@@ -116,13 +107,21 @@ IN_FLIGHT = max(1, min(4, os.cpu_count() or 1))
 
 @dataclass(frozen=True)
 class _Technique:
-    """How BRDF samples are drawn: ``kind`` is "none" (light sampling only), "cosine", "model"
-    (the analytic model's own sampler), "lobe" (a table sampled by an analytic proposal) or a
-    table method ("inversion", "alias", "rejection")."""
+    """How BRDF samples are drawn: ``kind`` is "none" (light sampling only) or the method the
+    material is bound to (:meth:`gonio.brdf.material.Material.with_sampling`): one of its own
+    ``sampling_methods``, "cosine" or "lobe" (an analytic proposal)."""
 
     kind: str
     mis: bool
     light_sampling: bool
+
+    @property
+    def samples_brdf(self) -> bool:
+        return self.kind != "none"
+
+
+#: Samplers that name one of a material's own methods (a table's).
+_OWN_METHODS = ("inversion", "alias", "rejection")
 
 
 def resolve_sampler(
@@ -131,107 +130,54 @@ def resolve_sampler(
     """Check ``sampler`` against the material and return the technique to run."""
     if sampler not in SAMPLERS:
         raise ParameterError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
-    table = is_table(material)
     if sampler == "light":
         if mis:
             raise ParameterError("sampler='light' samples lights only; it cannot use MIS")
-        if has_delta(material):
+        if material.has_delta:
             raise ParameterError(
                 "sampler='light' cannot render a material with delta lobes (mirror, glass)"
             )
         return _Technique("none", False, True)
-    if sampler in TABLE_METHODS and not table:
+    methods = tuple(material.sampling_methods)
+    if sampler in _OWN_METHODS and sampler not in methods:
         raise ParameterError(
-            f"sampler={sampler!r} samples tabulated BRDFs; this is an analytic model"
+            f"sampler={sampler!r} is not a sampling method of this material (it offers "
+            f"{', '.join(methods)})"
         )
-    if sampler == "cosine" and has_delta(material):
+    if sampler == "cosine" and material.has_delta:
         raise ParameterError("sampler='cosine' cannot find the delta lobes of this material")
     if proposal is not None:
-        if not table:
-            raise ParameterError("proposal= applies to tabulated BRDFs only")
-        if not isinstance(proposal, BRDFModel) or has_delta(proposal):
-            raise ParameterError("proposal must be an analytic BRDF model without delta lobes")
         if sampler != "brdf":  # rejection proposes from its own rigorous majorant
             raise ParameterError(
-                "proposal= is used by sampler='brdf' only (a table sampled by an analytic lobe)"
+                "proposal= is used by sampler='brdf' only (a material sampled by an analytic lobe)"
             )
-    if sampler == "brdf" and table and proposal is not None:
+        if not isinstance(proposal, Material):
+            raise ParameterError("proposal must be a material (an analytic BRDF model)")
+        if material.has_delta or proposal.has_delta:
+            raise ParameterError("sampler='brdf' with a proposal cannot sample delta lobes")
         kind = "lobe"
     elif sampler in ("auto", "mis", "brdf"):
-        kind = "inversion" if table else "model"
-        if table and sampler != "brdf" and not hasattr(material, "sample"):
-            kind = "cosine"  # "auto": the best this table offers
+        kind = methods[0]
     else:
         kind = sampler
-    if kind in TABLE_METHODS and not (hasattr(material, "sample") and hasattr(material, "pdf")):
-        raise ParameterError(f"this table cannot be sampled by {kind!r} (no sample/pdf methods)")
     use_mis = True if mis is None else bool(mis)
     if sampler == "mis" and not use_mis:
         raise ParameterError("sampler='mis' with mis=False is contradictory")
     return _Technique(kind, use_mis, use_mis)
 
 
-# Material operations for a technique, as functions of (wi, wo) and (wo, u), all traced into the
-# jitted material stage: analytic models; tables sampled by cosine or an analytic lobe; tables
-# sampled by their own methods, from the sampling structures built once per render
-# (``state``, :meth:`gonio.brdf.tabulated.TabulatedBRDF.sampling_state`) passed as arguments.
-
-
-def _cos_sample(material_f: Callable, wo: Array, u: Array) -> tuple[Array, Array, Array, Array]:
-    wi = warp.square_to_cosine_hemisphere(u)
-    pdf = warp.cosine_hemisphere_pdf(wi)
-    f = material_f(wi, wo)
-    weight = jnp.where((pdf > 0)[..., None], f * jnp.pi, 0.0)
-    return wi, pdf, weight, jnp.zeros(pdf.shape, dtype=bool)
-
-
-def _model_ops(model: Any, kind: str, proposal: Any = None, state: Any = None):
-    """Traceable operations: ``model`` is an analytic model, or a table (whose ``f`` is JAX code)
-    with kind "cosine", "lobe" (sampled by the analytic ``proposal``), "none" or one of its own
-    methods (sampled from ``state``; rejection's extra random numbers come from ``u``)."""
+def _material_ops(material: Any):
+    """Traceable ``f``, ``pdf`` and ``sample`` of a material bound to its sampling method
+    (:meth:`gonio.brdf.material.Material.with_sampling`); ``f`` in the directions' dtype."""
 
     def f(wi, wo):
-        return jnp.asarray(model.f(wi, wo), wi.dtype)
+        return jnp.asarray(material.f(wi, wo), wi.dtype)
 
-    if kind == "lobe":
+    def sample(wo, u):
+        s = material.sample(wo, u)
+        return s.wi, s.pdf, s.weight, s.delta
 
-        def pdf(wi, wo):
-            return proposal.pdf(wi, wo)
-
-        def sample(wo, u):
-            s = proposal.sample(wo, u)
-            ok = s.pdf > 0
-            cos = jnp.maximum(s.wi[..., 2], 0.0)
-            w = f(s.wi, wo) * jnp.where(ok, cos / jnp.where(ok, s.pdf, 1.0), 0.0)[..., None]
-            return s.wi, s.pdf, w, jnp.zeros(s.pdf.shape, bool)
-
-    elif kind == "cosine":
-
-        def pdf(wi, wo):
-            return warp.cosine_hemisphere_pdf(wi) * (wo[..., 2] > 0)
-
-        def sample(wo, u):
-            return _cos_sample(f, wo, u)
-
-    elif kind in TABLE_METHODS:
-
-        def pdf(wi, wo):
-            return model.pdf(wi, wo, method=kind, state=state)
-
-        def sample(wo, u):
-            s = model.sample(wo, u, method=kind, state=state)
-            return s.wi, s.pdf, s.weight, s.delta
-
-    else:
-
-        def pdf(wi, wo):
-            return model.pdf(wi, wo)
-
-        def sample(wo, u):
-            s = model.sample(wo, u)
-            return s.wi, s.pdf, s.weight, s.delta
-
-    return f, pdf, sample
+    return f, material.pdf, sample
 
 
 # -- kernels -----------------------------------------------------------------------------------
@@ -345,13 +291,12 @@ def _light_stage_jit(lights, position, frame, sobol, shift):
     return _light_stage(lights, position, frame, _uniforms(sobol, shift))
 
 
-def _pixel_major(model: Any, kind: str) -> bool:
-    """Whether the material stage gets its arrays pixel-major ``(P, S, ...)``: models that
-    compute what depends on wo once per pixel (their table slices) and gather every sample of a
-    pixel from them, where consecutive lanes then gather from one slice. Same-run A/B, RGL
-    paper_white, 8192 x 16 tile: material stage 24.4-25.3 ms so (swaps included), 31.8-32.2 ms
-    samples-major."""
-    return kind == "model" and getattr(model, "broadcasts_outgoing", False)
+def _pixel_major(material: Any, kind: str) -> bool:
+    """Whether the material stage gets its arrays pixel-major ``(P, S, ...)``: materials
+    sampled by their own default method that compute what depends on wo once per pixel
+    (``broadcasts_outgoing``: their table slices) and gather every sample of a pixel from
+    them, where consecutive lanes then gather from one slice."""
+    return kind == material.sampling_methods[0] and material.broadcasts_outgoing
 
 
 @functools.partial(jax.jit, static_argnames=("samples",))
@@ -363,13 +308,15 @@ def _outgoing_per_sample(wo: Array, samples: int) -> Array:
     return jnp.broadcast_to(wo[None], (samples, *wo.shape))
 
 
-@functools.partial(jax.jit, static_argnames=("kind", "mis", "light_sampling"))
-def _model_stage(model, proposal, state, light_wi, wo, sobol, shift, *, kind, mis,
+@functools.partial(
+    jax.jit, static_argnames=("samples_brdf", "pixel_major", "mis", "light_sampling")
+)
+def _model_stage(material, light_wi, wo, sobol, shift, *, samples_brdf, pixel_major, mis,
                  light_sampling):  # fmt: skip
-    """``wo`` is (P, 3) for a pixel-major model (:func:`_pixel_major`), (S, P, 3) otherwise."""
-    f, pdf, sample = _model_ops(model, kind, proposal, state)
+    """``material`` bound to its sampling method; ``wo`` is (P, 3) when ``pixel_major``
+    (:func:`_pixel_major`), (S, P, 3) otherwise."""
+    f, pdf, sample = _material_ops(material)
     u = _uniforms(sobol, shift)[..., :2]
-    pixel_major = _pixel_major(model, kind)
 
     def swap(x):
         return jnp.swapaxes(x, 0, 1) if pixel_major else x
@@ -378,7 +325,7 @@ def _model_stage(model, proposal, state, light_wi, wo, sobol, shift, *, kind, mi
         wo, light_wi, u = wo[:, None], [swap(wi) for wi in light_wi], swap(u)
     fv = [swap(f(wi, wo)) for wi in light_wi] if light_sampling else None
     pb = [swap(pdf(wi, wo)) for wi in light_wi] if light_sampling and mis else None
-    brdf = tuple(swap(x) for x in sample(wo, u)) if kind != "none" else None
+    brdf = tuple(swap(x) for x in sample(wo, u)) if samples_brdf else None
     return fv, pb, brdf
 
 
@@ -404,16 +351,16 @@ def _sum_samples(x: Array) -> Array:
     return out
 
 
-def _tile(material, lights, pos, frame, wo, sob, shift, weights, acc, tech: _Technique, state,
-          proposal=None):  # fmt: skip
+def _tile(material, lights, pos, frame, wo, sob, shift, weights, acc, tech: _Technique,
+          pixel_major: bool):  # fmt: skip
     """``acc`` plus the radiance sums (P, C) of one tile: P pixels x S samples (``weights``
-    masks padding; ``wo`` as :func:`_model_stage` takes it); three kernel calls, nothing
-    waits on the host."""
+    masks padding; ``material`` bound to its sampling method, ``wo`` as :func:`_model_stage`
+    takes it); three kernel calls, nothing waits on the host."""
     ls = _light_stage_jit(lights, pos, frame, sob, shift) if tech.light_sampling else None
     light_wi = [wi for wi, _, _ in ls] if ls is not None else []
     fv, pb, brdf = _model_stage(
-        material, proposal if tech.kind == "lobe" else None, state, light_wi, wo, sob, shift,
-        kind=tech.kind, mis=tech.mis, light_sampling=tech.light_sampling,
+        material, light_wi, wo, sob, shift, samples_brdf=tech.samples_brdf,
+        pixel_major=pixel_major, mis=tech.mis, light_sampling=tech.light_sampling,
     )  # fmt: skip
     return _shade_stage(lights, ls, fv, pb, pos, frame, brdf, weights, acc, mis=tech.mis)
 
@@ -429,27 +376,6 @@ class RenderStats:
     samples: int = 0
     calls: int = 0
     env_maps_built: int = 0
-
-
-def _channel_index(material: Any, channels: Any, n: int) -> np.ndarray | None:
-    if channels is None:
-        return None
-    names = material_channel_names(material)
-    items = [channels] if isinstance(channels, str | int | np.integer) else list(channels)
-    idx = []
-    for c in items:
-        if isinstance(c, str):
-            if names is None or c not in names:
-                raise ParameterError(f"unknown channel {c!r}; the material has {names}")
-            idx.append(names.index(c))
-        else:
-            i = int(c)
-            if not 0 <= i < n:
-                raise ParameterError(f"channel index {i} out of range for {n} channels")
-            idx.append(i)
-    if not idx:
-        raise ParameterError("channels selects nothing")
-    return np.asarray(idx, dtype=np.int64)
 
 
 def _output_channels(c_mat: int, lights: Sequence[Light]) -> int:
@@ -484,8 +410,8 @@ def render_sphere(
 
     Parameters
     ----------
-    material : an analytic model (:class:`gonio.brdf.models.BRDFModel`) or a tabulated BRDF
-        (anything with ``values``, ``f``, ``pdf(..., method=)`` and ``sample(..., method=)``).
+    material : any material (:class:`gonio.brdf.material.Material`): an analytic model, a
+        tabulated BRDF, an RGL file.
     lights : a light or a list of lights (:mod:`gonio.render.lights`); default the built-in
         studio environment.
     resolution : image size, ``N`` for N x N or ``(H, W)``.
@@ -501,9 +427,9 @@ def render_sphere(
     tile_samples : pixels x samples per kernel call (memory bound).
     progress : called as ``progress(done, total)`` after each tile.
     stats : filled with counts of what was done.
-    proposal : tables only: an analytic model (typically the table's fit). With
-        ``sampler="brdf"`` the table is sampled by the model's own sampler ("analytic lobe"
-        sampling: directions and pdf from the model, values from the table). Other samplers
+    proposal : an analytic model without delta lobes (typically a table's fit). With
+        ``sampler="brdf"`` the material is sampled by the model's own sampler ("analytic lobe"
+        sampling: directions and pdf from the model, values from the material). Other samplers
         refuse it (``"rejection"`` proposes from the table's own majorant: an exact reference
         needs a rigorous bound that an analytic model's density does not give).
     optimize : for benchmarks only: ``False`` turns off every shortcut that skips work a scene
@@ -523,25 +449,17 @@ def render_sphere(
     spp = int(spp)
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ParameterError(f"seed must be a non-negative integer, got {seed!r}")
-    c_mat = material_channels(material)
-    idx = _channel_index(material, channels, max(c_mat, *(lt.channels for lt in lights)))
+    c_mat = material.n_channels
+    idx = channel_index(material, channels, max(c_mat, *(lt.channels for lt in lights)))
     post_idx = idx  # channels still to cut from the result
     if idx is not None and optimize:
-        restricted = material
-        if c_mat > 1:
-            restricted = (
-                restrict_model_channels(material, idx)
-                if isinstance(material, BRDFModel)
-                else restrict_table_channels(material, idx)
-            )
+        restricted = restrict_channels(material, idx)
         if restricted is not None:
             material = restricted
             lights = [lt.with_channels(idx) for lt in lights]
-            c_mat = material_channels(material)
+            c_mat = material.n_channels
             post_idx = None
     tech = resolve_sampler(material, sampler, mis, proposal)
-    if is_table(material) and tech.kind not in ("none", "cosine", "lobe", *TABLE_METHODS):
-        raise ParameterError(f"tables are sampled by {TABLE_METHODS}; got {tech.kind!r}")
     c_out = _output_channels(c_mat, lights)
 
     hits = intersect_sphere(resolution, camera)
@@ -619,12 +537,11 @@ def _render_area(
     total = len(tiles) * n_batches
     done = 0
     wo_tiles = [device_array(pad_rows(hits.wo[a:b], p_tile)) for a, b in tiles]
-    state = None
     pixel_major = _pixel_major(material, tech.kind)
-    if is_table(material) and tech.kind in TABLE_METHODS:
-        # every outgoing direction of the image is known here: the table's sampling structures
-        # for their buckets are built once, and the kernels take them as arguments
-        state = material.sampling_state(tech.kind, wo_tiles)
+    if tech.samples_brdf:
+        # every outgoing direction of the image is known here: a table's sampling structures
+        # for their buckets are built once, and the kernels take them inside the bound material
+        material = material.with_sampling(tech.kind, proposal=proposal, wo=wo_tiles)
     # Sample points and weights go to the device once; each tile's sums stay there (the shade
     # stage adds each batch into them) and come back in one transfer at the end, so that no
     # kernel call waits on a copy to the host.
@@ -656,7 +573,7 @@ def _render_area(
         acc = device_array(np.zeros((p_tile, c_out), np.float32))
         wo = wo_tile if pixel_major else _outgoing_per_sample(wo_tile, s_batch)
         for k, (sb, wb) in enumerate(batches):
-            acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, state, proposal)
+            acc = _tile(material, groups, pos, frame, wo, sb, sh, wb, acc, tech, pixel_major)
             pending.append(acc)
             drain(IN_FLIGHT)
             stats.calls += 1
@@ -670,4 +587,4 @@ def _render_area(
 
 
 def _out_c(material, lights) -> int:
-    return _output_channels(material_channels(material), lights)
+    return _output_channels(material.n_channels, lights)

@@ -28,19 +28,11 @@ from typing import Any
 
 import numpy as np
 
+from gonio.io.spectral import spectral_to_rgb_matrix
+
 #: Largest number of valid nodes of a holey gridded table that are re-interpolated (the
 #: Delaunay tetrahedralization of more points takes longer than the render).
 MAX_FILL_NODES = 200_000
-
-
-def spectral_to_rgb_matrix(wavelengths_nm: Any, illuminant: str = "D65") -> np.ndarray:
-    """``M`` (n, 3) with ``rgb = spectrum @ M``: CIE 1931 XYZ under ``illuminant``, then linear
-    sRGB; normalized so that a flat spectrum of value c gives Y = c."""
-    from gonio.io.spectral import XYZ_TO_LINEAR_SRGB, spectral_weights
-
-    return spectral_weights(np.asarray(wavelengths_nm, dtype=float), illuminant) @ (
-        XYZ_TO_LINEAR_SRGB.T
-    )
 
 
 def rgb_samples(obj: Any, illuminant: str) -> Any:
@@ -96,9 +88,9 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
     from gonio.errors import ParameterError
 
     notes: list[str] = []
-    channels = getattr(obj, "channels", None)
-    if getattr(channels, "kind", None) == "spectral":
-        n = len(channels)
+    info = obj.channel_info
+    if isinstance(obj, MeasuredSamples | TabulatedBRDF) and info.kind == "spectral":
+        n = len(info)
         obj = rgb_samples(obj, illuminant) if isinstance(obj, MeasuredSamples) else obj
         if isinstance(obj, TabulatedBRDF):
             obj = _rgb_table(obj, illuminant)

@@ -85,7 +85,7 @@ def _load(path: str) -> Any:
     material, _ = renderable(obj)
     samples = None
     if isinstance(obj, MeasuredSamples):
-        if getattr(obj.channels, "kind", None) == "spectral":
+        if obj.channels.kind == "spectral":
             from gonio.render.measured import rgb_samples
 
             obj = rgb_samples(obj, "D65")

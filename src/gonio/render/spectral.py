@@ -4,7 +4,7 @@ A fit of spectral data (Cornell's 31 wavelengths) is a model with 31 channels. T
 lights are RGB, and an RGB light's white is sRGB's white, D65, so a spectral BRDF is shown as
 the linear sRGB colour of its spectrum under the lights' spectrum (``illuminant``, D65 by
 default): ``f_rgb = f_spectral @ M`` with ``M`` (n, 3) from CIE 1931 XYZ
-(:func:`gonio.render.measured.spectral_to_rgb_matrix`). The projection is linear, so the
+(:func:`gonio.io.spectral.spectral_to_rgb_matrix`). The projection is linear, so the
 rendered image equals the spectral rendering under a grey light of that spectrum followed by the
 same projection; out-of-gamut colours are clipped at 0 per channel. Sampling and pdf are the
 spectral model's own.
@@ -12,32 +12,13 @@ spectral model's own.
 
 from __future__ import annotations
 
-import re
 from typing import Any, ClassVar
 
 import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf.models._base import BRDFModel, BRDFSample
-
-_NM = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*nm\s*$")
-
-
-def wavelengths_from_names(names: Any) -> np.ndarray | None:
-    """Wavelengths (nm) of channel names like ``"400nm"``, or None when they are not all such."""
-    try:
-        items = list(names)
-    except TypeError:
-        return None
-    wl = []
-    for n in items:
-        m = _NM.match(str(n))
-        if m is None:
-            return None
-        wl.append(float(m.group(1)))
-    if len(wl) < 2 or np.any(np.diff(wl) <= 0):
-        return None
-    return np.asarray(wl)
+from gonio.io.spectral import spectral_to_rgb_matrix
 
 
 class SpectralToRGB(BRDFModel):
@@ -62,11 +43,11 @@ class SpectralToRGB(BRDFModel):
 
     @property
     def is_delta(self) -> bool:  # type: ignore[override]
-        return bool(getattr(self.base, "is_delta", False))
+        return self.base.is_delta
 
     @property
     def has_delta(self) -> bool:
-        return bool(getattr(self.base, "has_delta", False))
+        return self.base.has_delta
 
     def _project(self, x: Any) -> Any:
         m = jnp.asarray(self.matrix, dtype=jnp.result_type(x))
@@ -88,6 +69,7 @@ class SpectralToRGB(BRDFModel):
 
 def to_rgb(model: Any, wavelengths_nm: Any, illuminant: str = "D65") -> SpectralToRGB:
     """``model`` (one channel per wavelength in ``wavelengths_nm``) as an RGB model."""
-    from gonio.render.measured import spectral_to_rgb_matrix
-
     return SpectralToRGB(model, spectral_to_rgb_matrix(wavelengths_nm, illuminant))
+
+
+__all__ = ["SpectralToRGB", "to_rgb"]

@@ -12,13 +12,16 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal, NamedTuple
+from typing import Any, ClassVar, Literal
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from gonio.brdf.frames import safe_div, upper
+from gonio.brdf.grid import Channels
+from gonio.brdf.sample_record import BRDFSample
+from gonio.brdf.sampled import bind_generic
 from gonio.errors import ParameterError
 
 Array = jnp.ndarray
@@ -58,26 +61,6 @@ class Param:
     scale: Literal["linear", "log", "logit"] = "linear"
     doc: str = ""
     per_lobe: bool = False
-
-
-class BRDFSample(NamedTuple):
-    """Result of ``sample(wo, u)``.
-
-    Attributes
-    ----------
-    wi : (..., 3) sampled incident direction (toward the light).
-    pdf : (...) its density per unit solid angle; for a delta lobe, the discrete probability of
-        having chosen it. 0 marks a failed sample (then ``weight`` is 0 too).
-    weight : (..., C) ``f(wi, wo) cos(theta_i) / pdf`` (for delta lobes, the lobe's reflectance
-        divided by its selection probability).
-    delta : (...) bool, True where ``wi`` came from a delta lobe and must not be evaluated as a
-        density (``f`` and ``pdf`` of a delta lobe are 0 for every given pair of directions).
-    """
-
-    wi: Array
-    pdf: Array
-    weight: Array
-    delta: Array
 
 
 def is_concrete(x: Any) -> bool:
@@ -370,6 +353,12 @@ class BRDFModel(Node):
     #: True for lobes that are Dirac deltas (perfect mirror, smooth glass).
     is_delta: ClassVar[bool] = False
 
+    #: The model's own sampler (:meth:`sample`) is its only method (:mod:`gonio.brdf.material`).
+    sampling_methods: ClassVar[tuple[str, ...]] = ("native",)
+
+    #: See :class:`gonio.brdf.material.Material`; models evaluate ``wo`` per lane.
+    broadcasts_outgoing: ClassVar[bool] = False
+
     # -- to implement --------------------------------------------------------------------------
     def _f(self, wi: Array, wo: Array) -> Array:
         raise NotImplementedError
@@ -389,6 +378,46 @@ class BRDFModel(Node):
     def sampling_weight(self, wo: Array) -> Array:
         """Estimate of the directional albedo at ``wo`` (shape ``(...)``), for lobe selection."""
         raise NotImplementedError
+
+    # -- the material interface (gonio.brdf.material.Material) ---------------------------------
+    @property
+    def n_channels(self) -> int:
+        """Channel count C (the same as :attr:`channels`)."""
+        return self.channels
+
+    @property
+    def channel_info(self) -> Channels | None:
+        """Mono for C = 1, RGB for C = 3; None otherwise (a model does not know wavelengths)."""
+        c = self.n_channels
+        return Channels.for_count(c) if c in (1, 3) else None
+
+    @property
+    def has_delta(self) -> bool:
+        """True when the model is (or, for sums, contains) a Dirac delta lobe."""
+        return self.is_delta
+
+    def select_channels(self, idx: Sequence[int]) -> BRDFModel:
+        """The model with every per-channel parameter cut down to channels ``idx``
+        (per-channel parameters of length C become length ``len(idx)``; scalar, grey,
+        parameters stay)."""
+        specs = self.param_specs()
+        new = {}
+        for key, value in self.params().items():
+            v = np.asarray(value)
+            if specs[key].per_channel and v.ndim == 1 and v.size > 1:
+                new[key] = v[idx]
+        return self.replace(**new) if new else self
+
+    def with_sampling(self, method: str | None = None, *, proposal: Any = None,
+                      wo: Any = None) -> Any:  # fmt: skip
+        """The model itself for its own sampler (``None`` or ``"native"``: a model is a pytree
+        whose :meth:`sample` is the plain interface), or the generic ``"cosine"`` / ``"lobe"``
+        wrappers (:func:`gonio.brdf.sampled.bind_generic`). ``wo`` is not needed."""
+        if method is None or method in self.sampling_methods:
+            if proposal is not None:
+                raise ParameterError("proposal= is used by lobe sampling only")
+            return self
+        return bind_generic(self, method, proposal)
 
     # -- public interface ----------------------------------------------------------------------
     def f(self, wi: Array, wo: Array) -> Array:
