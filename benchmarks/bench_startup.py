@@ -40,7 +40,7 @@ def _table(tmp: Path) -> Path:
     import numpy as np
 
     from gonio import io
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
 
     rng = np.random.default_rng(0)
     w = rng.normal(size=(50, 3))

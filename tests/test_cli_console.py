@@ -46,7 +46,7 @@ def test_output_into_a_closed_pipe_is_silent(args):
 
 def test_info_into_a_closed_pipe_is_silent(tmp_path):
     from gonio import io
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
 
     w = np.random.default_rng(0).normal(size=(50, 3))
     w[:, 2] = np.abs(w[:, 2]) + 0.1

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from gonio.acquire.table import default_grid, grid_samples, half_diff_iso, reciprocal_pairs
-from gonio.brdf.tabulated import Channels, MeasuredSamples
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Channels
 from gonio.errors import FormatError
 from gonio.io.native import read_native, write_native
 

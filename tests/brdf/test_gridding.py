@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gonio.brdf import frames, gridding, models
-from gonio.brdf.tabulated import MeasuredSamples
+from gonio.brdf.measured import MeasuredSamples
 from gonio.errors import ParameterError
 
 

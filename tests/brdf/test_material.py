@@ -129,3 +129,29 @@ def test_bound_material_is_a_pytree_that_round_trips(table):
         again = jax.tree_util.tree_unflatten(tree, leaves)
         assert type(again) is type(bound)
         np.testing.assert_array_equal(np.asarray(again.f(wo, wo)), np.asarray(bound.f(wo, wo)))
+
+
+def test_scattered_samples_are_their_documented_interpolant(table):
+    from gonio.brdf.gridding import filled_interpolant
+    from gonio.brdf.measured import MeasuredSamples
+
+    lambert = TabulatedBRDF.from_model(models.Lambert([0.2, 0.4, 0.6]), axes=render_axes(12, 8, 8))
+    samples = MeasuredSamples.from_table(lambert)
+    assert isinstance(samples, Material)
+    assert samples.n_channels == 3 and samples.channel_info.kind == "rgb"
+    assert not samples.has_delta and samples.sampling_methods == table.sampling_methods
+    interp, covered = filled_interpolant(samples)
+    assert samples.interpolant() is samples.interpolant()  # built once
+    assert samples.interpolant_coverage() == pytest.approx(covered)
+    wi, wo = _dirs(64, 5), _dirs(64, 6)
+    np.testing.assert_array_equal(np.asarray(samples.f(wi, wo)), np.asarray(interp.f(wi, wo)))
+    # a Lambertian material stays Lambertian through the interpolant
+    np.testing.assert_allclose(np.asarray(samples.f(wi, wo)), np.tile([0.2, 0.4, 0.6], (64, 1)) / np.pi,
+                               rtol=1e-5)  # fmt: skip
+    u = np.random.default_rng(7).random((64, 2)).astype(np.float32)
+    s, r = samples.sample(wo, u), interp.sample(wo, u)
+    np.testing.assert_array_equal(np.asarray(s.wi), np.asarray(r.wi))
+    np.testing.assert_array_equal(np.asarray(samples.pdf(s.wi, wo)), np.asarray(r.pdf))
+    bound = samples.with_sampling("alias", wo=wo)
+    assert isinstance(bound, TableSampled)
+    assert samples.select_channels([1]).n_channels == 1

@@ -11,7 +11,8 @@ import pytest
 from scipy.interpolate import RegularGridInterpolator
 
 from gonio.brdf import frames, models
-from gonio.brdf.tabulated import Axis, Channels, MeasuredSamples, TabulatedBRDF, merl_axes
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Axis, Channels, TabulatedBRDF, merl_axes
 from gonio.errors import FormatError, ParameterError
 from tests.brdf.model_checks import random_upper
 
@@ -372,7 +373,7 @@ def test_to_samples_and_cell_measure():
         t = random_table(axes, param)
         m = t.cell_measure()
         assert m.sum() == pytest.approx(8 * math.pi**2, rel=1e-9)
-        s = t.to_samples()
+        s = MeasuredSamples.from_table(t)
         assert isinstance(s, MeasuredSamples)
         assert np.all(s.wi[:, 2] > 0) and np.all(s.wo[:, 2] > 0)
         # theta_d = 0 nodes share one direction pair for every phi_d (and theta_h = 0 nodes of an

@@ -77,7 +77,7 @@ def test_true_model_is_preferred_and_renders_closest(demo):
 
 def test_outputs_exist_and_are_readable(demo):
     from gonio import io
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
     from gonio.render.output import read_exr
 
     out, _, summary = demo

@@ -10,6 +10,7 @@ import pytest
 
 from gonio import io
 from gonio.brdf import models
+from gonio.brdf.measured import MeasuredSamples
 from gonio.brdf.tabulated import Axis, TabulatedBRDF
 from gonio.export import to_blender
 from gonio.fit import fit
@@ -59,7 +60,7 @@ def test_ward_to_blender_is_refitted_to_ggx(ward_fit):
         shadowing="smith",
         fresnel=models.Schlick(p["Principled BSDF"]["Base Color"]),
     )
-    s = io.load(table_path).to_samples()
+    s = MeasuredSamples.from_table(io.load(table_path))
     wi, wo = np.asarray(s.wi, np.float64), np.asarray(s.wo, np.float64)
     y = np.asarray(s.values, np.float64).reshape(len(wi), -1)
     cmax = math.cos(math.radians(80.0)) - 1e-12

@@ -5,7 +5,8 @@ import pytest
 
 from gonio import fit
 from gonio.brdf import frames, models
-from gonio.brdf.tabulated import Channels, MeasuredSamples
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Channels
 from gonio.fit.params import Layout
 
 

@@ -210,7 +210,7 @@ def test_score_cli_prints_both_metrics_of_a_published_fit(tmp_path, capsys):
     _, m = ngan.to_family(fit)
     rng = np.random.default_rng(0)
     wi, wo = cosine_directions(300, rng), cosine_directions(300, rng)
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
     from gonio.io import save
 
     y = np.asarray(m.f(wi, wo)) * 1.1
@@ -250,7 +250,7 @@ def test_default_intervals_cover_best_in_family_parameters_of_a_wrong_model():
 
 
 def test_fit_cli_says_which_loss_without_sigma_and_scores_fits(tmp_path, capsys):
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
     from gonio.io import save
 
     rng = np.random.default_rng(2)

@@ -5,7 +5,8 @@ import pytest
 
 import gonio.fit as gf
 from gonio.brdf import models
-from gonio.brdf.tabulated import Axis, Channels, MeasuredSamples, TabulatedBRDF
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Axis, Channels, TabulatedBRDF
 from gonio.fit import presets
 
 AXES = (
@@ -24,7 +25,7 @@ def test_table_with_masked_cells_and_solid_angle_weights():
     values[3, 4, :] = np.nan  # with garbage in it
     table = table.replace(values=values.astype(np.float32), mask=mask)
     data = gf.prepare(table)
-    samples = table.to_samples()
+    samples = MeasuredSamples.from_table(table)
     cos_ok = (samples.wi[:, 2] >= np.cos(np.radians(80)) - 1e-12) & (
         samples.wo[:, 2] >= np.cos(np.radians(80)) - 1e-12
     )

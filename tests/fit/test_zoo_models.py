@@ -4,7 +4,8 @@ import numpy as np
 
 from gonio import fit
 from gonio.brdf import frames, models
-from gonio.brdf.tabulated import Channels, MeasuredSamples
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Channels
 
 
 def test_htsg_recovers_roughness_and_autocorrelation_length():

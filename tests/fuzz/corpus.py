@@ -83,7 +83,8 @@ def _half_diff_table(n: tuple[int, int, int], seed: int, channels: str = "rgb"):
 
 
 def _samples(n: int, seed: int, n_ch: int = 3):
-    from gonio.brdf.tabulated import Channels, MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import Channels
 
     rng = np.random.default_rng(seed)
 

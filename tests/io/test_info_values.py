@@ -36,7 +36,7 @@ def test_info_on_a_native_table_imports_no_heavy_library(tmp_path):
     import numpy as np
 
     from gonio import io
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
 
     w = np.tile([[0.0, 0.6, 0.8]], (4, 1))
     io.save(MeasuredSamples(w, w, np.full((4, 3), 0.2)), tmp_path / "t.brdf.h5")

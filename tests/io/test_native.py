@@ -10,7 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
-from gonio.brdf.tabulated import Axis, Channels, MeasuredSamples, TabulatedBRDF
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Axis, Channels, TabulatedBRDF
 from gonio.errors import FormatError, ParameterError
 from gonio.io import load, native, save
 from tests.io.corrupt import assert_clean, variants

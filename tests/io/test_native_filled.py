@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from gonio.brdf import gridding
+from gonio.brdf.measured import MeasuredSamples
 from gonio.brdf.models import Lambert
-from gonio.brdf.tabulated import Axis, MeasuredSamples, TabulatedBRDF
+from gonio.brdf.tabulated import Axis, TabulatedBRDF
 from gonio.errors import FormatError
 from gonio.io import load, native, save
 

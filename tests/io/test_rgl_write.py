@@ -110,7 +110,7 @@ def test_convert_a_gridded_table_to_bsdf(tmp_path):
 
 
 def test_unwritable_sources_are_refused_and_nothing_is_written(tmp_path):
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
 
     wi, wo = pairs(10, seed=4)
     samples = MeasuredSamples(wi, wo, np.ones((10, 1)))
@@ -154,7 +154,7 @@ def test_a_filled_table_is_written_without_a_step_at_its_coverage_edge(tmp_path)
     with zeros beyond the coverage instead, the colour grid smooths the step into the edge
     cells (measured 95th percentile 41 %)."""
     from gonio.brdf import gridding
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
 
     model = _sources()["lambert+beckmann-0.3"]
     rng = np.random.default_rng(0)

@@ -11,7 +11,7 @@ import pytest
 
 from gonio import io
 from gonio.brdf import models
-from gonio.brdf.tabulated import MeasuredSamples
+from gonio.brdf.measured import MeasuredSamples
 from tests.render.helpers import gonio_cli as gonio
 
 PAINT = models.Lambert(albedo=[0.5, 0.3, 0.1]) + models.TorranceSparrow(

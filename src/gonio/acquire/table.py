@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gonio.brdf.gridding import default_grid, grid_samples, half_diff_iso
-from gonio.brdf.tabulated import Channels, MeasuredSamples
+from gonio.brdf.measured import MeasuredSamples
+from gonio.brdf.tabulated import Channels
 
 __all__ = [
     "default_grid",

@@ -38,10 +38,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from gonio.brdf.tabulated import Axis, MeasuredSamples, TabulatedBRDF
+from gonio.brdf.tabulated import Axis, TabulatedBRDF
 from gonio.errors import ParameterError
 
 __all__ = [
@@ -86,7 +87,7 @@ def render_axes(n_theta_h: int = 64, n_theta_d: int = 32, n_phi_d: int = 32) -> 
     )
 
 
-def grid_samples(samples: MeasuredSamples, axes: tuple[Axis, ...] | None = None) -> TabulatedBRDF:
+def grid_samples(samples: Any, axes: tuple[Axis, ...] | None = None) -> TabulatedBRDF:
     """Bin scattered samples onto an isotropic half/diff grid (see the module docstring).
 
     Samples without sigma are weighted equally (sigma of the node: the standard error of the
@@ -180,7 +181,7 @@ def _merge_duplicates(x: np.ndarray, f: np.ndarray, sigma: np.ndarray | None) ->
     return _Points(x[first], swx / sw, sig)
 
 
-def _scattered_points(samples: MeasuredSamples) -> _Points:
+def _scattered_points(samples: Any) -> _Points:
     th, td, pd = half_diff_iso(samples.wi, samples.wo)
     x = embed(th, td, pd)
     f = np.asarray(samples.values, dtype=float)
@@ -317,7 +318,7 @@ def _weights_low_dim(
 
 
 def interpolate_samples(
-    samples: MeasuredSamples,
+    samples: Any,
     axes: tuple[Axis, ...] | None = None,
     *,
     interpolation: str = "linear",
@@ -378,6 +379,29 @@ def interpolate_samples(
         interpolation=interpolation,
         filled=True,
     )
+
+
+def filled_interpolant(
+    samples: Any, axes: tuple[Axis, ...] | None = None
+) -> tuple[TabulatedBRDF, float]:
+    """The documented interpolant of scattered samples as a material: every node with both
+    directions above the horizon valid.
+
+    :func:`interpolate_samples` on ``axes`` (default :func:`render_axes`), its mask widened to
+    every above-horizon node (outside the samples' convex hull the nearest sample's value,
+    i.e. extrapolation) and no sigma. This is how :class:`gonio.brdf.measured.MeasuredSamples`
+    answers ``f``, ``pdf`` and ``sample``.
+
+    Returns
+    -------
+    (table, covered) : the table, and the fraction of its above-horizon nodes that lie inside
+        the samples' hull (the rest are extrapolated).
+    """
+    t = interpolate_samples(samples, axes)
+    wi, wo = t.node_directions()
+    above = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).reshape(t.shape)
+    covered = float(np.asarray(t.mask).sum()) / max(int(above.sum()), 1)
+    return t.replace(mask=above, sigma=None), covered
 
 
 def _floor(f: np.ndarray) -> np.ndarray:

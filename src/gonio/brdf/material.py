@@ -2,12 +2,12 @@
 
 A *material* is anything the renderer and the exporter take: an analytic model
 (:class:`gonio.brdf.models.BRDFModel`, sums and scaled lobes included), a gridded table
-(:class:`gonio.brdf.tabulated.TabulatedBRDF`) and an RGL tensor file
-(:class:`gonio.io.rgl_measured.RGLMeasured`). They all offer the members below under the same
-names, so that code taking a material never asks what it is. Scattered measurements
-(:class:`gonio.brdf.measured.MeasuredSamples`) give ``n_channels`` and ``channel_info``; they
-are rendered through their interpolant, the Delaunay-gridded table of
-:func:`gonio.brdf.gridding.interpolate_samples` (:func:`gonio.render.measured.renderable`).
+(:class:`gonio.brdf.tabulated.TabulatedBRDF`), an RGL tensor file
+(:class:`gonio.io.rgl_measured.RGLMeasured`) and scattered measurements
+(:class:`gonio.brdf.measured.MeasuredSamples`), which answer through their documented
+interpolant, the Delaunay-gridded table of :func:`gonio.brdf.gridding.filled_interpolant`.
+They all offer the members below under the same names, so that code taking a material never
+asks what it is.
 
 Conventions
 -----------

@@ -1,5 +1,13 @@
 """Scattered BRDF measurements (:class:`MeasuredSamples`): one row per (wi, wo) pair, as
-acquired or read from a scattered format."""
+acquired or read from a scattered format.
+
+As a material (:class:`gonio.brdf.material.Material`) scattered samples are their documented
+interpolant: :func:`gonio.brdf.gridding.filled_interpolant`, the log-linear Delaunay
+interpolant tabulated on the 64 x 32 x 32 isotropic half/diff grid of
+:func:`gonio.brdf.gridding.render_axes`, every node above the horizon valid (outside the
+samples' convex hull, the nearest sample's value). It is built on first use and kept; ``f``,
+``pdf``, ``sample``, ``select_channels`` and ``with_sampling`` are that table's.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +17,8 @@ from typing import Any
 import numpy as np
 
 from gonio.brdf.grid import Channels, numeric_array
+from gonio.brdf.sample_record import BRDFSample
+from gonio.brdf.tabulated import TABLE_METHODS, TabulatedBRDF
 from gonio.errors import FormatError
 
 
@@ -95,6 +105,19 @@ class MeasuredSamples:
         self.wi, self.wo, self.values, self.sigma, self.weights = wi, wo, vals, sig, w
         self.channels = channels
         self.meta: dict[str, Any] = dict(meta or {})
+        self._interpolant: tuple[TabulatedBRDF, float] | None = None
+
+    @classmethod
+    def from_table(cls, table: TabulatedBRDF) -> MeasuredSamples:
+        """A table's valid nodes whose directions are both above the horizon, as samples.
+
+        ``weights`` are the cell measures of :meth:`TabulatedBRDF.cell_measure` (sr^2), so that
+        sums over the samples approximate integrals over direction pairs.
+        """
+        wi, wo, vals, sig, weights = table.valid_nodes()
+        meta = dict(table.meta)
+        meta["converted_from"] = f"TabulatedBRDF {table.parameterization} {table.shape}"
+        return cls(wi, wo, vals, sig, table.channels, weights, meta)
 
     def __len__(self) -> int:
         return self.wi.shape[0]
@@ -110,6 +133,50 @@ class MeasuredSamples:
 
     def __repr__(self) -> str:
         return f"MeasuredSamples(N={len(self)}, {self.channels!r})"
+
+    # -- the Material interface, through the interpolant (module docstring) ---------------------
+    sampling_methods = TABLE_METHODS
+    has_delta = False
+    broadcasts_outgoing = False
+
+    def interpolant(self) -> TabulatedBRDF:
+        """The table these samples are as a material (module docstring), built once."""
+        return self._filled()[0]
+
+    def interpolant_coverage(self) -> float:
+        """Fraction of the interpolant's above-horizon nodes inside the samples' convex hull
+        (the rest hold the nearest sample's value)."""
+        return self._filled()[1]
+
+    def _filled(self) -> tuple[TabulatedBRDF, float]:
+        if self._interpolant is None:
+            from gonio.brdf.gridding import filled_interpolant
+
+            self._interpolant = filled_interpolant(self)
+        return self._interpolant
+
+    def f(self, wi: Any, wo: Any) -> Any:
+        """The interpolant's BRDF in 1/sr, no cosine: ``(..., 3), (..., 3) -> (..., C)``."""
+        return self.interpolant().f(wi, wo)
+
+    def pdf(self, wi: Any, wo: Any) -> Any:
+        """Density of :meth:`sample` over ``wi`` per unit solid angle, ``(...)``."""
+        return self.interpolant().pdf(wi, wo)
+
+    def sample(self, wo: Any, u: Any) -> BRDFSample:
+        """``wi`` for ``wo (..., 3)`` from ``u (..., 2)`` by the interpolant's default method."""
+        return self.interpolant().sample(wo, u)
+
+    def select_channels(self, idx: Any) -> TabulatedBRDF | None:
+        """The interpolant with only channels ``idx`` (None where it cannot cut them)."""
+        return self.interpolant().select_channels(idx)
+
+    def with_sampling(
+        self, method: str | None = None, *, proposal: Any = None, wo: Any = None
+    ) -> Any:
+        """The interpolant bound to one sampling method
+        (:meth:`gonio.brdf.material.Material.with_sampling`)."""
+        return self.interpolant().with_sampling(method, proposal=proposal, wo=wo)
 
 
 __all__ = ["MeasuredSamples"]

@@ -1,5 +1,5 @@
-"""Tabulated BRDFs on a grid (:class:`TabulatedBRDF`) and scattered measurements
-(:class:`MeasuredSamples`).
+"""Tabulated BRDFs on a grid (:class:`TabulatedBRDF`); scattered measurements are
+:class:`gonio.brdf.measured.MeasuredSamples`.
 
 Grids
 -----
@@ -63,7 +63,6 @@ from gonio.brdf.grid import (
     numeric_array,
 )
 from gonio.brdf.lookup import LookupSpec, corner_bits, eval_kernel, interpolate
-from gonio.brdf.measured import MeasuredSamples
 from gonio.brdf.sample_record import BRDFSample
 from gonio.brdf.sampled import TableSampled, bind_generic
 from gonio.errors import FormatError, ParameterError
@@ -607,22 +606,12 @@ class TabulatedBRDF:
             w = w * 2 * math.pi * 2**self._spec.fold
         return w
 
-    def to_samples(self) -> MeasuredSamples:
-        """Valid nodes whose directions are both above the horizon, as :class:`MeasuredSamples`.
-
-        ``weights`` are the cell measures of :meth:`cell_measure` (sr^2), so that sums over the
-        samples approximate integrals over direction pairs.
-        """
-        wi, wo, vals, sig, weights = self.valid_nodes()
-        meta = dict(self.meta)
-        meta["converted_from"] = f"TabulatedBRDF {self.parameterization} {self.shape}"
-        return MeasuredSamples(wi, wo, vals, sig, self.channels, weights, meta)
-
     def valid_nodes(
         self,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
-        """The nodes :meth:`to_samples` keeps as flat NumPy arrays, without building a
-        :class:`MeasuredSamples`: ``(wi, wo, values, sigma, weights)``, directions ``(N, 3)``,
+        """Valid nodes with both directions above the horizon, as flat NumPy arrays (what
+        :meth:`gonio.brdf.measured.MeasuredSamples.from_table` keeps): ``(wi, wo, values,
+        sigma, weights)``, directions ``(N, 3)``,
         values and sigma (or None) ``(N, C)``, weights the cell measures ``(N,)`` in sr^2."""
         wi, wo = self.node_directions()
         keep = np.asarray(self.mask).reshape(-1) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
@@ -679,7 +668,6 @@ def _describe(model: Any) -> Any:
 __all__ = [
     "Axis",
     "Channels",
-    "MeasuredSamples",
     "TabulatedBRDF",
     "default_axes",
     "merl_axes",

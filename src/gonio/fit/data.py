@@ -180,7 +180,8 @@ def prepare(
 
     Parameters
     ----------
-    data : a TabulatedBRDF (anything with ``to_samples()``), a MeasuredSamples (anything with
+    data : a TabulatedBRDF (anything with ``valid_nodes()``) or an object with ``to_samples()``
+        (an RGL file), a MeasuredSamples (anything with
         ``wi``, ``wo``, ``values`` and optionally ``sigma``, ``weights``, ``channels``, ``meta``),
         a :class:`FitData` (re-filtered with the cutoff), or a path read with :func:`gonio.io.load`.
     theta_max_deg : polar-angle cutoff in degrees applied to both directions, in (0, 90].
@@ -205,8 +206,11 @@ def prepare(
         data = load_data(data)
     kind = type(data).__name__
     meta = dict(getattr(data, "meta", None) or {})
-    if hasattr(data, "to_samples") and not isinstance(data, FitData):
-        data = _table_samples(data) if hasattr(data, "valid_nodes") else data.to_samples()
+    if hasattr(data, "valid_nodes"):  # a gridded table
+        data = _table_samples(data)
+        source.setdefault("kind", kind)
+    elif hasattr(data, "to_samples") and not isinstance(data, FitData):  # e.g. an RGL file
+        data = data.to_samples()
         source.setdefault("kind", kind)
     source.setdefault("kind", type(data).__name__)
     for key in ("name", "material", "source", "path"):
@@ -300,8 +304,9 @@ class _TableSamples:
 
 
 def _table_samples(table: Any) -> _TableSamples:
-    """The nodes of a :class:`~gonio.brdf.tabulated.TabulatedBRDF` that ``to_samples`` keeps
-    (valid, both directions above the horizon), weighted by their cell measure (sr^2)."""
+    """The nodes of a :class:`~gonio.brdf.tabulated.TabulatedBRDF` that
+    :meth:`~gonio.brdf.measured.MeasuredSamples.from_table` keeps (valid, both directions above
+    the horizon), weighted by their cell measure (sr^2)."""
     return _TableSamples(*table.valid_nodes(), table.channels)
 
 

@@ -172,7 +172,8 @@ def read_alta(
     color : {"keep", "rgb"}
         ``"rgb"`` replicates a single output into three equal RGB channels.
     """
-    from gonio.brdf.tabulated import Channels, MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import Channels
     from gonio.errors import ParameterError
     from gonio.io import spectral
 

@@ -91,7 +91,8 @@ def read_cornell(path: PathLike, color: str = "spectral", illuminant: str = "D65
     illuminant : {"D65", "E"}
         Illuminant of the spectral -> RGB conversion (see :mod:`gonio.io.spectral`).
     """
-    from gonio.brdf.tabulated import Channels, MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import Channels
     from gonio.errors import ParameterError
     from gonio.io import spectral
 

@@ -82,7 +82,7 @@ def cmd_grid(args: argparse.Namespace) -> int:
         raise ParameterError(f"{args.output} exists (use --force to replace it)")
     from gonio import io
     from gonio.brdf import gridding
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
 
     obj = io.load(args.input)
     if not isinstance(obj, MeasuredSamples):

@@ -194,7 +194,8 @@ def write_merl(table: Any, path: PathLike) -> None:
     as -1.
     """
     from gonio.brdf import frames
-    from gonio.brdf.tabulated import MeasuredSamples, TabulatedBRDF
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import TabulatedBRDF
 
     n_channels = table.n_channels
     if n_channels not in (1, 3):

@@ -195,7 +195,8 @@ def write_native(
     """
     import h5py
 
-    from gonio.brdf.tabulated import MeasuredSamples, TabulatedBRDF
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import TabulatedBRDF
     from gonio.errors import ParameterError
 
     gridded = isinstance(obj, TabulatedBRDF)
@@ -656,7 +657,8 @@ def _read_arrays(h5: Any, header: dict, path: PathLike) -> dict:
 
 
 def _build(header: dict, arrays: dict) -> Any:
-    from gonio.brdf.tabulated import Axis, Channels, MeasuredSamples, TabulatedBRDF
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import Axis, Channels, TabulatedBRDF
 
     ch = header["channels"]
     channels = Channels(

@@ -396,7 +396,7 @@ class RGLMeasured(BRDFModel):
         return tabulate(self, *args, **kwargs)
 
     def to_samples(self, theta_max_deg: float = 90.0) -> Any:
-        """The file's own nodes as :class:`~gonio.brdf.tabulated.MeasuredSamples` (for fits).
+        """The file's own nodes as :class:`~gonio.brdf.measured.MeasuredSamples` (for fits).
 
         For each tabulated conditioning angle ``theta_i`` (``wo`` at ``phi = 0`` for isotropic
         files, every ``phi_i`` otherwise) the colour grid's nodes, taken as positions in the
@@ -408,7 +408,7 @@ class RGLMeasured(BRDFModel):
         ``cos theta``, times ``2 pi`` for isotropic files). Pairs whose ``wi`` falls below the
         horizon or beyond ``theta_max_deg`` are dropped.
         """
-        from gonio.brdf.tabulated import MeasuredSamples
+        from gonio.brdf.measured import MeasuredSamples
 
         fields_theta = np.asarray(self._vndf.params[1])
         fields_phi = np.asarray(self._vndf.params[0])

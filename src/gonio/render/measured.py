@@ -5,7 +5,7 @@ hemisphere. Measured data comes in shapes it cannot use directly; :func:`rendera
 
 * **Scattered samples** (``gonio acquire``'s ``RUN/table.brdf.h5``, ALTA, Cornell): tabulated on
   a 64 x 32 x 32 isotropic half/diff grid (sqrt-warped theta_h) through the log-linear Delaunay
-  interpolant of :func:`gonio.brdf.gridding.interpolate_samples`. Outside the samples' convex
+  interpolant (:meth:`gonio.brdf.measured.MeasuredSamples.interpolant`). Outside the samples' convex
   hull the nearest sample's value is used (extrapolation; the note says how much of the grid
   that is); samples that span only a line or a plane (a 1-D ``COS_TH`` ALTA file) are
   interpolated along it and extended off it. Its error on a simulated acquisition of a known
@@ -37,7 +37,8 @@ MAX_FILL_NODES = 200_000
 
 def rgb_samples(obj: Any, illuminant: str) -> Any:
     """Scattered spectral samples -> linear sRGB samples (sigma propagated linearly)."""
-    from gonio.brdf.tabulated import Channels, MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import Channels
 
     m = spectral_to_rgb_matrix(obj.channels.wavelengths_nm, illuminant)
     vals = np.maximum(np.asarray(obj.values) @ m, 0.0)
@@ -67,16 +68,6 @@ def _above_horizon(table: Any) -> np.ndarray:
     return ((wi[:, 2] > 0) & (wo[:, 2] > 0)).reshape(table.shape)
 
 
-def _fill(samples: Any, axes: Any = None) -> tuple[Any, float]:
-    """Interpolated table with every above-horizon node valid; returns (table, hull fraction)."""
-    from gonio.brdf.gridding import interpolate_samples
-
-    t = interpolate_samples(samples, axes)
-    above = _above_horizon(t)
-    covered = float(t.mask.sum()) / max(int(above.sum()), 1)
-    return t.replace(mask=above, sigma=None), covered
-
-
 def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
     """``obj`` (anything :func:`gonio.io.load` returns) as a material the renderer accepts.
 
@@ -84,7 +75,8 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
     Objects that already evaluate and sample themselves (analytic models, exact evaluators)
     pass through unchanged.
     """
-    from gonio.brdf.tabulated import MeasuredSamples, TabulatedBRDF
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import TabulatedBRDF
     from gonio.errors import ParameterError
 
     notes: list[str] = []
@@ -98,7 +90,7 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
     if isinstance(obj, MeasuredSamples):
         if len(obj) < 1:
             raise ParameterError("the file holds no samples to render")
-        table, covered = _fill(obj)
+        table, covered = obj.interpolant(), obj.interpolant_coverage()
         notes.append(
             f"{len(obj)} scattered samples tabulated by log-linear Delaunay interpolation on a "
             f"{'x'.join(str(s) for s in table.shape)} half/diff grid; {covered:.0%} of it inside "
@@ -113,11 +105,13 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
             if n_valid == 0:
                 raise ParameterError("the table has no valid nodes to render")
             if n_valid <= MAX_FILL_NODES:
-                from gonio.brdf.gridding import render_axes
+                from gonio.brdf.gridding import filled_interpolant, render_axes
 
                 fine = render_axes()
                 coarse = int(np.prod(obj.shape)) < int(np.prod([a.size for a in fine]))
-                table, _ = _fill(obj.to_samples(), fine if coarse else obj.axes)
+                table, _ = filled_interpolant(
+                    MeasuredSamples.from_table(obj), fine if coarse else obj.axes
+                )
                 notes.append(
                     f"{int(missing.sum())} of {int(above.sum())} grid nodes without data filled "
                     "by log-linear Delaunay interpolation of the valid ones"

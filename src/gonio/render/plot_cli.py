@@ -78,7 +78,7 @@ def _load(path: str) -> Any:
         model, _ = load_fitted(p)
         return PlotInput(p.name.removesuffix(".json"), model, measured=False)
     from gonio import io
-    from gonio.brdf.tabulated import MeasuredSamples
+    from gonio.brdf.measured import MeasuredSamples
     from gonio.render.measured import renderable
 
     obj = io.load(p)
