@@ -8,7 +8,8 @@ __all__ = ["__version__"]
 
 
 def __getattr__(name: str):
-    # looked up on first use: importlib.metadata costs 30-80 ms, and `python -m gonio` installs
+    # looked up on first use: importing importlib.metadata is a noticeable part of a light
+    # command's start (benchmarks/bench_startup.py), and `python -m gonio` installs
     # its signal handlers only after this package is imported (see gonio/__main__.py)
     if name == "__version__":
         from importlib.metadata import PackageNotFoundError, version

@@ -1,6 +1,6 @@
 # `python -m gonio`. The first thing done is to catch SIGINT and SIGTERM, through the C module
-# _signal (importing signal.py alone takes ~10 ms of enum set-up, long enough for a Ctrl-C to
-# land in it as a KeyboardInterrupt traceback); gonio.interrupts then takes over what arrived.
+# _signal (importing signal.py runs an enum set-up long enough for a Ctrl-C to land in it as a
+# KeyboardInterrupt traceback); gonio.interrupts then takes over what arrived.
 import _signal
 
 _early: list[int] = []

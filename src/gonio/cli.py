@@ -9,7 +9,7 @@ Start-up is kept short by importing only the module of the command being run: th
 the modules named in :data:`LAZY_COMMANDS` appear in ``gonio --help`` with the one-line help
 stored there, and their module (with jax, scipy and the rest) is imported only when one of them
 is invoked. A module listed in :data:`COMMAND_MODULES` but not in :data:`LAZY_COMMANDS` is
-imported eagerly, as before.
+imported eagerly, at start-up.
 """
 
 from __future__ import annotations

@@ -37,12 +37,12 @@ class Costs:
     source: str
 
 
-#: Measured with ``gonio acquire --rig sim --plan demo-quick`` (61 configurations, time scale
-#: 60) on the project's 2-core development machine while other jobs shared it (medians of
-#: RUN/log.jsonl): the virtual camera renders, writes and merges about 3 DNG frames per
-#: configuration, 2.99 s of wall time (0.55 s of this process's CPU: an idle machine is about
-#: 5x faster); a move costs 0.043 s beyond its profile (3.07 s of moves for 0.45 s of profile).
-#: ``sim-sample`` reads the truth directly (about 1 ms) plus the rig file's capture_time_s.
+#: Costs in seconds (per configuration, per move beyond its profile, bookkeeping), medians of
+#: RUN/log.jsonl of ``gonio acquire --rig sim --plan demo-quick`` (time scale 60) on a 2-core
+#: machine shared with other jobs: the virtual camera renders, writes and merges about 3 DNG
+#: frames per configuration, mostly waiting for the CPU, so an idle machine takes less.
+#: ``sim-sample`` reads the truth directly, plus the rig file's capture_time_s.
+#: ``benchmarks/bench_imaging.py`` and ``benchmarks/bench_rig.py`` measure the time split.
 MEASURED = {
     "sim": Costs(
         2.99, 0.043, 0.0075, "measured: virtual camera, demo-quick on a busy 2-core machine"

@@ -1,10 +1,11 @@
 """Cosine and sine of an angle given in turns, fast on XLA's CPU backend.
 
-XLA:CPU evaluates float32 ``sin`` and ``cos`` about 50 times slower than ``exp`` or ``sqrt``
-(37 M/s against 1.7 G/s per core-pair, measured at 10^6 lanes on the project's 2-core machine):
-every sampling routine spends most of its time there. The angles sampling needs are fractions
-of a turn (``phi = 2 pi u``), so the range reduction is exact: ``t`` minus the nearest quarter
-turn is computed without rounding, and what remains is a polynomial on ``[-pi/4, pi/4]``.
+XLA:CPU evaluates float32 ``sin`` and ``cos`` more than an order of magnitude slower than
+``exp`` or ``sqrt`` (they are not vectorized), so a sampling routine that calls them spends most
+of its time there (``benchmarks/bench_throughput.py`` measures the samplers). The angles
+sampling needs are fractions of a turn (``phi = 2 pi u``), so the range reduction is exact: ``t``
+minus the nearest quarter turn is computed without rounding, and what remains is a polynomial on
+``[-pi/4, pi/4]``.
 
 For float32 the result is within 2 ulp of the exact value (1.7 ulp, 8.5e-8 measured over 2e6
 random turns; XLA's own ``cos(2 pi t)`` is off by up to 4e-7, from rounding ``2 pi t`` alone):

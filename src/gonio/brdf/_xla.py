@@ -1,8 +1,9 @@
 """Workarounds for XLA's CPU fusion heuristics on hot lookup and sampling paths.
 
-Used only where a same-run A/B (``benchmarks/ab_xla.py``) shows switching it off costs more than
-10 %: the table lookup's index arithmetic (lookup 0.63x without it) and the CDF binary search of
-:func:`gonio.brdf.sampling.distributions.find_interval` (inversion 0.67x).
+Used only on the two paths where XLA's fusion otherwise recomputes shared values as scalar code
+inside gather loops: the table lookup's index arithmetic and the CDF binary search of
+:func:`gonio.brdf.sampling.distributions.find_interval`. Their throughput is measured by
+``benchmarks/bench_throughput.py``; any other use needs such a measurement to justify it.
 """
 
 from __future__ import annotations

@@ -40,8 +40,8 @@ def dot(a: Array, b: Array) -> Array:
 def normalize(v: Array) -> Array:
     """Unit vector along ``v`` (``(..., 3)``); a zero vector maps to +z."""
     # Per component and stacked, rather than v * inv[..., None] with a scattered +z fallback:
-    # the same values bit for bit, and XLA:CPU fuses it into its consumers (ndf(normalize(.))
-    # ran 5-8x faster at 1e6 float32 vectors, same-run A/B).
+    # the same values bit for bit, and XLA:CPU fuses it into its consumers (e.g. ndf(normalize(.))
+    # becomes one loop), where the scatter would be a separate pass over memory.
     x, y, z = v[..., 0], v[..., 1], v[..., 2]
     n2 = x * x + y * y + z * z
     ok = n2 > 0

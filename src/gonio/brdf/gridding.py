@@ -228,10 +228,11 @@ def _weights(points: np.ndarray, query: np.ndarray) -> tuple[np.ndarray, np.ndar
     if points.shape[0] >= 4:
         # Gonioreflectometer samples lie on regular grids: many are co-spherical, and Qhull's
         # default ("Qbb Qc Qz Q12") resolves those ties with flat slivers, whose barycentric
-        # transforms and directed walks are slow (retro-gray-tape.dat: 15 s to locate 39k nodes).
-        # Joggled input (QJ) breaks the ties with ~1e-11 perturbations and gives a triangulation
-        # without slivers (3 s); any triangulation of the samples is a valid linear interpolant,
-        # they differ only where the Delaunay one is not unique.
+        # transforms and directed walks are slow (locating a dense RGL file's nodes, e.g.
+        # retro-gray-tape.dat's, takes several times longer). Joggled input (QJ) breaks the ties
+        # with ~1e-11 perturbations and gives a triangulation without slivers; any triangulation of
+        # the samples is a valid linear interpolant, they differ only where the Delaunay one is not
+        # unique.
         for options in ("QJ Qbb", None):
             try:
                 tri = Delaunay(points, qhull_options=options)

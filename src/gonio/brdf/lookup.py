@@ -37,9 +37,9 @@ class LookupSpec:
 
 
 # atan(a) ~= a P(a^2) on [0, 1]: odd polynomial fitted for minimal relative error (max 9e-8 in
-# float64, 2.2e-7 evaluated in float32). With XLA's float32 jnp.arctan2 instead, the whole MERL-grid
-# lookup runs at 0.65x and inversion sampling at 0.70x (same-run A/B, benchmarks/ab_xla.py);
-# float64 input keeps jnp.arctan2.
+# float64, 2.2e-7 evaluated in float32). XLA:CPU's float32 jnp.arctan2 is not vectorized and
+# takes a large share of the table lookup and of inversion sampling (both timed by
+# benchmarks/bench_throughput.py); float64 input keeps jnp.arctan2.
 _ATAN_COEFFS = (
     0.9999999110764471,
     -0.33332092081615694,
@@ -148,9 +148,9 @@ def _index_corners(ax: Axis, t: Array) -> tuple[Array, Array, Array]:
 def _corner_params(spec: LookupSpec, coords: Sequence[Array]) -> list[tuple[Array, Array, Array]]:
     """Per axis ``(i0, i1, frac)`` (see :func:`_axis_corners`) from continuous indices stored
     once (:func:`gonio.brdf._xla.materialize`): otherwise XLA recomputes the angle-to-index
-    arithmetic inside each of the gather loops, as scalar code (without it, and without the
-    stored denominator in :func:`interpolate`, the lookup runs at 0.63x: same-run A/B,
-    benchmarks/ab_xla.py)."""
+    arithmetic inside each of the gather loops, as scalar code (this and the stored denominator
+    in :func:`interpolate` keep that work out of the loops; lookup throughput:
+    ``benchmarks/bench_throughput.py``)."""
     ts = [_wrapped_index(ax, a) for ax, a in zip(spec.axes, coords, strict=True)]
     ts = materialize(ts, coords[0])
     return [_index_corners(ax, t) for ax, t in zip(spec.axes, ts, strict=True)]

@@ -64,8 +64,8 @@ class DemoSettings:
 
     @classmethod
     def quick(cls, **kw: Any) -> DemoSettings:
-        """A reduced demo (about 45 s on an idle 2-core machine): fewer configurations, small
-        renders."""
+        """A reduced demo: fewer configurations, small renders (its wall time per stage:
+        ``benchmarks/bench_demo.py``)."""
         return cls(**{"plan": "demo-quick", "resolution": 96, "spp": 16, **kw})
 
 

@@ -20,7 +20,8 @@ from importlib import import_module
 from typing import Any
 
 # The names below are loaded on first use (PEP 562), so that ``gonio fit --help`` and the
-# command-line parser do not import JAX (about 4 s on a loaded 2-core machine). gonio.fit.api
+# command-line parser do not import JAX, the largest part of their start-up
+# (benchmarks/bench_startup.py). gonio.fit.api
 # imports gonio.brdf, which enables float64 in JAX before anything is traced.
 _LAZY = {
     "FitOptions": ("gonio.fit.api", "FitOptions"),

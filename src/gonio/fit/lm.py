@@ -6,8 +6,8 @@ Here every iteration makes exactly one call of the compiled ``normal(u) -> (L, g
 :mod:`gonio.fit.objective`: ``A = J^T J`` and ``g = J^T r`` accumulated in chunks with one
 forward-mode Jacobian pass); the P x P algebra runs on the host. The trial point's normal
 equations are computed directly, so an accepted step (the usual case near the optimum) needs no
-second pass. (A version with the whole loop inside ``lax.while_loop`` was measured 5-10x slower
-on 1e6 samples: XLA copies the loop-invariant data through the loop and its branches.)
+second pass. (The loop is not a ``lax.while_loop``: inside one, XLA copies the loop-invariant
+data through the loop and its branches, which costs more than the host round trip per step.)
 
 Step: solve ``(A + lam * D) delta = -g`` with Marquardt's scaling ``D = diag(A)`` (floored)
 over the free parameters, project ``u + delta`` onto the box, accept when the gain ratio (actual
@@ -16,9 +16,9 @@ bound whose descent direction ``-g`` points out of the box is held there for the
 and column are left out of the solve: projected Newton, Bertsekas 1982). Without that, the
 solve spends the step on the held parameter and its coupling bends every other one, so that the
 clipped step is poor: on a metal whose Cook-Torrance ``f0`` ends on 1 the polish on every cell
-took six passes over the data to the two of a fit inside the box, and the stages on subsets
-stopped early on steps whose clipped gain was tiny (``published_activeset_*`` in
-``benchmarks/results``). Stops when an accepted step lowers the loss by less than ``ftol``
+took several times the passes over the data of a fit inside the box, and the stages on
+subsets stopped early on steps whose clipped gain was tiny (``benchmarks/bench_published.py``
+fits such metals). Stops when an accepted step lowers the loss by less than ``ftol``
 relatively or the next step is predicted to, when a step is shorter than ``xtol`` relative to
 ``|u|``, when ``lam`` exceeds 1e14, or after ``max_iter`` accepted steps.
 """

@@ -300,9 +300,9 @@ def optimize(
     n_starts : number of starting points of the multi-start stage (>= 1).
     seed : seed of the subsample and the random starts.
     subsample : samples used by the global and multi-start stages (all when fewer). 2048 keeps
-        the optimum of all 444 fits of ``benchmarks/bench_published.py`` (74 MERL-resolution
-        tables x 3 families x 2 losses: final losses within 1e-9 relative of 4000's or lower,
-        ``published_sub2048_all_vs_published_activeset_all.csv``) at 0.55-0.67x its starts' cost.
+        the optimum of every fit of ``benchmarks/bench_published.py`` (MERL-resolution tables x
+        3 families x 2 losses: final losses within 1e-9 relative of those with 4000 samples, or
+        lower), and the starts cost less than with 4000.
     max_iter : iteration limit of each local run.
     max_restarts : automatic restarts of the polish when it stops before converging.
     start : optional (P,) starting point used instead of the template's values.

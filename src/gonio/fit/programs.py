@@ -3,10 +3,10 @@
 JAX's persistent compilation cache (:mod:`gonio.compile_cache`) skips only XLA's compilation:
 a new process still traces each jitted function to a jaxpr and lowers it to StableHLO, which
 for the fit's programs (the normal equations on two data sizes, the gradient on every cell, the
-subset's Hessian, the score pass) took 1.2 s of tracing and 0.7 s of lowering per cold
-``gonio fit`` here. A :class:`Program` exports its function once per argument signature, stores
-the serialized module, and in later processes deserializes it and calls it (the call lowers to
-the stored module, which the compilation cache then finds).
+subset's Hessian, the score pass) is a sizeable part of a cold ``gonio fit`` that the cache
+cannot save, paid again by every new process. A :class:`Program` exports its function once
+per argument signature, stores the serialized module, and in later processes deserializes it and
+calls it (the call lowers to the stored module, which the compilation cache then finds).
 
 Where: ``<JAX compilation cache dir>/gonio-fit-programs/`` (the folder
 :func:`gonio.compile_cache.enable` sets for the commands); when no cache directory is set (a
@@ -152,14 +152,10 @@ class Program:
 
 def _compiler_options() -> dict[str, Any]:
     """XLA options of the fit's programs: on the CPU, XLA's loop emitters instead of its MLIR
-    fusion emitters, which take longer to compile these programs and run them slower.
-    ``benchmarks/fit_phases.py --empty-cache``, gold-paint Cook-Torrance ``ngan``, 909 696
-    cells, medians of 3 alternated fresh processes, 2 cores at load 1-2: a first fit on an
-    empty compilation cache 3.52 -> 2.30 s with this and the background compile of
-    ``optimize`` (``fit_phases_empty.csv``), 2.70 -> 2.30 s with the background compile alone
-    (``fit_phases_empty_prepare.csv``); a warm fit 0.50 -> 0.41 s. Not set for the render
-    kernels, whose cold first image is slower with it (1.99 -> 2.34 s,
-    ``bench_first_image.py --quick``)."""
+    fusion emitters, which take longer to compile these programs and run them slower: both a
+    first fit on an empty compilation cache and a warm fit are faster with the loop emitters.
+    Not set for the render kernels, whose cold first image is slower with it
+    (``benchmarks/bench_first_image.py``)."""
     return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else {}
 
 

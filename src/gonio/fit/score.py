@@ -44,8 +44,9 @@ def model_values(model: Any, data: FitData, chunk: int = 1 << 18) -> np.ndarray:
 
     A gonio model (a JAX pytree) is evaluated by one jitted function in chunks of ``chunk``
     pairs, the last one padded to full size, so that every model of the same structure reuses
-    one compiled program whatever the data size (evaluating op by op took 2.5 s on a MERL
-    table). Anything else with ``f(wi, wo)`` is called chunk by chunk as it is.
+    one compiled program whatever the data size (evaluating op by op, un-jitted, dispatches
+    every operation separately and is slow on a MERL table). Anything else with ``f(wi, wo)``
+    is called chunk by chunk as it is.
     """
     if isinstance(model, BRDFModel):
         if not _EVAL_JIT:

@@ -61,7 +61,7 @@ from gonio.fit.objective import Problem
 
 Array = jnp.ndarray
 
-Z68 = NormalDist().inv_cdf(0.84)  # (statistics, not scipy.stats: 1 s less to import)
+Z68 = NormalDist().inv_cdf(0.84)  # (statistics, not scipy.stats: a far lighter import)
 Z95 = NormalDist().inv_cdf(0.975)
 
 

@@ -252,9 +252,8 @@ class RGLMeasured(BRDFModel):
     def _jacobian(self, u_m: Array, u_c: Array) -> Array:
         jac = w2.eval_warp(self._ndf, u_m) / (4.0 * w2.eval_warp(self._sigma, u_c))
         # Stored once before it scales the C channels (and the pdf likewise before it divides
-        # them): XLA:CPU otherwise recomputes the lookups inside the channels' loop. Same-run
-        # A/B, 64^2 sphere render at 32 spp (paper_white, 3 alternating rounds, load 20-24):
-        # CPU time 0.116-0.119 s without, 0.088-0.091 s with.
+        # them): XLA:CPU otherwise recomputes the lookups inside the channels' loop, once per
+        # channel (render times of RGL files: benchmarks/bench_rgl.py).
         (jac,) = materialize([jac], u_m[..., 0])
         return jac
 

@@ -254,7 +254,8 @@ class _NoBar:
 
 def _progress_bar() -> Any:
     """A rich progress bar on a terminal; otherwise :class:`_NoBar`, without importing rich
-    (its import is ~40 ms of a second process's time to its first image)."""
+    (its import would add to the time from a process's start to its first image, which
+    ``benchmarks/bench_first_image.py`` measures)."""
     if not sys.stderr.isatty():
         return _NoBar()
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn

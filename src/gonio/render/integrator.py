@@ -36,20 +36,18 @@ Random numbers: ``2 + 2 K`` per sample (BRDF sample, then one pair per sampled l
 a rank-1 lattice sequence (:mod:`gonio.brdf.sampling.points`): every pair is that 2-D lattice, the
 light pairs in an order permuted per pixel ("padding"), each rotated per pixel by an independent
 uniform shift modulo 1 (random 32-bit words, seeded), so pixels are independent unbiased
-estimates while every pair keeps the lattice. Same-run A/Bs, 64² sphere under the studio
-environment, relative MSE (median of 4 seeds), Lambert / GGX alpha 0.2 at 16 spp: former
-scrambled Sobol' points with a Cranley-Patterson rotation per pixel 0.0068 / 0.0110, Sobol'
-dimensions 2-3 for the light digitally shifted 0.0049 / 0.0101, padded 0.0045 / 0.0085 (at 64
-spp: 0.00076 / 0.00123 against padded 0.00064 / 0.00108); the lattice in place of the padded
-Sobol' net (mean of 4 seeds) 0.00255 -> 0.00199 / 0.00667 -> 0.00511.
+estimates while every pair keeps the lattice. Of the point sets tried for this (scrambled
+Sobol' points rotated per pixel; further Sobol' dimensions for the light pairs, digitally
+shifted; padded Sobol' pairs), the padded lattice gives the lowest error, for diffuse and
+glossy materials alike (``benchmarks/bench_equal_time.py`` measures the renderer's error).
 
 Work is split into tiles of pixels x samples of bounded size (``tile_samples``), laid out
-samples-major (S, P, ...): XLA:CPU runs elementwise code over a (P, S) batch with its short
-samples axis innermost 2-3x slower than over the same number of lanes flat, and (S, P) keeps
-the long axis innermost (same-run A/B, 8192-pixel x 16-sample tile of the equal-time scene:
-light stage 5.7 -> 4.8 ms, Lambert material 2.5 -> 1.6 ms, GGX 12.8 -> 9.0 ms; shading 1.5 ->
-1.7 ms). Each tile runs as three jitted float32 stages: light sampling, the material (``f`` and
-``pdf`` at the light samples, BRDF samples), shading. Tile shapes do not follow the request:
+samples-major (S, P, ...): XLA:CPU vectorizes elementwise code along the innermost axis, so
+a (P, S) batch with its short samples axis innermost runs much slower than the same number of
+lanes flat, and (S, P) keeps the long pixel axis innermost (the light and material stages
+gain; the shading stage is about even). Each tile runs as three jitted float32 stages:
+light sampling, the material (``f`` and ``pdf`` at the light samples, BRDF samples), shading.
+Tile shapes do not follow the request:
 ``spp`` is padded to a multiple of :data:`SAMPLE_BATCH` (padding has zero weight) and pixels
 to equal tiles of one of at most 17 sizes (:func:`gonio.render.tiling.sample_tile`), and delta
 and area lights of one kind are stacked and looped over (or picked from) with a traced count,
@@ -97,8 +95,8 @@ DEFAULT_TILE_SAMPLES = 1 << 17
 
 #: Samples per pixel in one kernel call: ``spp`` is padded up to a multiple of it (masked by zero
 #: weights), so that every ``spp`` runs the same compiled kernel; an ``spp`` that is a multiple
-#: of ``4 * SAMPLE_BATCH`` uses that larger batch (a second kernel shape), which measured ~15 %
-#: faster at 64 spp on a 2-core CPU.
+#: of ``4 * SAMPLE_BATCH`` uses that larger batch (a second kernel shape): fewer, larger kernel
+#: calls per tile (``benchmarks/bench_render.py`` times renders by spp).
 SAMPLE_BATCH = 16
 
 #: Tiles dispatched ahead of the one being collected (one per core keeps every core busy).
@@ -184,8 +182,8 @@ def _material_ops(material: Any):
 
 
 # Per component through frames.dot: XLA on CPU turns a batched 3x3 einsum into a slow
-# dot_general, and a sum over the size-3 axis into a reduction loop of its own (at 8192 x 16
-# directions: 2.8 ms for _world and 1.2 ms for _local that way, 0.19 ms each written out).
+# dot_general, and a sum over the size-3 axis into a reduction loop of its own; written out,
+# the products fuse into their consumers.
 def _local(frame: Array, w: Array) -> Array:
     f = frame[None]
     return jnp.stack([dot(f[..., i, :], w) for i in range(3)], -1)
@@ -227,7 +225,7 @@ def _light_stage(groups: tuple, position: Array, frame: Array, u: Array):
             ls = _pick(light, j).sample(p, jnp.stack([u0, uk[..., 1]], -1))
             ls = LightSample(ls.wi, ls.value, ls.pdf / n)
         # stored before the rotation: fused into it, the light's sampler (the environment's
-        # quadtree descent) would run once per component (light stage 8 -> 22 ms per tile);
+        # quadtree descent) would run once per component, three times over;
         # the runtime 1.0 comes from the uniform numbers, which are always finite
         wi = materialize([ls.wi], uk[..., 0])[0]
         out.append((_local(frame, wi), ls.value, ls.pdf))
@@ -281,8 +279,8 @@ def _uniforms(sobol: Array, shift: Array) -> Array:
 
 
 # A tile runs as three jitted stages: light sampling; the material (f and pdf at the light
-# samples, BRDF samples); shading. Measured on CPU, this is ~25% cheaper than one fused kernel,
-# where XLA recomputes the gather-heavy sampling code inside several consumers. It is also the
+# samples, BRDF samples); shading. On CPU this is cheaper than one fused kernel, where XLA
+# recomputes the gather-heavy sampling code inside several consumers. It is also the
 # structure tables need, whose samplers keep host-side state between calls.
 
 
@@ -302,9 +300,8 @@ def _pixel_major(material: Any, kind: str) -> bool:
 @functools.partial(jax.jit, static_argnames=("samples",))
 def _outgoing_per_sample(wo: Array, samples: int) -> Array:
     """``wo`` (P, 3) repeated for each of a batch's samples -> (S, P, 3), as a buffer: the
-    models' kernels run faster reading one than with the broadcast fused into them (GGX
-    conductor f + pdf + sample at 16 x 8192: 7.0-7.3 ms so, 5.5-6.1 ms reading the buffer,
-    made in 0.1 ms; same run)."""
+    models' kernels run faster reading one than with the broadcast fused into them, and the
+    buffer costs one cheap pass to make."""
     return jnp.broadcast_to(wo[None], (samples, *wo.shape))
 
 
@@ -343,8 +340,8 @@ def _shade_stage(lights, ls, fv, pb, position, frame, brdf, weights, acc, *, mis
 
 def _sum_samples(x: Array) -> Array:
     """``x`` (S, P, C) summed over its samples axis -> (P, C), as S - 1 elementwise adds: XLA:CPU
-    runs ``jnp.sum`` over that axis as a slow loop of its own (shading stage of an 8192-pixel x
-    16-sample tile 1.8 ms so, 6.4 ms by ``jnp.sum(x, 0)``)."""
+    runs ``jnp.sum`` over that axis as a slow loop of its own, where the adds fuse with the
+    shading that produces ``x``."""
     out = x[0]
     for s in range(1, x.shape[0]):
         out = out + x[s]

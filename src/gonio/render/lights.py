@@ -318,7 +318,7 @@ def _latlong_direction_sin(xy: Array) -> tuple[Array, Array]:
     """:func:`latlong_to_direction` and sin(theta) (..., the solid angle's Jacobian)."""
     xy = jnp.asarray(xy)
     # theta = pi y and phi = 2 pi (x - 1/2) in turns, through the exact-reduction polynomial
-    # (XLA's float32 sin/cos cost ~50x an exp; gonio.brdf._trig)
+    # (XLA's float32 sin/cos are far slower than an exp; gonio.brdf._trig)
     ct, st = cos_sin_turns(0.5 * xy[..., 1])
     cp, sp = cos_sin_turns(xy[..., 0] - 0.5)
     return jnp.stack([st * sp, ct, -st * cp], -1), st
@@ -329,8 +329,8 @@ def direction_to_latlong(w: Array) -> Array:
 
     Both angles go through :func:`gonio.brdf.lookup.atan2` (a float32 polynomial within
     2.2e-7 relative, exact ``arctan2`` in float64): XLA's float32 ``arccos`` and ``arctan2``
-    made this function 12x slower (4.95 against 0.41 ms for 65,536 directions, same run) and
-    were most of the cost of evaluating the environment at BRDF-sampled directions.
+    are not vectorized on CPU and would be most of the cost of evaluating the environment at
+    BRDF-sampled directions.
     """
     cy = jnp.clip(w[..., 1], -1.0, 1.0)
     y = atan2(jnp.sqrt(jnp.maximum(0.0, (1.0 - cy) * (1.0 + cy))), cy) / jnp.pi
@@ -477,8 +477,8 @@ def latlong_pixel_directions(height: int, width: int) -> np.ndarray:
     image, computed on the host in NumPy float64 -> ``(height, width, 3)`` unit vectors.
 
     For images built on the host (:func:`studio_environment`): the JAX function, called
-    outside a trace, compiles and runs its ops one by one, which cost 0.5 s of CPU per process
-    with a warm compilation cache (1.6 s without) for an image that NumPy builds in a few ms.
+    outside a trace, compiles and runs its ops one by one, a cost paid by every process
+    (more with a cold compilation cache) for an image that NumPy builds almost at once.
     """
     theta = np.pi * (np.arange(height) + 0.5) / height
     phi = 2.0 * np.pi * ((np.arange(width) + 0.5) / width - 0.5)

@@ -9,7 +9,7 @@ hemisphere. Measured data comes in shapes it cannot use directly; :func:`rendera
   hull the nearest sample's value is used (extrapolation; the note says how much of the grid
   that is); samples that span only a line or a plane (a 1-D ``COS_TH`` ALTA file) are
   interpolated along it and extended off it. Its error on a simulated acquisition of a known
-  material is measured by ``benchmarks/bench_scattered_render.py`` (README table).
+  material is measured by ``benchmarks/bench_scattered_render.py``.
 * **Gridded tables with holes** (a binned table from ``gonio grid``, or a run's ``/gridded``):
   the valid nodes are treated as samples and interpolated the same way (onto the render grid
   when the table's own grid is coarser), so uncovered cells do not render black. Tables with

@@ -146,9 +146,8 @@ def intersect_sphere(
     """Trace one ray per pixel centre against the unit sphere; keep only the hits.
 
     The last few images' hits are kept (:func:`functools.lru_cache`; their arrays are read-only):
-    a render of an image size and camera met before skips the tracing. Same-run A/B of warm
-    128² renders at 16 spp under the studio environment: Lambert 31.4 -> 26.2 ms, GGX 45.2 ->
-    39.6 ms (the tracing's 3.6 ms and the memory it churns).
+    a render of an image size and camera met before skips the tracing, a noticeable share of a
+    small warm render's host time (the tracing and the memory it churns).
 
     Returns
     -------
@@ -161,8 +160,8 @@ def intersect_sphere(
 def _traced(shape: tuple[int, int], camera: Camera) -> SphereHits:
     origin, direction = primary_rays(shape, camera)
     # |o + t d|^2 = 1 with |d| = 1: t^2 + 2 b t + c = 0. Written per component, on the hit rows
-    # only: the same bits as sums and stacks of (n, 3) arrays, in 1.5 ms instead of 3.4 ms for
-    # a 128^2 image (that was the largest part of a warm render's host time).
+    # only: the same bits as sums and stacks of (n, 3) arrays, in fewer passes over memory
+    # (the tracing is a large part of a warm render's host time).
     b = np.einsum("ij,ij->i", origin, direction)
     c = np.einsum("ij,ij->i", origin, origin) - 1.0
     disc = b * b - c

@@ -44,11 +44,9 @@ def sample_tile(n: int, cap: int) -> int:
 
     All image sizes share at most ``TILE_SIZES`` compiled kernels per ``cap`` (and one for
     images of ``MIN_PIXEL_TILE`` pixels or fewer), and the padding, whose samples cost what a
-    real pixel's do, stays under one step per tile. :func:`pixel_tile`'s powers of 4 padded
-    the 12 868 pixels of a 128² sphere to 2 x 8192 (21 % of the work on padding); equal tiles
-    pad them to 2 x 6656 (3 %). Same-run A/B, warm renders at 16 spp, images bitwise equal
-    (``benchmarks/bench_tiles.py``): 64² 8-12 % faster, 128² 13-14 %, 256² 5-8 %, 512² the
-    same tiles.
+    real pixel's do, stays under one step per tile. For example, the 12 868 pixels of a 128²
+    sphere fit in 2 x 6656 (3 % padding), where :func:`pixel_tile`'s powers of 4 would take
+    2 x 8192 (21 %). Tiles split pixels only, so their size changes the work, not the image.
     """
     cap = max(1, cap)
     if n <= MIN_PIXEL_TILE or cap <= MIN_PIXEL_TILE:
@@ -61,8 +59,8 @@ def sample_tile(n: int, cap: int) -> int:
 
 def device_array(a: np.ndarray) -> Array:
     """A host array on the default device: ``jax.device_put`` copies without compiling anything,
-    where ``jnp.asarray`` compiles a small copy kernel per new shape (5-30 ms each, paid by
-    every fresh process on its first image)."""
+    where ``jnp.asarray`` compiles a small copy kernel per new shape (paid by every fresh
+    process on its first image)."""
     a = np.asarray(a)
     if a.dtype == np.float64:
         a = a.astype(np.float32)

@@ -303,17 +303,14 @@ def channels_last(x: Array) -> Array:
     computation back into an ``(n, C)`` loop (``optimization_barrier`` does not stop that on
     CPU), so the axis is moved by a product with the identity: a dot is never fused, and
     ``x * 1 + 0 * y`` is exact for finite values (an inf or NaN in one channel would spread
-    to the others; the models that use this return finite values). The move costs a pass over
-    the output (1e6 RGB values of a cheap per-lane value: 2.4-3.1 ms, against 1.3-2.7 ms
-    computed in place, ``benchmarks/ab_kernels.py --layout``), so it is used only where the
-    per-channel work is large and a same-run A/B says so: Torrance-Sparrow ``f`` with a
-    conductor Fresnel term (1e6 float32 lanes, four runs at load average 5-13: Beckmann
-    1.4-2.4x, GGX 1.7-4.5x faster than with a plain transpose, ``ab_kernels.py`` variant
-    ``no-dot``). With the cheaper dielectric term, in the sample weight and for Lambert no gain
-    showed above the run-to-run noise, so their outputs stay channels last (bit for bit as
-    before). The batch axes are flattened for the product: over a rank-3 ``(C, S, P)`` array
-    XLA:CPU's dot ran 3x slower than over ``(C, S * P)`` (GGX conductor ``f`` at the renderer's
-    16 x 8192 directions: 3.0 -> 1.0 ms; material stage of a render tile 9.0 -> 7.5 ms).
+    to the others; the models that use this return finite values). The move costs an extra
+    pass over the output, so it is used only where the per-channel work is large enough to pay
+    for it: Torrance-Sparrow ``f`` with a conductor Fresnel term (throughput:
+    ``benchmarks/bench_throughput.py``). With the cheaper dielectric term, in the sample weight
+    and for Lambert the pass costs about what it saves, so their outputs stay channels last.
+    The batch axes are flattened for the product: XLA:CPU's dot over a rank-3 ``(C, S, P)``
+    array is much slower than over ``(C, S * P)``, and the renderer calls this with ``(S, P)``
+    batches.
     """
     c = x.shape[0]
     if c == 1:
@@ -451,8 +448,8 @@ class BRDFModel(Node):
         wo_s, ok_o = masked_outgoing(wo)
         # The sampled directions stored once, before the pdf, f and weight that read them:
         # XLA:CPU otherwise recomputes the cheap part of the sampler (the polynomial cos/sin
-        # included) inside each of their loops. Same-run A/B at 1e6 float32 lanes, load average
-        # 15: Lambert sample 24.3 -> 40.6 M/s; Torrance-Sparrow unchanged (5.9 / 5.8 M/s).
+        # included) inside each of their loops. This matters for cheap samplers (Lambert), where
+        # that recomputation is a large share of the cost; for Torrance-Sparrow it is neutral.
         wi = jax.lax.optimization_barrier(self._sample(wo_s, u).astype(wo.dtype))
         return self._finish(wi, wo_s, ok_o)
 

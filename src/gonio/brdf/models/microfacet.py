@@ -251,9 +251,9 @@ def sample_visible_ggx(wo: Array, u: Array, alpha: Array) -> Array:
     alpha = jnp.asarray(alpha).astype(wo.dtype)
     # Written per component, and the unnormalized normal stored (optimization_barrier) before
     # it is normalized and reflected about: XLA:CPU otherwise splits the (..., 3)-shaped version
-    # into 12 loops and recomputes the cheap part of the sampler in several of them. Same
-    # values up to rounding; same-run A/B of reflect(wo, h) at 1e6 float32 lanes, load average
-    # 31: 5.1 -> 16.8 M/s (3 loops). Per component without the barrier: 2.3 M/s.
+    # into 12 loops and recomputes the cheap part of the sampler in several of them; this way
+    # reflect(wo, h) compiles to 3 loops. Same values up to rounding. Writing it per component
+    # without the barrier is not enough: the recomputation remains.
     # Stretch to the configuration where the roughness is 1 (hemisphere of visible normals).
     vx, vy, vz = _normalized(alpha * wo[..., 0], alpha * wo[..., 1], wo[..., 2])
     lensq = vx * vx + vy * vy

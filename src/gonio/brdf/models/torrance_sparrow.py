@@ -114,9 +114,8 @@ class TorranceSparrow(BRDFModel):
         v = mf.visibility(wi, wo, h, self.alpha, self.distribution, self.shadowing)
         # The per-lane values the channels share, stored once: without the barrier XLA:CPU
         # recomputes the cheap half of D and G in every channel's loop and splits the rest into
-        # one pass over memory per expensive op (GGX f: 6 loops -> 2, Beckmann 10 -> 7).
-        # Same-run A/B of f at 1e6 float32 lanes, load average 11: GGX conductor 13.3 -> 14.7,
-        # GGX dielectric 120 -> 161, Beckmann conductor 10.2 -> 10.8 M/s.
+        # one pass over memory per expensive op; with it, GGX f compiles to 2 loops and
+        # Beckmann f to 7 (throughput: benchmarks/bench_throughput.py).
         return jax.lax.optimization_barrier(jnp.stack([d * v, dot(wi, h)], -1))
 
     def _conductor(self) -> bool:
@@ -189,9 +188,8 @@ class TorranceSparrow(BRDFModel):
         1 / (4 den)``): visible normals give ``F cos_i (cos_o + mu_o) / den`` (``F G2 / G1(wo)``,
         as Mitsuba's ``roughconductor`` writes it), distribution sampling gives
         ``F cos_i (wo.h) / (n.h den)``. The same values as
-        the generic ``f cos_i / pdf`` up to rounding, without evaluating ``D`` a second time:
-        same-run A/B of ``sample`` at 1e6 float32 lanes, load average 30: Beckmann conductor
-        3.4 -> 5.0 M/s, GGX visible 3.7 -> 9.3 M/s (19 -> 17 and 13 -> 11 loops).
+        the generic ``f cos_i / pdf`` up to rounding, without evaluating ``D`` a second time
+        (which also leaves XLA:CPU fewer loops to emit for ``sample``).
         """
         if not (self._diffuse_free() and self.shadowing == "smith"):
             return super()._finish(wi, wo, ok_o)

@@ -114,8 +114,8 @@ def find_interval(cdf_flat: Array, base: Array, n: int, u: Array) -> Array:
     step = 1 << max(0, (n - 1).bit_length() - 1) if n > 1 else 0
     # base and each step's index are stored (gonio.brdf._xla.materialize): otherwise XLA
     # recomputes them inside every later step's gather loop and keeps every step's gathered
-    # values alive to the end (without it inversion sampling runs at 0.67x: same-run A/B,
-    # benchmarks/ab_xla.py)
+    # values alive to the end, a large share of inversion sampling's cost
+    # (benchmarks/bench_throughput.py)
     if step:
         (base,) = materialize([jnp.broadcast_to(base, u.shape)], u)
     while step:
@@ -268,9 +268,9 @@ class Distribution2D:
     ) -> tuple[tuple[Array, Array], tuple[Array, Array], Array]:
         """Draw a cell: ``((iy, ix), (ry, rx) remapped uniforms in the cell, cell probability)``.
 
-        ``clip=False``: ``u`` is already a float array in [0, 1)^2. Clipping it again inside a
-        kernel makes the inversion kernel of tables take 1.3x the CPU time on XLA's CPU backend
-        (128 against 96 ms per 10^6 samples in a same-run A/B).
+        ``clip=False``: ``u`` is already a float array in [0, 1)^2. Callers inside a kernel pass
+        it so: a second clip there is not free on XLA's CPU backend (it is fused into the
+        inversion kernel's gather loops).
         """
         u = _float_u(u) if clip else u
         iy, ry, py = self.marginal.sample_discrete(u[..., 0], which, clip=False)
@@ -539,7 +539,7 @@ def rejection_sample_traced(
     if n == 0 or max_rounds <= 1:
         return x, ok, rounds
     # an eighth of the batch: about the pending queries left by an acceptance of 0.85 (a
-    # quarter ran 20 % slower on the benchmark table, with lanes idle after the first pass)
+    # larger retry batch leaves lanes idle after its first pass)
     lanes = n if n <= 1024 else max(1024, n // 8)
     leaves, tree = jax.tree.flatten(x)
     lane = jnp.arange(lanes, dtype=jnp.int32)

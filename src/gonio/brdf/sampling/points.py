@@ -2,8 +2,8 @@
 radical inverse that Sobol' points start with.
 
 The renderer needs a few hundred points in a handful of dimensions; building them is cheap, but
-``scipy.stats.qmc`` costs the import of all of ``scipy.stats`` (0.4 s on an idle 2-core
-machine, 3.7 s on a loaded one), more than the rest of a render's start. So Sobol' points are
+``scipy.stats.qmc`` costs the import of all of ``scipy.stats``, more than the rest of a
+render's start (``benchmarks/bench_first_image.py`` times that start). So Sobol' points are
 generated here from the Joe-Kuo direction numbers that SciPy ships
 (``scipy/stats/_sobol_direction_numbers.npz``, read with NumPy, located without importing
 ``scipy.stats``); where that file is not found, ``scipy.stats.qmc.Sobol`` gives the same
@@ -23,17 +23,11 @@ modulo 2^32): each rotated point is uniform on [0, 1)^2, so every pixel is an un
 independent of the others, and the rotated set is still the lattice. The samplers map a pair
 through a warp (concentric disk, visible normals, the environment's quadtree) onto an
 environment whose bright regions have sharp edges; there the lattice gives less error than the
-Sobol' net. Same-run measurement, 64² sphere under the studio environment, relative MSE over 4
-seeds, Sobol' net -> lattice:
-
-- BRDF samples alone, 16 / 64 spp: Lambert 0.341 / 0.0301 -> 0.279 / 0.0238, GGX alpha 0.2
-  0.137 / 0.0138 -> 0.087 / 0.0115;
-- environment samples alone, 16 spp: Lambert 0.00260 -> 0.00248, GGX alpha 0.2 0.0222 -> 0.0216;
-- MIS, 16 / 64 spp: Lambert 0.00255 / 0.000336 -> 0.00199 / 0.000288, GGX alpha 0.2 0.00667 /
-  0.000716 -> 0.00511 / 0.000470, GGX alpha 0.05 0.00578 / 0.000296 -> 0.00243 / 0.000196.
-
-The gap showed against Mitsuba 3's ``multijitter`` sampler (a correlated multi-jittered pattern,
-close to a rotated lattice): BRDF samples alone, Lambert, 16 spp, 0.245 against the net's 0.341.
+Sobol' net, for BRDF samples, environment samples and their MIS combination alike, and most
+for glossy materials. The gap first showed against Mitsuba 3's ``multijitter`` sampler (a
+correlated multi-jittered pattern, close to a rotated lattice), whose error the digitally
+shifted net did not reach; ``benchmarks/bench_equal_time.py`` compares the two renderers'
+error at equal time.
 """
 
 from __future__ import annotations
@@ -134,8 +128,8 @@ def padded_unit(
     takes it in an order permuted per pixel and pair (sample ``i`` takes point ``i XOR r``,
     ``r`` from the shift's low 8 bits, which the conversion drops), with its own rotation:
     each pair is the whole lattice, while the pairing between pairs is random ("padding",
-    Kollig and Keller 2002). Same-run A/B against the next dimensions of one sequence for the
-    second pair: relative MSE 8-16 % lower (see :mod:`gonio.render.integrator`).
+    Kollig and Keller 2002). This gives lower error than taking the second pair from the next
+    dimensions of one sequence (see :mod:`gonio.render.integrator`).
     """
     s, d = points.shape[0], shift.shape[1]
     r = points[:, 0]  # radical inverse of the sample's index, 32 bits

@@ -39,7 +39,7 @@ class BucketGeometry:
 
 def bucket_of(geo: BucketGeometry, wo: Array) -> Array:
     x, y, z = wo[..., 0], wo[..., 1], wo[..., 2]
-    # the lookup's polynomial atan2 in float32 (see gonio.brdf.lookup.atan2 for its A/B figure),
+    # the lookup's polynomial atan2 in float32 (see gonio.brdf.lookup.atan2 for why),
     # exact in float64; sample and pdf both bucket through here, so they always agree
     theta = atan2(jnp.sqrt(x * x + y * y), z)
     bt = jnp.clip(jnp.floor(theta * (geo.n_to / HALF_PI)).astype(jnp.int32), 0, geo.n_to - 1)
@@ -91,9 +91,8 @@ def direction_in_cell(
     ct = c0 - ry * (c0 - c1)
     cp, sp = _cos_sin_in_column(geo.n_p, col, rx, ct.dtype)
     # stored once (gonio.brdf._xla.materialize): otherwise XLA fuses the gathers above into the
-    # loops below, which then run as scalar code once per output component (without it the
-    # alias kernel alone takes 1.9x the CPU time: 136 against 72 ms per 10^6 samples in a
-    # same-run A/B with jnp.cos/sin; benchmarks/ab_xla.py, materialize-direction, times it whole)
+    # loops below, which then run as scalar code once per output component (otherwise a large
+    # share of the alias kernel's cost; benchmarks/bench_throughput.py times the samplers)
     ct, cp, sp = materialize([ct, cp, sp], ct)
     st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
     if geo.iso:  # phi is relative to wo's azimuth: rotate by +phi_o
@@ -106,9 +105,8 @@ def _cos_sin_in_column(n_p: int, col: Array, rx: Array, dtype: Any) -> tuple[Arr
     """``cos phi, sin phi`` of ``phi = (col + rx) 2 pi / n_p`` (``rx`` in [0, 1)).
 
     The column's start angle comes from a table and the offset ``delta = rx 2 pi / n_p`` goes
-    through short Taylor series (error below 1e-8 for ``delta <= pi / 4``): with XLA's CPU
-    ``cos``/``sin`` instead, the alias kernel takes 1.15x the CPU time per sample (72 against 63
-    ms per 10^6, inversion 1.06x; same-run A/B, see ``benchmarks/ab_xla.py``, cos-sin-series)."""
+    through short Taylor series (error below 1e-8 for ``delta <= pi / 4``), cheaper than XLA's
+    CPU ``cos``/``sin`` (see :mod:`gonio.brdf._trig`) in the alias and inversion kernels."""
     width = TWO_PI / n_p
     if n_p < 8:  # offsets too wide for the series
         phi = (col.astype(dtype) + rx) * width

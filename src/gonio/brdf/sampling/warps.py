@@ -37,7 +37,7 @@ def _concentric_xy(u: Array) -> tuple[Array, Array]:
 def square_to_cosine_hemisphere(u: Array) -> Array:
     """Cosine-weighted hemisphere around +z (Malley's method) -> ``(..., 3)``."""
     # Components stacked once at the end: slicing a stacked disk point back apart kept XLA:CPU
-    # from fusing the map (the warp ran 3x faster this way at 1e6 lanes; same values).
+    # from fusing the map into one loop (same values either way).
     x, y = _concentric_xy(u)
     z = safe_sqrt(1.0 - x**2 - y**2)
     return jnp.stack([x, y, z], -1)

@@ -18,7 +18,8 @@ filter) is modelled as a Gaussian of ``psf_px`` pixels applied to the board's pr
 the camera's distance: a few point samples of a sharp pattern alias its edges by up to
 1/(2 supersample) pixel, depending on where each edge falls on the pixel grid, which moves the
 ChArUco corners by ~0.1 px and the recovered camera direction by up to ~0.1 deg, the same in
-every frame of the same geometry (``benchmarks/bench_pose_bias.py``).
+every frame of the same geometry (``benchmarks/bench_acquisition_accuracy.py`` reports each
+frame's camera-direction error).
 """
 
 from __future__ import annotations

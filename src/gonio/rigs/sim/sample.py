@@ -44,8 +44,8 @@ class SimulatedSampleCamera:
         from gonio.brdf import models
 
         if self._f is None:
-            # jit at the device boundary: one compile, then ~0.1 ms per capture (an analytic
-            # model; a table would be baked into the compiled code as a constant)
+            # jit at the device boundary: one compile, then each capture is one cheap call (an
+            # analytic model; a table would be baked into the compiled code as a constant)
             is_model = isinstance(self.model, models.BRDFModel)
             self._f = jax.jit(self.model.f) if is_model else self.model.f
         f = self._f(jnp.asarray(wi, dtype=jnp.float64), jnp.asarray(wo, dtype=jnp.float64))
