@@ -5,8 +5,11 @@ stderr and a non-zero exit for input that cannot be right, never a traceback."""
 
 from __future__ import annotations
 
+import os
 import re
 import struct
+import subprocess
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -78,3 +81,123 @@ def test_merl_file_with_a_negated_channel_is_refused(tmp_path):
     p.write_bytes(d[:12] + raw.tobytes())
     t = io.load(p)
     assert 0 < np.count_nonzero(t.mask) < t.mask.size
+
+
+# -------------------------------------------------------------------------- Cornell, ALTA
+def _run_measuring_rss(*args, timeout: float = 300) -> tuple[subprocess.CompletedProcess, int]:
+    """``gonio ARGS`` through the console script; the result and the process's peak resident
+    memory in bytes (``wait4``'s rusage of that process alone)."""
+    proc = subprocess.Popen(
+        [console_script.script(), *map(str, args)],
+        env=console_script.env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    streams: dict[str, str] = {}
+    readers = [
+        threading.Thread(target=lambda k=k, f=f: streams.__setitem__(k, f.read()))
+        for k, f in (("out", proc.stdout), ("err", proc.stderr))
+    ]
+    for t in readers:
+        t.start()
+    killer = threading.Timer(timeout, proc.kill)
+    killer.start()
+    try:
+        _, status, usage = os.wait4(proc.pid, 0)
+    finally:
+        killer.cancel()
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    for t in readers:
+        t.join()
+    done = subprocess.CompletedProcess(proc.args, proc.returncode, streams["out"], streams["err"])
+    return done, usage.ru_maxrss * 1024
+
+
+def _zeros_text(path: Path, header: str, line: str, mib: int = 63) -> Path:
+    with open(path, "w") as fh:
+        fh.write(header)
+        block = line * 4096
+        while fh.tell() < mib << 20:
+            fh.write(block)
+    return path
+
+
+@pytest.mark.parametrize(
+    "name, header, line",
+    [
+        ("zeros.alta", "#DIM 3 1\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n", "0 0 0 0\n"),
+        ("zeros.brdf", "1\n500\n", "0 0 0 0 0\n"),
+    ],
+)
+def test_text_file_of_many_rows_is_refused_before_its_numbers_are_stored(
+    tmp_path, name, header, line
+):
+    """``gonio info`` of 63 MiB of zeros (8 M rows) reached 2.6 GiB (ALTA) and 2.0 GiB
+    (Cornell) as Python lists; rows are now counted first (at most 2,097,152)."""
+    p = _zeros_text(tmp_path / name, header, line)
+    proc, peak = _run_measuring_rss("info", p)
+    _one_line_refusal(proc, p, r"lines of text, more than 2097152")
+    assert peak < 1 << 30, f"{peak / 2**30:.2f} GiB"
+
+
+def test_text_file_with_one_huge_line_is_refused(tmp_path):
+    """The numbers of a Cornell file may wrap anywhere; one line of 63 MiB is still bounded."""
+    p = tmp_path / "long.brdf"
+    p.write_text("1\n500\n" + "0 " * (1 << 20) + "\n")
+    _refused(p, r"line 3: more than 65536 characters")
+
+
+def test_many_numbers_on_short_lines_are_refused(tmp_path):
+    """Under the line bound, over the numbers' bound (16,777,216: 128 MiB as float64)."""
+    p = tmp_path / "wide.alta"
+    row = " ".join(["0"] * 20) + "\n"
+    # a legal #DIM header; 1.4 M rows of 20 numbers are 29 M numbers
+    _zeros_text(p, "#DIM 1 19\n#PARAM_IN COS_TH\n", row, mib=55)
+    _refused(p, r"more than 16777216 numbers")
+
+
+def _alta(tmp: Path, param_in: str, rows: list[list[float]], n_out: int = 1) -> Path:
+    from gonio.io.alta import PARAM_IN_DIMS
+
+    p = tmp / f"{param_in.lower()}.alta"
+    head = f"#DIM {PARAM_IN_DIMS[param_in]} {n_out}\n#PARAM_IN {param_in}\n"
+    head += "#PARAM_OUT INV_STERADIAN\n"
+    p.write_text(head + "".join(" ".join(map(str, r)) + "\n" for r in rows))
+    return p
+
+
+GOOD = {
+    "ISOTROPIC_TL_TV_PROJ_DPHI": [0.3, 0.2, 0.1, 0.5],
+    "ISOTROPIC_TV_TL_DPHI": [0.3, 0.2, 1.0, 0.5],
+    "SPHERICAL_TL_PL_TV_PV": [0.3, 1.0, 0.2, -2.0, 0.5],
+    "RUSIN_TH_TD_PD": [0.3, 0.2, 1.0, 0.5],
+    "RUSIN_TH_PH_TD_PD": [0.3, 0.1, 0.2, 1.0, 0.5],
+    "CARTESIAN": [0.0, 0.6, 0.8, 0.6, 0.0, 0.8, 0.5],
+}
+BAD = [
+    ("ISOTROPIC_TL_TV_PROJ_DPHI", 0, 7.0, "polar angle"),  # theta_l in degrees-ish: wrapped
+    ("ISOTROPIC_TL_TV_PROJ_DPHI", 1, 40.0, "projected polar angle"),
+    ("ISOTROPIC_TV_TL_DPHI", 1, -0.5, "polar angle"),
+    ("ISOTROPIC_TV_TL_DPHI", 2, 90.0, "azimuth"),
+    ("SPHERICAL_TL_PL_TV_PV", 2, 20.0, "polar angle"),
+    ("SPHERICAL_TL_PL_TV_PV", 3, 1e300, "azimuth"),
+    ("RUSIN_TH_TD_PD", 2, 180.0, "azimuth"),
+    ("RUSIN_TH_PH_TD_PD", 1, -90.0, "azimuth"),
+    ("CARTESIAN", 0, 0.0, "unit vector"),  # with 0, 0.6, 0.8 -> length 1 still: see below
+    ("CARTESIAN", 3, 5.0, "unit vector"),
+]
+
+
+@pytest.mark.parametrize("param_in, col, value, what", BAD)
+def test_alta_angles_outside_their_domain_are_refused(tmp_path, param_in, col, value, what):
+    """Commit 69e6b84 bounded COS_TH and the Rusinkiewicz elevations; the spherical
+    parametrizations, the azimuths and the Cartesian vectors were still wrapped or
+    normalized silently."""
+    good = GOOD[param_in]
+    assert io.load(_alta(tmp_path, param_in, [good])).values.shape == (1, 1)
+    row = list(good)
+    row[col] = value
+    if param_in == "CARTESIAN" and value == 0.0:
+        row[0:3] = [0.0, 0.0, 0.0]  # a zero vector: normalized to NaN, dropped silently
+    _refused(_alta(tmp_path, param_in, [good, row]), rf"data row 2: {param_in} input .* {what}")
