@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import tomllib
 from typing import Any
 
@@ -135,8 +136,9 @@ def loads_toml(
     """Parse untrusted TOML within the module's limits; ``error`` (a GonioError) otherwise.
 
     Refused: more than :data:`MAX_TOML_BYTES`, non-UTF-8 text, nesting deeper than
-    :data:`MAX_NESTING`, invalid TOML. ``nan`` and ``inf`` are valid TOML and are left to the
-    caller's range checks, which must name the key.
+    :data:`MAX_NESTING`, invalid TOML, integers with more digits than Python converts.
+    ``nan`` and ``inf`` are valid TOML and are left to the caller's range checks, which must
+    name the key.
     """
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else data
     if len(raw) > MAX_TOML_BYTES:
@@ -150,6 +152,11 @@ def loads_toml(
         raise error(f"{source}: invalid TOML: {exc}") from None
     except RecursionError:
         raise error(f"{source}: TOML nested too deeply") from None
+    except ValueError:
+        # tomllib converts integers with int(), which refuses more than
+        # sys.get_int_max_str_digits() digits (4300): no count or angle has that many
+        limit = sys.get_int_max_str_digits()
+        raise error(f"{source}: invalid TOML: an integer of more than {limit} digits") from None
 
 
 def bad_number_path(

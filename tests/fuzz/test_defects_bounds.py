@@ -201,3 +201,27 @@ def test_alta_angles_outside_their_domain_are_refused(tmp_path, param_in, col, v
     if param_in == "CARTESIAN" and value == 0.0:
         row[0:3] = [0.0, 0.0, 0.0]  # a zero vector: normalized to NaN, dropped silently
     _refused(_alta(tmp_path, param_in, [good, row]), rf"data row 2: {param_in} input .* {what}")
+
+
+# ------------------------------------------------------------------------------ TOML input
+@pytest.mark.parametrize("what", ["plan", "rig"])
+def test_integer_of_more_than_4300_digits_is_one_line(tmp_path, what):
+    """``gonio plan --plan P.toml`` with an integer of 5,000 digits: tomllib's int() raised
+    ValueError (Python's digit limit) through the CLI as a traceback."""
+    huge = "9" * 5000
+    if what == "plan":
+        p = tmp_path / "P.toml"
+        p.write_text(
+            f'kind = "isotropic"\ntheta_i_deg = [20, {huge}]\ntheta_o_deg = [20, 50]\n'
+            "dphi_deg = [90, 180]\n"
+        )
+        args = ["plan", "--plan", p]
+    else:
+        import gonio.rigs
+
+        p = tmp_path / "R.toml"
+        rig = (Path(gonio.rigs.__file__).parent / "sim.toml").read_text()
+        p.write_text(f"fuzz_count = {huge}\n{rig}")
+        args = ["plan", "--rig", p, "--plan", "iso-tiny"]
+    proc = console_script.run(*args)
+    _one_line_refusal(proc, p, r"invalid TOML: an integer of more than 4300 digits")
