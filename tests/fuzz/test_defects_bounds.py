@@ -5,6 +5,7 @@ stderr and a non-zero exit for input that cannot be right, never a traceback."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import struct
@@ -225,3 +226,45 @@ def test_integer_of_more_than_4300_digits_is_one_line(tmp_path, what):
         args = ["plan", "--rig", p, "--plan", "iso-tiny"]
     proc = console_script.run(*args)
     _one_line_refusal(proc, p, r"invalid TOML: an integer of more than 4300 digits")
+
+
+# ------------------------------------------------------------------------------ strict JSON
+def _strict(text: str):
+    def refuse(token: str):
+        raise ValueError(f"non-strict JSON token {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_info_json_prints_strict_json_for_a_nan_in_the_provenance(tmp_path):
+    """``gonio info X.brdf.h5 --json`` printed the token ``NaN`` (not JSON) for a NaN in the
+    file's metadata attribute; it now prints null and says where and why."""
+    import h5py
+
+    p = tmp_path / "x.brdf.h5"
+    io.save(_half_diff_table((6, 6, 12), 1), p)
+    with h5py.File(p, "r+") as h5:
+        h5.attrs["metadata"] = '{"source": {"format": "lab", "gain": NaN, "peak": [1.0, Infinity]}}'
+    proc = console_script.run("info", p, "--json")
+    console_script.assert_clean(proc)
+    out = _strict(proc.stdout)
+    assert out["provenance"]["source"]["gain"] is None
+    assert out["nonfinite_as_null"] == {
+        "provenance.source.gain": "NaN",
+        "provenance.source.peak[1]": "Infinity",
+    }
+    proc = console_script.run("info", p)  # the table prints the same JSON
+    console_script.assert_clean(proc)
+    assert ": NaN" not in proc.stdout and '"gain": null' in proc.stdout
+
+
+def test_dumps_json_is_strict():
+    from gonio._bounded import dumps_json
+
+    assert _strict(dumps_json([1.0, float("nan")])) == [1.0, None]
+    assert _strict(dumps_json({"a": {"b": float("-inf")}, "c": (2, 3)})) == {
+        "a": {"b": None},
+        "c": [2, 3],
+        "nonfinite_as_null": {"a.b": "-Infinity"},
+    }
+    assert dumps_json({"a": 1}, indent=2) == json.dumps({"a": 1}, indent=2)
