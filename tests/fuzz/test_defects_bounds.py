@@ -268,3 +268,19 @@ def test_dumps_json_is_strict():
         "nonfinite_as_null": {"a.b": "-Infinity"},
     }
     assert dumps_json({"a": 1}, indent=2) == json.dumps({"a": 1}, indent=2)
+
+
+def test_run_log_is_strict_json_and_its_reader_takes_null(tmp_path):
+    """``RUN/log.jsonl`` wrote ``NaN`` for a non-finite figure; ``gonio plan --timing-from RUN``
+    reads the null it writes now as a missing figure."""
+    from gonio.acquire.engine import RunLog
+    from gonio.acquire.timing import costs_from_run
+
+    log = RunLog(tmp_path / "log.jsonl")
+    log("sample", t_capture=2.0, t_book=0.5, move_wall_s=float("nan"), profile_wall_s=0.25)
+    log.close()
+    (line,) = (tmp_path / "log.jsonl").read_text().splitlines()
+    e = _strict(line)
+    assert e["move_wall_s"] is None and e["nonfinite_as_null"] == {"move_wall_s": "NaN"}
+    costs = costs_from_run(tmp_path)
+    assert costs[0] == 2.0
