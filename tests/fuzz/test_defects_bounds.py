@@ -283,4 +283,4 @@ def test_run_log_is_strict_json_and_its_reader_takes_null(tmp_path):
     e = _strict(line)
     assert e["move_wall_s"] is None and e["nonfinite_as_null"] == {"move_wall_s": "NaN"}
     costs = costs_from_run(tmp_path)
-    assert costs[0] == 2.0
+    assert costs.capture_s == 2.0 and costs.book_s == 0.5 and costs.move_overhead_s == 0.0
