@@ -15,6 +15,9 @@ real measurement needs and far below what would exhaust a workstation:
 * :data:`MAX_TEXT_BYTES` — numeric text files (Cornell, ALTA) are at most 64 MiB (the largest
   published one is about 1 MB); binary files at most :data:`MAX_DECODED_BYTES` plus 1 MiB.
 
+What gonio prints or writes as JSON is strict JSON (:func:`dumps_json`): a NaN or infinite
+number becomes ``null``, and the paths it stood at are listed under :data:`NONFINITE_KEY`.
+
 This module imports nothing of gonio but :mod:`gonio.errors`, so every subpackage may use it.
 """
 
@@ -23,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import tomllib
 from typing import Any
 
@@ -35,6 +39,8 @@ MAX_NESTING = 64
 MAX_JSON_BYTES = 64 << 20
 MAX_TOML_BYTES = 1 << 20
 MAX_TEXT_BYTES = 64 << 20
+#: Key under which :func:`dumps_json` lists the non-finite numbers it wrote as null.
+NONFINITE_KEY = "nonfinite_as_null"
 
 
 def decode_utf8(data: bytes, source: str, error: type[GonioError] = FormatError) -> str:
@@ -135,8 +141,9 @@ def loads_toml(
     """Parse untrusted TOML within the module's limits; ``error`` (a GonioError) otherwise.
 
     Refused: more than :data:`MAX_TOML_BYTES`, non-UTF-8 text, nesting deeper than
-    :data:`MAX_NESTING`, invalid TOML. ``nan`` and ``inf`` are valid TOML and are left to the
-    caller's range checks, which must name the key.
+    :data:`MAX_NESTING`, invalid TOML, integers with more digits than Python converts.
+    ``nan`` and ``inf`` are valid TOML and are left to the caller's range checks, which must
+    name the key.
     """
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else data
     if len(raw) > MAX_TOML_BYTES:
@@ -150,6 +157,11 @@ def loads_toml(
         raise error(f"{source}: invalid TOML: {exc}") from None
     except RecursionError:
         raise error(f"{source}: TOML nested too deeply") from None
+    except ValueError:
+        # tomllib converts integers with int(), which refuses more than
+        # sys.get_int_max_str_digits() digits (4300): no count or angle has that many
+        limit = sys.get_int_max_str_digits()
+        raise error(f"{source}: invalid TOML: an integer of more than {limit} digits") from None
 
 
 def bad_number_path(
@@ -176,3 +188,32 @@ def bad_number_path(
         elif isinstance(node, list):
             stack += [(f"{where}[{i}]", v) for i, v in enumerate(node)]
     return None
+
+
+def finite_json(obj: Any, where: str = "") -> tuple[Any, dict[str, str]]:
+    """A copy of ``obj`` (dicts, lists and tuples of JSON values) whose NaN and infinite floats
+    are None, and ``{dotted path: "NaN" | "Infinity" | "-Infinity"}`` of those replaced."""
+    replaced: dict[str, str] = {}
+
+    def walk(node: Any, at: str) -> Any:
+        if isinstance(node, float) and not math.isfinite(node):
+            replaced[at or "<root>"] = json.dumps(float(node))
+            return None
+        if isinstance(node, dict):
+            return {k: walk(v, f"{at}.{k}" if at else str(k)) for k, v in node.items()}
+        if isinstance(node, list | tuple):
+            return [walk(v, f"{at}[{i}]") for i, v in enumerate(node)]
+        return node
+
+    return walk(obj, where), replaced
+
+
+def dumps_json(obj: Any, **kwargs: Any) -> str:
+    """``json.dumps(obj, **kwargs)`` as strict JSON: non-finite numbers are written as null and,
+    when ``obj`` is an object, listed with their value under :data:`NONFINITE_KEY` (the reason
+    a reader finds null there); ``allow_nan`` is always False."""
+    kwargs.pop("allow_nan", None)
+    clean, replaced = finite_json(obj)
+    if replaced and isinstance(clean, dict):
+        clean = {**clean, NONFINITE_KEY: replaced}
+    return json.dumps(clean, allow_nan=False, **kwargs)

@@ -4,6 +4,10 @@
 that kind, and a mutation; it returns the mutated bytes and a one-line description. Mutation
 families:
 
+New classes (issue #45): consistent reshaping (a MERL grid with a matching payload, a neural
+network widened or deepened in its description and weights), scaled fields (a MERL channel
+negated or scaled, a text column scaled), integers overflowing Python's 4,300-digit limit.
+
 * bytes (every format): truncation, bit flips, zeroed ranges, duplicated ranges (the 1 KB
   duplication of the issue among them), inserted and deleted ranges, 32/64-bit words set to
   huge, negative or zero values;
@@ -25,6 +29,7 @@ from __future__ import annotations
 import io as _io
 import json
 import math
+import re
 import struct
 import tempfile
 import tomllib
@@ -176,7 +181,41 @@ def _float_payload(d: bytes, rng: Rng, start: int, end: int, dtype: str) -> tupl
 
 
 # ---------------------------------------------------------------------------------- MERL
+#: MERL grids whose payload is resized to match (a consistent file): beyond the bounds of a
+#: measured grid (the 1 x 1 x 65536 of issue #45), at them, and small.
+MERL_SHAPES = ((1, 1, 65536), (1, 1, 720), (361, 2, 2), (2, 3, 5), (360, 360, 46))
+
+
+def _merl_reshaped(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    """A MERL file with another grid and a payload of the matching size (from the file's own
+    values, repeated); the largest is written as a header only (its payload would be 143 MB)."""
+    dims = MERL_SHAPES[int(rng.integers(len(MERL_SHAPES)))]
+    n = int(np.prod(dims))
+    if n > 1 << 20:
+        return struct.pack("<3i", *dims), f"MERL grid set to {dims} (header only)"
+    vals = np.frombuffer(d, "<f8", offset=12)
+    vals = np.resize(vals[: len(vals) // 3 * 3].reshape(3, -1), (3, n))
+    return struct.pack("<3i", *dims) + vals.astype("<f8").tobytes(), f"MERL grid set to {dims}"
+
+
+def _merl_channel(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    """One colour channel negated or scaled (negative values mark unmeasured cells)."""
+    raw = np.frombuffer(d, "<f8", offset=12).copy()
+    if raw.size < 3:
+        return m_flip(d, rng)
+    raw = raw[: raw.size // 3 * 3].reshape(3, -1)
+    c = int(rng.integers(3))
+    f = float(_pick(rng, [-1.0, 1e30, 1e-30, -1e-3]))
+    raw[c] *= f
+    return d[:12] + raw.astype("<f8").tobytes(), f"MERL channel {c} scaled by {f}"
+
+
 def m_merl(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    r = rng.random()
+    if r < 0.15:
+        return _merl_reshaped(d, rng)
+    if r < 0.3:
+        return _merl_channel(d, rng)
     if rng.random() < 0.5:
         b = bytearray(d)
         i = int(rng.integers(0, 3))
@@ -459,10 +498,33 @@ def m_hdf5(d: bytes, rng: Rng) -> tuple[bytes, str]:
 
 
 # ---------------------------------------------------------------------------------- text
+def _scale_column(lines: list[str], rng: Rng) -> tuple[bytes, str]:
+    """One column of the data rows (angles, values) scaled: degrees for radians, a sign flip,
+    a huge or tiny factor."""
+    rows = [i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")]
+    width = max((len(lines[i].split()) for i in rows), default=0)
+    if width < 2:
+        return "\n".join(lines).encode(), "no data column to scale"
+    col = int(rng.integers(width))
+    f = float(_pick(rng, [180 / math.pi, -1.0, 1e30, 1e-30, 4.0]))
+    for i in rows:
+        toks = lines[i].split()
+        if col < len(toks):
+            try:
+                toks[col] = repr(float(toks[col]) * f)
+            except ValueError:
+                continue
+            lines[i] = " ".join(toks)
+    return "\n".join(lines).encode(), f"data column {col + 1} scaled by {f:.6g}"
+
+
 def m_text(d: bytes, rng: Rng) -> tuple[bytes, str]:
     text = d.decode("utf-8", "replace")
     lines = text.split("\n")
-    op = str(_pick(rng, ["number", "number", "number", "drop", "dup", "swap", "utf8", "header"]))
+    op = str(_pick(rng, ["number", "number", "number", "drop", "dup", "swap", "utf8", "header",
+                         "scale"]))  # fmt: skip
+    if op == "scale":
+        return _scale_column(lines, rng)
     if op in ("number", "header"):
         header = op == "header"
         cand = [
@@ -569,9 +631,25 @@ def _tree_mutation(tree: Any, rng: Rng, for_toml: bool) -> str:
     return f"{where}: {old!r} -> {new!r}"[:200]
 
 
+def _overflow_integer(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    """One integer of the text given thousands of digits (beyond Python's 4,300-digit int()
+    limit, which tomllib hits)."""
+    text = d.decode("utf-8", "replace")
+    found = [m for m in re.finditer(r"(?<=[=\[,\s])-?\d+(?=\s*[,\]\n])", text)]
+    if not found:
+        return m_flip(d, rng)
+    m = found[int(rng.integers(len(found)))]
+    n = int(_pick(rng, [4301, 5000, 20000]))
+    return (text[: m.start()] + "9" * n + text[m.end() :]).encode(), (
+        f"integer {m.group()} at {m.start()} given {n} digits"
+    )
+
+
 def m_toml(d: bytes, rng: Rng) -> tuple[bytes, str]:
     import tomli_w
 
+    if rng.random() < 0.1:
+        return _overflow_integer(d, rng)
     try:
         tree = tomllib.loads(d.decode())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError):

@@ -9,8 +9,9 @@ kilobytes, not the whole archive.
 
 The mutations (:func:`m_nbrdf`) act on the archive's members: removal, a corrupt or hostile JSON
 description, wrong weight shapes, NaN/Inf or huge weights, huge declared dataset shapes, a highly
-compressible member (a zip bomb in miniature), an unsupported compression method, and
-truncation or byte flips of one compressed member.
+compressible member (a zip bomb in miniature), an unsupported compression method,
+truncation or byte flips of one compressed member, and a network widened or deepened
+consistently (description and weights) within and beyond the reader's bounds.
 """
 
 from __future__ import annotations
@@ -198,14 +199,32 @@ def _json_mutation(desc: dict[str, Any], rng: Any) -> tuple[Any, str]:
     return desc, f"layer {i} units set to NaN"
 
 
+#: Hidden layers a widened network gets: within the reader's bounds (the first two) and
+#: beyond them in width, depth or multiply-adds (issue #45: 4096 wide ran XLA out of memory,
+#: 512 wide took 4.6 GiB).
+WIDENED = ([64, 64], [24] * 7, [4096], [512, 512], [200, 200], [4] * 9)
+
+
+def _widen(members: dict[str, bytes], json_name: str, rng: Any) -> tuple[bytes, str]:
+    """Replace one material's description and weights by a consistent wider or deeper one
+    (small weights, so that only the size can be wrong)."""
+    units = list(WIDENED[int(rng.integers(len(WIDENED)))])
+    ks, bs = _network(units, int(rng.integers(1 << 16)))
+    members[json_name] = json.dumps(description(units)).encode()
+    members[json_name[: -len(".json")] + ".h5"] = weights_h5([k * 0.05 for k in ks], bs)
+    return _zip(members), f"nbrdf {json_name}: network widened to hidden layers {units}"
+
+
 def m_nbrdf(d: bytes, rng: Any) -> tuple[bytes, str]:
     """One zip-level mutation of a neural-BRDF archive (see the module docstring)."""
     members = _members(d)
     names = sorted(members)
     what = str(["remove", "json", "json", "shape", "nan", "huge_weights", "huge_shape", "bomb",
-                "method", "member_bytes", "raw_json"][rng.integers(11)])  # fmt: skip
+                "method", "member_bytes", "raw_json", "widen"][rng.integers(12)])  # fmt: skip
     jsons = [n for n in names if n.endswith(".json")]
     h5s = [n for n in names if n.endswith(".h5")]
+    if what == "widen" and jsons:
+        return _widen(members, jsons[int(rng.integers(len(jsons)))], rng)
     if what == "remove":
         n = names[int(rng.integers(len(names)))]
         del members[n]

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 import numpy as np
 
+from gonio._bounded import dumps_json
 from gonio.errors import ParameterError
 
 _PLAN_HELP = (
@@ -198,7 +198,7 @@ def _plan(args: argparse.Namespace) -> int:
     if plan.n_stages > 1:
         out["note"] = "later stages depend on measurements; predicted around the mirror direction"
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(dumps_json(out, indent=2))
         return 0
     _print_plan(out, plan, rig, costs, args.list_refused)
     return 0
@@ -300,7 +300,7 @@ def _acquire(args: argparse.Namespace) -> int:
         "wall_s": round(summary.wall_s, 3),
     }
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(dumps_json(out, indent=2))
     else:
         print(
             f"run {summary.run_dir}: {summary.done}/{summary.planned} samples"

@@ -28,7 +28,6 @@ finished for completeness and is not retried on resume.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -41,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from gonio import interrupts
+from gonio._bounded import dumps_json
 from gonio.acquire import rundir, stopping
 from gonio.acquire.journal import Journal, PlannedConfig
 from gonio.acquire.ordering import move_times, path_time, plan_route
@@ -211,14 +211,15 @@ def _refuse_if_nothing(sp: StagePlan) -> None:
 
 
 class RunLog:
-    """Append-only JSON-lines log (one flushed line per event)."""
+    """Append-only JSON-lines log (one flushed line per event, strict JSON:
+    :func:`gonio._bounded.dumps_json`)."""
 
     def __init__(self, path: Path) -> None:
         self._fh = open(path, "a", encoding="utf-8")
 
     def __call__(self, event: str, **fields) -> None:
         rec = {"t": round(time.time(), 6), "event": event, **fields}
-        self._fh.write(json.dumps(rec, default=_jsonable) + "\n")
+        self._fh.write(dumps_json(rec, default=_jsonable) + "\n")
         self._fh.flush()
 
     def close(self) -> None:

@@ -86,12 +86,14 @@ def costs_from_run(run_dir: str | Path) -> Costs:
     if not samples:
         raise FormatError(f"--timing-from {run_dir}: the log records no configuration")
 
-    def med(key: str) -> float:
-        return float(statistics.median(float(s.get(key, 0.0)) for s in samples))
+    def num(s: dict, key: str) -> float:  # a non-finite figure is logged as null
+        v = s.get(key)
+        return 0.0 if v is None else float(v)
 
-    overhead = statistics.median(
-        float(s.get("move_wall_s", 0.0)) - float(s.get("profile_wall_s", 0.0)) for s in samples
-    )
+    def med(key: str) -> float:
+        return float(statistics.median(num(s, key) for s in samples))
+
+    overhead = statistics.median(num(s, "move_wall_s") - num(s, "profile_wall_s") for s in samples)
     return Costs(
         med("t_capture"),
         max(0.0, float(overhead)),

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
+
+from gonio._bounded import dumps_json
 
 
 def register(sub: Any) -> None:
@@ -81,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     progress = not args.no_progress
     summary = run_demo(args.out, material, settings, force=args.force, progress=progress)
     if args.json:
-        json.dump(summary.to_json(), sys.stdout, indent=2)
+        sys.stdout.write(dumps_json(summary.to_json(), indent=2))
         print()
     else:
         print_summary(summary)

@@ -28,6 +28,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from gonio._bounded import dumps_json
 from gonio.errors import FitError, GonioError, ParameterError
 
 #: File name endings considered measurement files when a folder is given.
@@ -205,7 +206,7 @@ def pending(
 
 
 def _journal(out_dir: Path, record: dict[str, Any]) -> None:
-    line = json.dumps({k: v for k, v in record.items() if k != "table"}) + "\n"
+    line = dumps_json({k: v for k, v in record.items() if k != "table"}) + "\n"
     with open(out_dir / "batch.jsonl", "a") as fh:
         fh.write(line)
         fh.flush()

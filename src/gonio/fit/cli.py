@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import sys
@@ -11,6 +10,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from gonio._bounded import dumps_json
 from gonio.errors import FitError, ParameterError
 
 #: Names of :data:`gonio.fit.losses.LOSSES` (written out so that building the parser does not
@@ -297,7 +297,7 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     if as_json:
-        json.dump(summary, sys.stdout, indent=2)
+        sys.stdout.write(dumps_json(summary, indent=2))
         sys.stdout.write("\n")
     else:
         out_console = Console()
@@ -334,7 +334,7 @@ def _run_score(paths: list[Path], args: argparse.Namespace) -> int:
             if not args.json:
                 _print_score(console, f"{label} ({Path(spec).name})", s, data)
     if args.json:
-        json.dump(rows, sys.stdout, indent=2)
+        sys.stdout.write(dumps_json(rows, indent=2))
         sys.stdout.write("\n")
     return 0
 
@@ -390,10 +390,11 @@ def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any)
             todo, out, options, jobs=args.jobs, scheduler=args.scheduler, on_done=on_done
         )
     if args.json:
-        json.dump(
-            {"out": str(out), "done_before": [str(p) for p in done], "results": summaries},
-            sys.stdout,
-            indent=2,
+        sys.stdout.write(
+            dumps_json(
+                {"out": str(out), "done_before": [str(p) for p in done], "results": summaries},
+                indent=2,
+            )
         )
         sys.stdout.write("\n")
     else:

@@ -71,7 +71,9 @@ def _gaps(raw_data: list[tuple[int, int]], size: int) -> list[tuple[int, int]]:
     return gaps
 
 
-def check_global_heaps(path: PathLike, raw_data: list[tuple[int, int]] = ()) -> None:
+def check_global_heaps(
+    path: PathLike, raw_data: list[tuple[int, int]] = (), data: bytes | None = None
+) -> None:
     """Walk every global heap collection as libhdf5's decoder does; refuse one it would loop on.
 
     Collections are found by their signature outside the datasets' raw data (``raw_data``: byte
@@ -83,21 +85,31 @@ def check_global_heaps(path: PathLike, raw_data: list[tuple[int, int]] = ()) -> 
     a header of index (2 bytes), reference count (2), reserved (4) and size (``L`` bytes, the
     superblock's size of lengths), then its data padded to 8 bytes; index 0 is the free space,
     whose size is the rest of the collection; a tail too short for an object header is free.
+
+    ``data``: the file's bytes when it is held in memory (a member of an archive); ``path``
+    then only names it in messages.
     """
     import mmap
 
-    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
-        try:
-            n_len = _size_of_lengths(data[:16])
-        except ValueError as exc:
-            raise fail(path, str(exc)) from None
-        size = len(data)
-        done = 0  # end of the last collection walked
-        for lo, hi in _gaps(list(raw_data), size):
-            at = data.find(_GCOL, max(lo, done), hi)
-            while at >= 0:
-                done = _walk_collection(data, at, n_len, path)
-                at = data.find(_GCOL, done, hi) if done < hi else -1
+    if data is not None:
+        _walk_heaps(data, list(raw_data), path)
+        return
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        _walk_heaps(mm, list(raw_data), path)
+
+
+def _walk_heaps(data: Any, raw_data: list[tuple[int, int]], path: PathLike) -> None:
+    """:func:`check_global_heaps` on the file's bytes (``bytes`` or an ``mmap``)."""
+    try:
+        n_len = _size_of_lengths(data[:16])
+    except ValueError as exc:
+        raise fail(path, str(exc)) from None
+    done = 0  # end of the last collection walked
+    for lo, hi in _gaps(raw_data, len(data)):
+        at = data.find(_GCOL, max(lo, done), hi)
+        while at >= 0:
+            done = _walk_collection(data, at, n_len, path)
+            at = data.find(_GCOL, done, hi) if done < hi else -1
 
 
 def _walk_collection(data: Any, at: int, n_len: int, path: PathLike) -> int:
@@ -131,12 +143,17 @@ class ReadBudgetExceeded(OSError):
 
 
 class BoundedReader(io.RawIOBase):
-    """A read-only raw file that refuses to read more than its budget (see module docstring)."""
+    """A read-only raw file that refuses to read more than its budget (see module docstring);
+    ``source`` is a path, or the file's bytes when it is held in memory."""
 
-    def __init__(self, path: PathLike) -> None:
+    def __init__(self, source: PathLike | bytes) -> None:
         super().__init__()
-        self._fh = open(path, "rb")
-        self.size = os.fstat(self._fh.fileno()).st_size
+        if isinstance(source, bytes):
+            self._fh: Any = io.BytesIO(source)
+            self.size = len(source)
+        else:
+            self._fh = open(source, "rb")
+            self.size = os.fstat(self._fh.fileno()).st_size
         self.budget = READ_FACTOR * self.size + READ_SLACK_BYTES
         self.bytes_read = 0
         self.calls = 0
@@ -171,11 +188,12 @@ class BoundedReader(io.RawIOBase):
         super().close()
 
 
-def open_bounded(path: PathLike) -> Any:
-    """``h5py.File`` opened read-only on a :class:`BoundedReader` (its ``reader`` attribute)."""
+def open_bounded(source: PathLike | bytes) -> Any:
+    """``h5py.File`` opened read-only on a :class:`BoundedReader` of ``source`` (a path or the
+    file's bytes)."""
     import h5py
 
-    reader = BoundedReader(path)
+    reader = BoundedReader(source)
     try:
         h5 = h5py.File(reader, "r")
     except BaseException:

@@ -29,7 +29,7 @@ import numpy as np
 from gonio.io._common import PathLike, fail, read_text
 from gonio.io._geometry import half_diff_to_directions, spherical
 from gonio.io._sanity import check_brdf_values
-from gonio.io._text import parse_row, rows_to_array
+from gonio.io._text import NumberBlocks, check_line_count, numbered_lines, rows_to_array
 
 PARAM_IN_DIMS = {
     "COS_TH": 1,
@@ -49,8 +49,9 @@ _MIN_COS = 1e-6
 def parse_alta_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
     """Parse ALTA data text: header dict and the data as ``(N, columns)`` float64."""
     header: dict[str, Any] = {"comments": []}
-    rows: list[list[float]] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
+    check_line_count(path, text)
+    rows = NumberBlocks(path, "data row")
+    for lineno, line in numbered_lines(text):
         s = line.strip()
         if not s:
             continue
@@ -84,17 +85,11 @@ def parse_alta_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
             continue
         if "dim" not in header:
             raise fail(path, f"line {lineno}: data before the #DIM header (not an ALTA file?)")
-        rows.append(parse_row(path, lineno, s))
+        rows.add(lineno, s)
     if "dim" not in header:
         raise fail(path, "no #DIM header (not an ALTA data file)")
     n_in, n_out = header["dim"]
     width = n_in + n_out * (1 + header.get("vs", 0))
-    for i, r in enumerate(rows):
-        if len(r) != width:
-            raise fail(
-                path,
-                f"data row {i + 1} has {len(r)} numbers, expected {width} (truncated or malformed)",
-            )
     header["data"] = rows_to_array(path, rows, width, "data")
     return header
 
@@ -130,24 +125,47 @@ def _directions(param_in: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     raise AssertionError(param_in)
 
 
-#: Input columns with a bounded domain: (first column, last column + 1, low, high, what).
-_BOUNDED_INPUTS = {
-    "COS_TH": [(0, 1, -1.0, 1.0, "a cosine, in [-1, 1]")],
-    "RUSIN_TH_TD": [(0, 2, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]")],
-    "RUSIN_TH_TD_PD": [(0, 2, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]")],
+_ELEVATION = (0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]")
+_POLAR = (0.0, math.pi, "a polar angle in radians, [0, pi]")
+_AZIMUTH = (-2 * math.pi, 2 * math.pi, "an azimuth in radians, [-2 pi, 2 pi]")
+_UNIT = (0.99, 1.01, "a unit vector (length 1 within 1 %)")
+#: Input columns with a bounded domain: (first column, last column + 1, (low, high, what)),
+#: the column's value or, with ``norm``, the length of the columns as a vector. Polar angles
+#: beyond pi/2 are directions below the horizon (dropped and counted, as ALTA's files have
+#: them); any angle beyond its domain is refused, which the direction formulas would
+#: otherwise wrap or clamp silently.
+_BOUNDED_INPUTS: dict[str, list[tuple[int, int, tuple[float, float, str], bool]]] = {
+    "COS_TH": [(0, 1, (-1.0, 1.0, "a cosine, in [-1, 1]"), False)],
+    "RUSIN_TH_TD": [(0, 2, _ELEVATION, False)],
+    "RUSIN_TH_TD_PD": [(0, 2, _ELEVATION, False), (2, 3, _AZIMUTH, False)],
     "RUSIN_TH_PH_TD_PD": [
-        (0, 1, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]"),
-        (2, 3, 0.0, math.pi / 2, "a Rusinkiewicz elevation in radians, [0, pi/2]"),
+        (0, 1, _ELEVATION, False),
+        (2, 3, _ELEVATION, False),
+        (1, 2, _AZIMUTH, False),
+        (3, 4, _AZIMUTH, False),
     ],
+    "ISOTROPIC_TL_TV_PROJ_DPHI": [
+        (0, 1, _POLAR, False),
+        (1, 3, (0.0, math.pi, "a projected polar angle in radians, length in [0, pi]"), True),
+    ],
+    "ISOTROPIC_TV_TL_DPHI": [(0, 2, _POLAR, False), (2, 3, _AZIMUTH, False)],
+    "SPHERICAL_TL_PL_TV_PV": [
+        (0, 1, _POLAR, False),
+        (2, 3, _POLAR, False),
+        (1, 2, _AZIMUTH, False),
+        (3, 4, _AZIMUTH, False),
+    ],
+    "CARTESIAN": [(0, 3, _UNIT, True), (3, 6, _UNIT, True)],
 }
 
 
 def _check_inputs(path: PathLike, param_in: str, x: np.ndarray) -> None:
     """Refuse input coordinates outside their domain (beyond 1e-6 of rounding), which the
     direction formulas would otherwise clamp or wrap silently; names the first bad row."""
-    for a, b, lo, hi, what in _BOUNDED_INPUTS.get(param_in, ()):
+    for a, b, (lo, hi, what), norm in _BOUNDED_INPUTS.get(param_in, ()):
         cols = x[:, a:b]
-        bad = np.flatnonzero(np.any((cols < lo - 1e-6) | (cols > hi + 1e-6), axis=1))
+        v = np.linalg.norm(cols, axis=1, keepdims=True) if norm else cols
+        bad = np.flatnonzero(np.any((v < lo - 1e-6) | (v > hi + 1e-6), axis=1))
         if bad.size:
             row = int(bad[0])
             raise fail(

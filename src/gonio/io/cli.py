@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from typing import Any
 
+from gonio._bounded import dumps_json
 from gonio.errors import ParameterError
 from gonio.io.atomic import same_file
 
@@ -94,7 +94,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
     s = summarize(args.file)
     if args.json:
-        print(json.dumps(s, indent=2))
+        print(dumps_json(s, indent=2))
         return 0
     from rich.console import Console
     from rich.table import Table
@@ -152,7 +152,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     )
     prov = s.get("provenance") or {}
     for k, v in prov.items():
-        t.add_row(f"provenance.{k}", json.dumps(v) if not isinstance(v, str) else v)
+        t.add_row(f"provenance.{k}", dumps_json(v) if not isinstance(v, str) else v)
     Console().print(t)
     return 0
 

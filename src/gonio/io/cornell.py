@@ -15,6 +15,7 @@ import numpy as np
 from gonio.io._common import PathLike, fail, read_text
 from gonio.io._geometry import spherical
 from gonio.io._sanity import check_brdf_values
+from gonio.io._text import MAX_TEXT_ROWS, NumberBlocks, check_line_count, numbered_lines
 
 _MAX_WAVELENGTHS = 100_000
 
@@ -29,22 +30,22 @@ def parse_cornell_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
         ``values`` (N, n) in 1/sr, ``comments`` (list of str).
     """
     comments: list[str] = []
-    tokens: list[str] = []
-    for line in text.splitlines():
+    check_line_count(path, text)
+    lines = NumberBlocks(path, "line")
+    first = ""
+    for lineno, line in numbered_lines(text):
         s = line.strip()
         if s.startswith("#"):
             comments.append(s[1:].strip())
         elif s:
-            tokens.extend(s.split())
-    if not tokens:
+            first = first or s.split()[0]
+            lines.add(lineno, s)
+    if not first:
         raise fail(path, "empty Cornell BRDF file (no numbers)")
-    try:
-        nums = np.array([float(t) for t in tokens])
-    except ValueError as exc:
-        raise fail(path, f"not a number in Cornell BRDF data ({exc})") from None
+    nums = lines.numbers()  # a bad token: "line N: not a number: 'x'"
     n_wl = nums[0]
     if not (np.isfinite(n_wl) and n_wl == int(n_wl) and 1 <= n_wl <= _MAX_WAVELENGTHS):
-        raise fail(path, f"impossible number of wavelengths {tokens[0]!r}")
+        raise fail(path, f"impossible number of wavelengths {first!r}")
     n_wl = int(n_wl)
     if len(nums) < 1 + n_wl:
         raise fail(path, f"truncated: {n_wl} wavelengths announced, {len(nums) - 1} numbers found")
@@ -61,6 +62,8 @@ def parse_cornell_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
             f"truncated or malformed: {body.size} numbers after the header is not a multiple of "
             f"the record length {width}",
         )
+    if body.size // width > MAX_TEXT_ROWS:
+        raise fail(path, f"{body.size // width} sample records, more than {MAX_TEXT_ROWS}")
     rec = body.reshape(-1, width)
     if not np.all(np.isfinite(rec)):
         raise fail(path, "NaN or Inf in sample records")

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio._bounded import dumps_json
 from gonio.errors import FormatError
 from gonio.io.atomic import atomic_output
 
@@ -120,7 +121,7 @@ def write_dng(
         (33434, "2I", 1, (num, den), True),  # ExposureTime
         (34855, "H", 1, int(iso), True),  # ISOSpeedRatings
     ]
-    description = json.dumps(meta or {}, sort_keys=True)
+    description = dumps_json(meta or {}, sort_keys=True)
     path = Path(path)
     with atomic_output(path) as tmp:
         tifffile.imwrite(

@@ -52,8 +52,15 @@ MERL_SCALES = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 #: MERL's resolution (theta_h, theta_d, phi_d).
 MERL_DIMS = (90, 90, 180)
 _HEADER = 12
-#: Largest dimension accepted when reading (guards against absurd headers before allocating).
-_MAX_DIM = 1 << 16
+#: Bounds on a file's grid, checked on its header before the data is read: at most 4 times
+#: MERL's resolution along each axis (a quarter of a cell: finer than any gonioreflectometer
+#: resolves) and 4 times its cells (5.8 M cells, a 140 MB file), so that what reads, converts
+#: or plots a table that passes stays far under 2 GiB.
+MAX_DIMS = tuple(4 * n for n in MERL_DIMS)
+MAX_CELLS = 4 * math.prod(MERL_DIMS)
+#: A channel negative (MERL's "not measured") at more than this share of the cells that the
+#: other two channels measured is not a marker but a corrupt (negated) channel.
+MAX_CHANNEL_DISAGREEMENT = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,9 +84,16 @@ def parse_merl_bytes(data: bytes, path: PathLike = "<bytes>") -> MerlArrays:
     if len(data) < _HEADER:
         raise fail(path, f"truncated MERL file: {len(data)} bytes, header needs {_HEADER}")
     dims = np.frombuffer(data, dtype="<i4", count=3)
-    if np.any(dims <= 0) or np.any(dims > _MAX_DIM):
-        raise fail(path, f"impossible MERL dimensions {tuple(int(d) for d in dims)}")
-    n = int(np.prod(dims.astype(np.int64)))
+    shape = tuple(int(d) for d in dims)
+    if min(shape) <= 0:
+        raise fail(path, f"impossible MERL dimensions {shape}")
+    n = math.prod(shape)
+    if any(d > m for d, m in zip(shape, MAX_DIMS, strict=True)) or n > MAX_CELLS:
+        raise fail(
+            path,
+            f"MERL dimensions {shape} beyond the bounds of a measured grid: at most "
+            f"{MAX_DIMS} cells per axis and {MAX_CELLS} in all (4 times MERL's {MERL_DIMS})",
+        )
     expected = _HEADER + 3 * 8 * n
     if len(data) != expected:
         what = "truncated" if len(data) < expected else "trailing bytes in"
@@ -93,16 +107,36 @@ def parse_merl_bytes(data: bytes, path: PathLike = "<bytes>") -> MerlArrays:
         bad = int(np.count_nonzero(~np.isfinite(raw)))
         raise fail(path, f"{bad} non-finite (NaN/Inf) values in MERL data")
     values = np.moveaxis(raw, 0, -1) * MERL_SCALES
-    mask = np.all(raw >= 0.0, axis=0)
+    measured = raw >= 0.0
+    mask = np.all(measured, axis=0)
+    _check_channels_agree(measured, path)
     values = np.where(mask[..., None], values, 0.0)
     # no valid cell, or values no reflectance reaches (they would also overflow float32)
     check_brdf_values(path, "MERL values", values, mask)
     return MerlArrays(values=values, mask=mask)
 
 
+def _check_channels_agree(measured: np.ndarray, path: PathLike) -> None:
+    """Refuse a channel that is negative ("not measured") at most of the cells the other two
+    channels measured (:data:`MAX_CHANNEL_DISAGREEMENT`): MERL marks a cell unmeasured in
+    all three channels; a whole channel of markers is a negated channel, not a measurement.
+
+    ``measured``: ``(3, ...)`` bool, the stored values >= 0 per channel."""
+    for c, name in enumerate("RGB"):
+        others = np.all(np.delete(measured, c, axis=0), axis=0)
+        n_others = int(np.count_nonzero(others))
+        n_bad = int(np.count_nonzero(others & ~measured[c]))
+        if n_others and n_bad > MAX_CHANNEL_DISAGREEMENT * n_others:
+            raise fail(
+                path,
+                f"MERL channel {name} is negative at {n_bad} of the {n_others} cells the other "
+                "channels measured (negative values mark unmeasured cells: a corrupt channel)",
+            )
+
+
 def read_merl_arrays(path: PathLike) -> MerlArrays:
     """Read a MERL ``.binary`` file into plain arrays (no table object)."""
-    return parse_merl_bytes(read_bytes(path), path)
+    return parse_merl_bytes(read_bytes(path, _HEADER + 3 * 8 * MAX_CELLS), path)
 
 
 #: Node offset of each cell convention (see the module docstring).

@@ -48,7 +48,7 @@ Conventions (from the repository's ``coords.py`` and its Mitsuba plugin):
 
 from __future__ import annotations
 
-import io as _pyio
+import itertools
 import os
 import zipfile
 import zlib
@@ -61,6 +61,12 @@ import numpy as np
 from gonio._bounded import loads_json
 from gonio.errors import FormatError
 from gonio.io._common import PathLike, check_input_file, fail
+from gonio.io._hdf5_guard import (
+    check_global_heaps,
+    check_group_datasets,
+    close_bounded,
+    open_bounded,
+)
 from gonio.io._sanity import check_brdf_values
 from gonio.io.merl import MERL_DIMS, merl_axes
 
@@ -69,7 +75,16 @@ if TYPE_CHECKING:
 
 #: Separator between the archive path and the material name in ``io.load`` paths.
 MEMBER_SEP = "::"
-_MAX_UNITS = 4096  # guards against absurd layer sizes before allocating
+#: Bounds on a network's architecture, checked on its description before any weight is read
+#: or any activation allocated. The published networks are 6 -> 21 -> 21 -> 3 (3 Dense layers,
+#: 630 multiply-adds per query); a network may have up to 8 Dense layers of up to 256 units and
+#: 16,384 multiply-adds per query (26 times theirs), so that tabulating MERL's grid takes seconds
+#: and :data:`CHUNK_ROWS` rows of activations at most 64 MiB per layer.
+MAX_DENSE_LAYERS = 8
+MAX_UNITS = 256
+MAX_MULTIPLY_ADDS = 1 << 14
+#: Rows a tabulation evaluates at once (the activations of one chunk: rows x units x 4 bytes).
+CHUNK_ROWS = 1 << 16
 #: Largest member read from an archive (a real network's files are under 20 kB): bounds what a
 #: highly compressible member can make the reader allocate.
 MAX_MEMBER_BYTES = 16 << 20
@@ -78,8 +93,6 @@ _ZIP_ERRORS = (zipfile.BadZipFile, OSError, KeyError, EOFError, zlib.error,
                NotImplementedError, RuntimeError, ValueError)  # fmt: skip
 #: What :meth:`NBRDF.to_table` does with negative network outputs (module docstring).
 NEGATIVE_POLICIES = ("clamp", "keep")
-#: Rows from which :meth:`NBRDF.to_table` evaluates the network as one compiled program.
-_JIT_MIN_ROWS = 1 << 16
 _JIT_FORWARD: Any = None
 #: Grid on which :meth:`NBRDFArchive.read` probes a network (as :meth:`NBRDF.to_table`).
 _PROBE_DIMS = (16, 16, 32)
@@ -149,12 +162,14 @@ class NBRDF:
         return a.reshape(*shape, a.shape[-1])
 
     def _forward_many(self, x: np.ndarray) -> np.ndarray:
-        """:meth:`forward` of many rows ``(N, 6)`` float32 at once: one compiled XLA program
-        (the layers fused, about three times NumPy's speed on a MERL grid) whose weights are
-        arguments, so that every network of the same architecture and the same ``N`` shares
-        it (and the persistent compilation cache, :mod:`gonio.compile_cache`). Small inputs
-        go through :meth:`forward` (no compilation)."""
-        if x.shape[0] < _JIT_MIN_ROWS:
+        """:meth:`forward` of many rows ``(N, 6)`` float32, :data:`CHUNK_ROWS` at a time (memory
+        bounded whatever ``N``). Each chunk runs as one compiled XLA program (the layers fused,
+        about three times NumPy's speed on a MERL grid) whose weights are arguments; the last
+        chunk is padded to the same length, so that every network of the same architecture
+        shares one program (and the persistent compilation cache, :mod:`gonio.compile_cache`).
+        Fewer rows than one chunk go through :meth:`forward` (no compilation)."""
+        n = x.shape[0]
+        if n < CHUNK_ROWS:
             return self.forward(x)
         import jax
         import jax.numpy as jnp
@@ -171,8 +186,15 @@ class NBRDF:
                 return a
 
             _JIT_FORWARD = jax.jit(dense)
-        out = _JIT_FORWARD(jnp.asarray(x), self.kernels, self.biases)
-        return np.asarray(out, dtype=np.float32)
+        out = np.empty((n, self.kernels[-1].shape[1]), dtype=np.float32)
+        for s in range(0, n, CHUNK_ROWS):
+            rows = x[s : s + CHUNK_ROWS]
+            m = rows.shape[0]
+            if m < CHUNK_ROWS:
+                rows = np.concatenate([rows, np.zeros((CHUNK_ROWS - m, x.shape[1]), x.dtype)])
+            y = _JIT_FORWARD(jnp.asarray(rows), self.kernels, self.biases)
+            out[s : s + m] = np.asarray(y, dtype=np.float32)[:m]
+        return out
 
     def f(self, wi: Any, wo: Any, chunk: int = 1 << 18, negative: str = "clamp") -> np.ndarray:
         """``f_r(wi, wo)`` in sr⁻¹, ``(..., 3)`` float64, for unit directions in the local frame.
@@ -371,8 +393,10 @@ def _parse_description(text: bytes, path: Path, name: str) -> list[tuple[str, in
             raise fail(path, f"{where}: layer {i} config is not an object")
         if cls == "Dense":
             units = cfg.get("units")
-            if type(units) is not int or not 0 < units <= _MAX_UNITS:
-                raise fail(path, f"{where}: layer {i} has impossible units {units!r}")
+            if type(units) is not int or not 0 < units <= MAX_UNITS:
+                raise fail(
+                    path, f"{where}: layer {i} has impossible units {units!r} (at most {MAX_UNITS})"
+                )
             act = cfg.get("activation")
             dense.append((str(cfg.get("name")), units))
             if act not in ("relu", "linear"):
@@ -383,58 +407,93 @@ def _parse_description(text: bytes, path: Path, name: str) -> list[tuple[str, in
             raise fail(path, f"{where}: unsupported layer {cls!r} at position {i}")
     if not dense or dense[-1][1] != 3:
         raise fail(path, f"{where}: expected Dense layers ending in 3 outputs")
+    _check_architecture(dense, path, where)
     return dense
+
+
+def _check_architecture(dense: list[tuple[str, int]], path: Path, where: str) -> None:
+    """Refuse a network beyond :data:`MAX_DENSE_LAYERS` or :data:`MAX_MULTIPLY_ADDS` (the
+    cost of tabulating it), before its weights are read."""
+    if len(dense) > MAX_DENSE_LAYERS:
+        raise fail(path, f"{where}: {len(dense)} Dense layers (at most {MAX_DENSE_LAYERS})")
+    sizes = [6, *(u for _, u in dense)]
+    macs = sum(a * b for a, b in itertools.pairwise(sizes))
+    if macs > MAX_MULTIPLY_ADDS:
+        shape = " -> ".join(map(str, sizes))
+        raise fail(
+            path,
+            f"{where}: network {shape} needs {macs} multiply-adds per query (at most "
+            f"{MAX_MULTIPLY_ADDS}; the published networks need 630)",
+        )
 
 
 def _read_weights(
     data: bytes, units: list[tuple[str, int]], path: Path, name: str
 ) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-    import h5py
-
+    """The kernels and biases of the Dense layers ``units``, read through the bounded HDF5
+    path of native files (:mod:`gonio.io._hdf5_guard`): the storage of every dataset and every
+    global heap are checked before libhdf5 decodes them, and reads are budgeted."""
     where = f"{name}.h5"
     kernels, biases = [], []
     try:
-        with h5py.File(_pyio.BytesIO(data), "r") as h5:
+        h5 = open_bounded(data)
+        try:
+            raw = check_group_datasets(h5, path, len(data))
+            check_global_heaps(path, raw, data)
             root = h5["model_weights"] if "model_weights" in h5 else h5
             n_in = 6
             for layer, n_out in units:
-                if layer not in root:
-                    raise fail(path, f"{where}: no weights for layer {layer!r}")
-                group = root[layer]
-                k = b = None
-                for wname in group.attrs.get("weight_names", []):
-                    wname = wname.decode() if isinstance(wname, bytes) else str(wname)
-                    ds = group[wname] if wname in group else group[wname.split("/", 1)[-1]]
-                    want = (n_in, n_out) if wname.endswith("kernel:0") else (n_out,)
-                    if not isinstance(ds, h5py.Dataset) or ds.shape != want:
-                        shape = getattr(ds, "shape", None)
-                        raise fail(path, f"{where}: {wname} has shape {shape}, expected {want}")
-                    if wname.endswith("kernel:0"):
-                        k = np.asarray(ds, dtype=np.float32)
-                    elif wname.endswith("bias:0"):
-                        b = np.asarray(ds, dtype=np.float32)
-                if k is None or b is None:
-                    raise fail(path, f"{where}: layer {layer!r} lacks its kernel or bias")
-                if k.shape != (n_in, n_out) or b.shape != (n_out,):
-                    raise fail(
-                        path,
-                        f"{where}: layer {layer!r} has kernel {k.shape} and bias {b.shape}, "
-                        f"expected ({n_in}, {n_out}) and ({n_out},)",
-                    )
-                if not (np.all(np.isfinite(k)) and np.all(np.isfinite(b))):
-                    raise fail(path, f"{where}: non-finite weights in layer {layer!r}")
-                # the 88 published networks stay below 12 in magnitude; weights far beyond that
-                # overflow float32 away from the probe grid: corruption, not a material
-                if max(np.abs(k).max(initial=0.0), np.abs(b).max(initial=0.0)) > MAX_WEIGHT:
-                    raise fail(path, f"{where}: layer {layer!r} has weights beyond {MAX_WEIGHT:g}")
+                k, b = _layer_weights(root, layer, (n_in, n_out), path, where)
                 kernels.append(k)
                 biases.append(b)
                 n_in = n_out
+        finally:
+            close_bounded(h5)
     except FormatError:
         raise
     except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
         raise fail(path, f"{where}: not a readable Keras weights file ({exc})") from None
     return tuple(kernels), tuple(biases)
+
+
+def _layer_weights(
+    root: Any, layer: str, shape: tuple[int, int], path: Path, where: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kernel ``shape`` ``(n_in, n_out)`` and bias ``(n_out,)`` float32 of one Dense layer,
+    checked (shapes before reading, finite, within :data:`MAX_WEIGHT`)."""
+    import h5py
+
+    n_in, n_out = shape
+    if layer not in root:
+        raise fail(path, f"{where}: no weights for layer {layer!r}")
+    group = root[layer]
+    k = b = None
+    for wname in group.attrs.get("weight_names", []):
+        wname = wname.decode() if isinstance(wname, bytes) else str(wname)
+        ds = group[wname] if wname in group else group[wname.split("/", 1)[-1]]
+        want = (n_in, n_out) if wname.endswith("kernel:0") else (n_out,)
+        if not isinstance(ds, h5py.Dataset) or ds.shape != want:
+            shape_ = getattr(ds, "shape", None)
+            raise fail(path, f"{where}: {wname} has shape {shape_}, expected {want}")
+        if wname.endswith("kernel:0"):
+            k = np.asarray(ds, dtype=np.float32)
+        elif wname.endswith("bias:0"):
+            b = np.asarray(ds, dtype=np.float32)
+    if k is None or b is None:
+        raise fail(path, f"{where}: layer {layer!r} lacks its kernel or bias")
+    if k.shape != (n_in, n_out) or b.shape != (n_out,):
+        raise fail(
+            path,
+            f"{where}: layer {layer!r} has kernel {k.shape} and bias {b.shape}, "
+            f"expected ({n_in}, {n_out}) and ({n_out},)",
+        )
+    if not (np.all(np.isfinite(k)) and np.all(np.isfinite(b))):
+        raise fail(path, f"{where}: non-finite weights in layer {layer!r}")
+    # the 88 published networks stay below 12 in magnitude; weights far beyond that overflow
+    # float32 away from the probe grid: corruption, not a material
+    if max(np.abs(k).max(initial=0.0), np.abs(b).max(initial=0.0)) > MAX_WEIGHT:
+        raise fail(path, f"{where}: layer {layer!r} has weights beyond {MAX_WEIGHT:g}")
+    return k, b
 
 
 def read_nbrdf(path: PathLike, name: str | None = None) -> NBRDF:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
+from gonio._bounded import dumps_json
 from gonio.errors import DeviceError
 
 
@@ -94,7 +94,7 @@ def _check(args: argparse.Namespace) -> int:
                 for i in infos
             ],
         }
-        print(json.dumps(out, indent=2))
+        print(dumps_json(out, indent=2))
     else:
         from rich.console import Console
         from rich.table import Table
