@@ -180,8 +180,8 @@ def prepare(
 
     Parameters
     ----------
-    data : a TabulatedBRDF (anything with ``valid_nodes()``) or an object with ``to_samples()``
-        (an RGL file), a MeasuredSamples (anything with
+    data : a TabulatedBRDF, an RGL file (:class:`~gonio.io.rgl_measured.RGLMeasured`), a
+        MeasuredSamples (anything with
         ``wi``, ``wo``, ``values`` and optionally ``sigma``, ``weights``, ``channels``, ``meta``),
         a :class:`FitData` (re-filtered with the cutoff), or a path read with :func:`gonio.io.load`.
     theta_max_deg : polar-angle cutoff in degrees applied to both directions, in (0, 90].
@@ -206,10 +206,13 @@ def prepare(
         data = load_data(data)
     kind = type(data).__name__
     meta = dict(getattr(data, "meta", None) or {})
-    if hasattr(data, "valid_nodes"):  # a gridded table
+    from gonio.brdf.tabulated import TabulatedBRDF
+    from gonio.io.rgl_measured import RGLMeasured
+
+    if isinstance(data, TabulatedBRDF):
         data = _table_samples(data)
         source.setdefault("kind", kind)
-    elif hasattr(data, "to_samples") and not isinstance(data, FitData):  # e.g. an RGL file
+    elif isinstance(data, RGLMeasured):  # the file's own nodes
         data = data.to_samples()
         source.setdefault("kind", kind)
     source.setdefault("kind", type(data).__name__)

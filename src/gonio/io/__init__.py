@@ -113,8 +113,10 @@ def save(obj: Any, path: PathLike, *, lossy: float | None = None) -> None:
 
         write_rgl(obj, path)
         return
-    if hasattr(obj, "to_table") and not hasattr(obj, "axes"):
-        obj = obj.to_table()  # an exact evaluator (RGL BSDF): store its MERL-grid tabulation
+    from gonio.io.rgl_measured import RGLMeasured
+
+    if isinstance(obj, RGLMeasured):
+        obj = obj.to_table()  # an exact evaluator: store its MERL-grid tabulation
     if lossy is not None and not name.endswith((".h5", ".hdf5")):
         raise ParameterError("lossy encoding is only available for .brdf.h5 output")
     if name.endswith((".h5", ".hdf5")):

@@ -170,13 +170,10 @@ def _luminance(vals: np.ndarray, wavelengths: np.ndarray | None = None) -> np.nd
 
 def _source_channels(src: Any) -> tuple[int, np.ndarray | None]:
     """Channel count C and, for spectral sources, their wavelengths (nm)."""
-    ch = getattr(src, "channel_info", None) or getattr(src, "channels", None)
-    wl = getattr(ch, "wavelengths_nm", None) if ch is not None and not isinstance(ch, int) else None
-    if wl is not None:
-        return len(wl), np.asarray(wl, np.float64)
-    if isinstance(ch, int):
-        return ch, None
-    return (len(ch) if ch is not None else 1), None
+    info = src.channel_info
+    if info is not None and info.kind == "spectral":
+        return src.n_channels, np.asarray(info.wavelengths_nm, np.float64)
+    return src.n_channels, None
 
 
 def rgl_fields(src: Any, description: str = "") -> dict[str, np.ndarray]:
@@ -268,7 +265,9 @@ def _loaded_fields(obj: Any, fields: dict[str, np.ndarray]) -> dict[str, np.ndar
 def _everywhere(obj: Any) -> Any:
     """The function the file is written from: a filled table with every node valid, else
     ``obj`` (module docstring)."""
-    if getattr(obj, "filled", False) and hasattr(obj, "replace"):
+    from gonio.brdf.tabulated import TabulatedBRDF
+
+    if isinstance(obj, TabulatedBRDF) and obj.filled:
         return obj.replace(mask=None, filled=False)
     return obj
 
@@ -281,6 +280,8 @@ def write_rgl(obj: Any, path: PathLike, description: str | None = None) -> None:
     isotropic BRDF with ``f(wi, wo)``: a table, an acquisition's gridded table, an analytic
     model. Scattered samples and anisotropic tables are refused (grid them first).
     """
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import TabulatedBRDF
     from gonio.io.rgl import RGLFile, read_rgl, tensor_file_bytes
     from gonio.io.rgl_measured import RGLMeasured
 
@@ -289,15 +290,15 @@ def write_rgl(obj: Any, path: PathLike, description: str | None = None) -> None:
     elif isinstance(obj, RGLFile):  # a file's checked fields, written back unchanged
         fields = dict(obj.fields)
     else:
-        if not hasattr(obj, "f"):
+        if isinstance(obj, MeasuredSamples):
             raise ParameterError(
                 f"{os.fspath(path)}: scattered samples cannot be written as an RGL file "
                 "(grid them first: gonio grid)"
             )
-        if getattr(obj, "isotropic", True) is False:
+        if isinstance(obj, TabulatedBRDF) and not obj.isotropic:
             raise ParameterError(f"{os.fspath(path)}: only isotropic BRDFs can be written as .bsdf")
         if description is None:
-            meta = getattr(obj, "meta", None) or {}
+            meta = obj.meta if isinstance(obj, TabulatedBRDF) else {}
             description = str(meta.get("name") or meta.get("material") or type(obj).__name__)
         fields = rgl_fields(_everywhere(obj), description)
         for name, arr in fields.items():

@@ -33,7 +33,7 @@ class SimulatedSampleCamera:
         self.noise_abs = rig.sim.noise_abs
         self.capture_time_s = float(rig.camera.get("capture_time_s", 0.0))
         self.exposure_s = float(rig.camera.get("exposure_s", 0.01))
-        c = self.model.channels if hasattr(self.model, "channels") else 1
+        c = self.model.n_channels
         self.channels = ("R", "G", "B") if c == 3 else tuple(f"c{i}" for i in range(c))
 
     def truth(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:

@@ -67,7 +67,7 @@ class ClampedTable:
 
     def __init__(self, table: Any) -> None:
         self.table = table
-        self.channels = table.values.shape[-1]
+        self.n_channels = table.n_channels
 
     def f(self, wi: Any, wo: Any) -> Any:
         import jax.numpy as jnp
@@ -86,7 +86,9 @@ def _load_table(path: str, mtime_ns: int) -> ClampedTable:
         obj = load_rgl(path).to_table(reciprocal=True)
     else:
         obj = io.load(path)
-    if not hasattr(obj, "values") or not hasattr(obj, "axes"):
+    from gonio.brdf.tabulated import TabulatedBRDF
+
+    if not isinstance(obj, TabulatedBRDF):
         raise FormatError(
             f"{path}: holds scattered samples; a simulated sample needs a tabulated BRDF"
         )
@@ -108,12 +110,17 @@ def load_truth(spec: dict, source: str) -> Any:
     except ValueError as exc:
         raise RigConfigError(f"{source}: sim.sample.{exc}") from None
     if path is None:
-        from gonio.brdf.models import Node
+        from gonio.brdf.models import BRDFModel, Node
 
         try:
-            return Node.from_dict(spec)
+            model = Node.from_dict(spec)
         except Exception as exc:
             raise RigConfigError(f"{source}: sim.sample: not a gonio model: {exc}") from None
+        if not isinstance(model, BRDFModel):
+            raise RigConfigError(
+                f"{source}: sim.sample: {type(model).__name__} is not a BRDF model"
+            )
+        return model
     if not path.is_file():
         raise RigConfigError(f"{source}: sim.sample.file: no such file: {path}")
     return _load_table(str(path.resolve()), path.stat().st_mtime_ns)
