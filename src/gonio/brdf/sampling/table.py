@@ -53,7 +53,6 @@ from gonio.errors import ParameterError
 
 Array = jnp.ndarray
 _UNIFORM_FLOOR = 1e-3
-METHODS = ("inversion", "alias", "rejection")
 
 
 class TableSampler:
@@ -250,4 +249,4 @@ def _alias_pdf(geo, slot_of, p, cos_asc, omega, wi, wo):
     return jnp.take(p.reshape(-1), s * n + row * geo.n_p + col) / jnp.take(omega, row)
 
 
-__all__ = ["METHODS", "TableSampler"]
+__all__ = ["TableSampler"]
