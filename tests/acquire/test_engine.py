@@ -62,13 +62,19 @@ def goals_within_limits(run: Path) -> int:
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """An uninterrupted, fault-free run of PLAN."""
+def reference_run(tmp_path_factory):
+    """An uninterrupted, fault-free run of PLAN: its summary and run directory (read only)."""
     d = tmp_path_factory.mktemp("ref")
     (d / "plan.toml").write_text(PLAN)
     s = acquire(d / "run", "sim_sample", d / "plan.toml", progress=False)
     assert s.complete
-    return samples_of(d / "run")
+    return s, d / "run"
+
+
+@pytest.fixture(scope="module")
+def reference(reference_run):
+    """The samples and journal counts of :func:`reference_run`."""
+    return samples_of(reference_run[1])
 
 
 def test_complete_run_measures_truth_within_noise(reference, tmp_path):
@@ -88,9 +94,8 @@ def test_complete_run_measures_truth_within_noise(reference, tmp_path):
     assert chi2.ppf(0.0005, n) < np.sum(z**2) < chi2.ppf(0.9995, n)
 
 
-def test_read_back_directions_match_targets(tmp_path, plan_file):
-    run = tmp_path / "run"
-    acquire(run, "sim_sample", plan_file, progress=False)
+def test_read_back_directions_match_targets(reference_run):
+    _, run = reference_run
     j = Journal(run)
     cfg = {c.idx: c for c in j.configs()}
     for s in j.samples():
@@ -277,11 +282,10 @@ def test_dead_servo_stops_run_cleanly_and_resume_finishes(reference, tmp_path, p
         np.testing.assert_array_equal(got[i].value, r.value)
 
 
-def test_complete_run_writes_table_through_gonio_io(tmp_path, plan_file, capsys):
+def test_complete_run_writes_table_through_gonio_io(reference_run, capsys):
     from gonio import io as gio
 
-    run = tmp_path / "run"
-    s = acquire(run, "sim_sample", plan_file, progress=False)
+    s, run = reference_run
     assert s.table == str(run / "table.brdf.h5")
     t = gio.load(run / "table.brdf.h5")
     assert t.wi.shape == (s.done, 3)
