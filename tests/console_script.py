@@ -46,3 +46,44 @@ def assert_clean(proc: subprocess.CompletedProcess) -> None:
     """Exit status 0 and no traceback nor warning on stderr."""
     assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, proc.stderr
     assert proc.returncode == 0, proc.stderr
+
+
+# ru_maxrss is not a program's own peak on Linux: exec keeps the larger of the process's high-water
+# mark and that of the address space it replaced, so a child forked from a pytest worker that
+# once held gigabytes reports them. VmHWM belongs to the address space built after exec; the
+# child reads it at exit (normal exit or sys.exit, which every one-line refusal takes).
+PEAK_HOOK = (
+    "import atexit, sys\n"
+    "def _peak(path=sys.argv.pop(1)):\n"
+    "    with open('/proc/self/status') as f:\n"
+    "        kib = next(int(l.split()[1]) for l in f if l.startswith('VmHWM:'))\n"
+    "    with open(path, 'w') as f:\n"
+    "        f.write(str(kib * 1024))\n"
+    "atexit.register(_peak)\n"
+)
+
+
+def peak_memory(path: Path) -> int:
+    """Peak resident memory in bytes that a child started with :data:`PEAK_HOOK` wrote to
+    ``path`` as it exited."""
+    return int(Path(path).read_text())
+
+
+def run_measuring_peak(
+    *args, tmp_path: Path, timeout: float = 300
+) -> tuple[subprocess.CompletedProcess, int]:
+    """``gonio ARGS`` in a fresh interpreter on this checkout's sources: the completed process
+    and the program's own peak resident memory in bytes (:data:`PEAK_HOOK`)."""
+    out = tmp_path / "peak-bytes"
+    code = PEAK_HOOK + (
+        "import runpy\nsys.argv = ['gonio', *sys.argv[1:]]\n"
+        "runpy.run_module('gonio', run_name='__main__')\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(out), *map(str, args)],
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+    return proc, peak_memory(out)

@@ -24,6 +24,7 @@ from gonio.acquire.ordering import (
 from gonio.acquire.plans import MAX_TARGETS
 from gonio.rigs.config import load_rig
 from tests.acquire.child import env
+from tests.console_script import PEAK_HOOK, peak_memory, run_measuring_peak
 
 JOINTS = list(load_rig("sim").joints)
 START = np.zeros(4)
@@ -121,7 +122,7 @@ def test_list_route_improves_a_given_order():
 
 ROUTE_10K = textwrap.dedent(
     """
-    import json, resource, sys, time, tracemalloc
+    import json, sys, time, tracemalloc
     import numpy as np
     from gonio.acquire.ordering import path_time, plan_route
     from gonio.rigs.config import load_rig
@@ -142,21 +143,26 @@ ROUTE_10K = textwrap.dedent(
         "travel_s": path_time(np.zeros(4), poses, order, joints),
         "plan_order_s": path_time(np.zeros(4), base, np.arange(10_000), joints),
         "wall_s": wall, "cpu_s": cpu, "traced_peak": peak,
-        "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
     }, sys.stdout)
     """
 )
 
 
-def test_route_of_10000_configurations_within_500_mb():
+def test_route_of_10000_configurations_within_500_mb(tmp_path):
+    peak = tmp_path / "peak-bytes"
     out = subprocess.run(
-        [sys.executable, "-c", ROUTE_10K], env=env(), capture_output=True, text=True, timeout=600
+        [sys.executable, "-c", PEAK_HOOK + ROUTE_10K, str(peak)],
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
     assert r["order"] and r["choice"]
     assert r["travel_s"] < 0.5 * r["plan_order_s"]
-    assert r["traced_peak"] < 500e6 and r["maxrss"] < 500e6  # the whole process, imports included
+    # the whole process, imports included
+    assert r["traced_peak"] < 500e6 and peak_memory(peak) < 500e6
     # a few seconds alone on a core; bounded loosely for a loaded machine (the ordering's own
     # budget is 10 s)
     assert r["cpu_s"] < 60 and r["wall_s"] < 180
@@ -171,25 +177,10 @@ def test_gonio_plan_of_10000_configurations_within_500_mb(tmp_path):
         f'kind = "grid4d"\ntheta_i_deg = [{axis}]\nphi_i_deg = [{phis}]\n'
         f"theta_o_deg = [{axis}]\nphi_o_deg = [{phis}]\n"
     )
-    rss = tmp_path / "maxrss"
-    # the child writes its own peak resident memory as it exits
-    wrapper = (
-        "import atexit, resource, runpy, sys\n"
-        f"atexit.register(lambda: open({str(rss)!r}, 'w').write("
-        "str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)))\n"
-        "sys.argv = ['gonio', *sys.argv[1:]]\n"
-        "runpy.run_module('gonio', run_name='__main__')\n"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", wrapper, "plan", "--plan", str(plan), "--json"],
-        env=env(),
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
+    out, peak = run_measuring_peak("plan", "--plan", plan, "--json", tmp_path=tmp_path, timeout=900)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["targets"] == 10_000
-    assert int(rss.read_text()) < 500e6
+    assert peak < 500e6
 
 
 def test_pose_choice_with_unequal_candidate_counts_is_optimal():

@@ -6,11 +6,8 @@ stderr and a non-zero exit for input that cannot be right, never a traceback."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import struct
-import subprocess
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -85,36 +82,6 @@ def test_merl_file_with_a_negated_channel_is_refused(tmp_path):
 
 
 # -------------------------------------------------------------------------- Cornell, ALTA
-def _run_measuring_rss(*args, timeout: float = 300) -> tuple[subprocess.CompletedProcess, int]:
-    """``gonio ARGS`` through the console script; the result and the process's peak resident
-    memory in bytes (``wait4``'s rusage of that process alone)."""
-    proc = subprocess.Popen(
-        [console_script.script(), *map(str, args)],
-        env=console_script.env(),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    streams: dict[str, str] = {}
-    readers = [
-        threading.Thread(target=lambda k=k, f=f: streams.__setitem__(k, f.read()))
-        for k, f in (("out", proc.stdout), ("err", proc.stderr))
-    ]
-    for t in readers:
-        t.start()
-    killer = threading.Timer(timeout, proc.kill)
-    killer.start()
-    try:
-        _, status, usage = os.wait4(proc.pid, 0)
-    finally:
-        killer.cancel()
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    for t in readers:
-        t.join()
-    done = subprocess.CompletedProcess(proc.args, proc.returncode, streams["out"], streams["err"])
-    return done, usage.ru_maxrss * 1024
-
-
 def _zeros_text(path: Path, header: str, line: str, mib: int = 63) -> Path:
     with open(path, "w") as fh:
         fh.write(header)
@@ -137,7 +104,7 @@ def test_text_file_of_many_rows_is_refused_before_its_numbers_are_stored(
     """``gonio info`` of 63 MiB of zeros (8 M rows) reached 2.6 GiB (ALTA) and 2.0 GiB
     (Cornell) as Python lists; rows are now counted first (at most 2,097,152)."""
     p = _zeros_text(tmp_path / name, header, line)
-    proc, peak = _run_measuring_rss("info", p)
+    proc, peak = console_script.run_measuring_peak("info", p, tmp_path=tmp_path)
     _one_line_refusal(proc, p, r"lines of text, more than 2097152")
     assert peak < 1 << 30, f"{peak / 2**30:.2f} GiB"
 
