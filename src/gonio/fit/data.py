@@ -161,13 +161,10 @@ def _jsonable(v: Any) -> bool:
 
 
 def load_data(path: str | Path) -> Any:
-    """Read a file with :func:`gonio.io.load`; FitError when io cannot read it."""
+    """Read a file with :func:`gonio.io.load` (its typed errors name what is wrong)."""
     from gonio import io as gio
 
-    loader = getattr(gio, "load", None)
-    if loader is None:
-        raise FitError(f"{path}: gonio.io.load is not available in this installation")
-    return loader(Path(path))
+    return gio.load(Path(path))
 
 
 def prepare(

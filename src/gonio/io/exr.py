@@ -192,7 +192,7 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
 SLICE_KEYS = frozenset({"gonio_phi_d_rad", "gonio_units"})
 
 
-def is_table_slices(path: PathLike) -> bool:
+def holds_table_slices(path: PathLike) -> bool:
     """True when ``path`` is an EXR file whose header marks it as table slices
     (:func:`write_table_slices`); False for any other file, readable or not (header only)."""
     try:

@@ -86,10 +86,7 @@ def load_measured(path: str | Path, illuminant: str = "D65") -> tuple[Any, list[
     from gonio import io as gio
     from gonio.render.measured import renderable
 
-    load = getattr(gio, "load", None)
-    if load is None:
-        raise FormatError("this gonio build cannot read measured tables (gonio.io.load missing)")
-    return renderable(load(p), illuminant=illuminant)
+    return renderable(gio.load(p), illuminant=illuminant)
 
 
 def parse_light(spec: str, irradiance: float = 1.0):
@@ -225,11 +222,11 @@ def _write_figure_image(out: Path, img: np.ndarray, exposure: float) -> None:
 
 def check_environment_file(path: str | Path) -> None:
     """Refuse an EXR that is not a lat-long radiance image: a BRDF slice file written by
-    ``gonio convert ... .exr`` (:func:`gonio.io.exr.is_table_slices`)."""
-    from gonio.io.exr import is_table_slices
+    ``gonio convert ... .exr`` (:func:`gonio.io.exr.holds_table_slices`)."""
+    from gonio.io.exr import holds_table_slices
 
     # an unreadable file passes here: the environment loader reports it in its own words
-    if str(path).lower().endswith(".exr") and is_table_slices(path):
+    if str(path).lower().endswith(".exr") and holds_table_slices(path):
         raise ParameterError(
             f"--env {path}: a BRDF slice image (theta_h x theta_d per phi_d, values in 1/sr), "
             "not a lat-long environment map"
