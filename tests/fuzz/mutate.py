@@ -5,8 +5,9 @@ that kind, and a mutation; it returns the mutated bytes and a one-line descripti
 families:
 
 New classes (issue #45): consistent reshaping (a MERL grid with a matching payload, a neural
-network widened or deepened in its description and weights), scaled fields (a MERL channel
-negated or scaled, a text column scaled), integers overflowing Python's 4,300-digit limit.
+network widened or deepened in its description and weights, an RGL file with three azimuths or
+thousands of wavelengths), scaled fields (a MERL channel negated or scaled, an RGL field or a few
+of its cells scaled, a text column scaled), integers overflowing Python's 4,300-digit limit.
 
 * bytes (every format): truncation, bit flips, zeroed ranges, duplicated ranges (the 1 KB
   duplication of the issue among them), inserted and deleted ranges, 32/64-bit words set to
@@ -245,7 +246,65 @@ def _rgl_fields(d: bytes) -> list[dict[str, int]]:
     return out
 
 
+#: Factors a whole RGL field or a few of its cells is scaled by (issue #45: a scaled ``theta_i``,
+#: a denormal ``sigma``, an NDF large in a few cells, a sign flip).
+RGL_SCALES = (1e-30, 1e-38, 1e-45, 1e9, 1e30, -1.0)
+#: Wavelength counts of a rewritten spectral file: beyond the reader's bound, at it, typical.
+RGL_WAVELENGTHS = (2000, 129, 128, 40)
+
+
+def _rgl_scaled(f: dict[str, np.ndarray], rng: Rng) -> str:
+    names = [n for n, a in f.items() if a.dtype.kind == "f"]
+    name = str(_pick(rng, names))
+    factor = np.float32(_pick(rng, RGL_SCALES))
+    a = f[name].copy()
+    if rng.random() < 0.5 or a.shape[-1] < 10:
+        f[name] = a * factor
+        return f"RGL field {name!r} scaled by {factor:g}"
+    at = int(rng.integers(0, a.shape[-1] - 9))
+    a[..., at : at + 10] *= factor
+    f[name] = a
+    return f"RGL field {name!r} columns {at}:{at + 10} scaled by {factor:g}"
+
+
+def _rgl_azimuths(f: dict[str, np.ndarray], rng: Rng) -> str:
+    """``phi_i`` of 3 entries (an anisotropic-looking file) with every table repeated to match,
+    over a span that is or is not a whole fold of 2 pi."""
+    span = float(_pick(rng, [2.0, math.pi, 2 * math.pi, 1e-30]))
+    f["phi_i"] = np.array([0.0, span / 2, span], np.float32)
+    for name in ("vndf", "luminance", "rgb", "spectra"):
+        if name in f:
+            f[name] = np.ascontiguousarray(np.repeat(f[name][:1], 3, axis=0))
+    return f"RGL phi_i set to 3 entries over {span:g} rad"
+
+
+def _rgl_wavelengths(f: dict[str, np.ndarray], rng: Rng) -> str:
+    """A spectral file of many wavelengths (flat spectra of the first channel, 4 x 4 grid)."""
+    n = int(_pick(rng, RGL_WAVELENGTHS))
+    colour = f.pop("spectra") if "spectra" in f else f.pop("rgb")
+    f["spectra"] = np.ascontiguousarray(np.repeat(colour[:, :, :1, :4, :4], n, axis=2))
+    f["luminance"] = np.ascontiguousarray(f["luminance"][:, :, :4, :4])
+    f["wavelengths"] = np.linspace(360.0, 1000.0, n).astype(np.float32)
+    return f"RGL spectral with {n} wavelengths"
+
+
+def _rgl_rewritten(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    """A consistent file whose fields are edited: one scaled, azimuths added, wavelengths."""
+    from gonio.errors import GonioError
+    from gonio.io.rgl import parse_tensor_file, tensor_file_bytes
+
+    try:
+        f = parse_tensor_file(d)
+    except GonioError:
+        return m_flip(d, rng)
+    edit = _pick(rng, [_rgl_scaled, _rgl_scaled, _rgl_azimuths, _rgl_wavelengths])
+    desc = edit(f, rng)
+    return tensor_file_bytes(f), desc
+
+
 def m_rgl(d: bytes, rng: Rng) -> tuple[bytes, str]:
+    if rng.random() < 0.3:
+        return _rgl_rewritten(d, rng)
     try:
         fields = _rgl_fields(d)
     except struct.error:

@@ -164,7 +164,8 @@ def c_rgl(path: str) -> str:
     """An RGL ``.bsdf`` through :func:`gonio.io.load` (an exact evaluator, RGLMeasured): the
     colour table not clearly negative (slightly negative values are kept, as the reference reader
     keeps them: :mod:`gonio.io.rgl_measured`); ``f`` finite and bounded; ``pdf`` finite and >= 0;
-    ``sample`` with finite pdf and weights and unit ``wi`` where the sample succeeded (pdf > 0)."""
+    ``sample`` with finite pdf and weights and unit ``wi`` where the sample succeeded (pdf > 0);
+    an isotropic file tabulated, written and read back (:func:`_rgl_round_trip`)."""
     b = _load(path)
     if type(b).__name__ != "RGLMeasured":
         raise Lie(f"load returned a {type(b).__name__}")
@@ -189,7 +190,31 @@ def c_rgl(path: str) -> str:
     ok = spdf > 0
     if np.any(ok):
         _check_dirs("RGL sampled wi", swi[ok])
-    return f"RGL BSDF, {b.n_channels} channels, {int(np.count_nonzero(ok))}/{len(ok)} samples"
+    trip = _rgl_round_trip(b, path) if b.isotropic else "anisotropic: no round trip"
+    return (
+        f"RGL BSDF, {b.n_channels} channels, {int(np.count_nonzero(ok))}/{len(ok)} samples, {trip}"
+    )
+
+
+def _rgl_round_trip(b: Any, path: str) -> str:
+    """What ``gonio convert`` writes, the native reader reads: a coarse tabulation (batches of
+    16, the size ``f`` was just compiled for), saved as ``.brdf.h5`` and loaded back. The
+    tabulation may refuse (a typed error, as convert's); the reader may not."""
+    from gonio import io
+    from gonio.errors import GonioError
+    from gonio.io.merl import merl_axes
+
+    table = b.to_table(axes=merl_axes((6, 6, 12)), chunk=16)
+    out = Path(path).with_name(Path(path).stem + "-trip.brdf.h5")
+    try:
+        io.save(table, out)
+        try:
+            io.load(out)
+        except GonioError as exc:
+            raise Lie(f"the table convert wrote is refused by its reader: {exc}") from None
+    finally:
+        out.unlink(missing_ok=True)
+    return "round trip through .brdf.h5"
 
 
 #: A network's ``f`` may dip below 0 in dark cells (nothing is clamped, gonio.io.nbrdf);

@@ -47,6 +47,18 @@ _MAX_NDIM = 16
 #: database's files reach -1.4 % of their peak); below this fraction of its largest magnitude
 #: it cannot come from a measurement and the file is refused.
 COLOUR_NEGATIVE_TOLERANCE = 0.1
+#: Most wavelengths a spectral file may hold (the database's spectral files hold a few dozen);
+#: checked before anything is evaluated or tabulated, whose memory grows with the count.
+MAX_WAVELENGTHS = 128
+#: Smallest step between consecutive ``theta_i`` or ``phi_i`` values, radians (0.006 degrees:
+#: finer than any goniophotometer positions; a scaled axis collapses below it).
+MIN_ANGLE_STEP = 1e-4
+#: Slack on the angle domains (float32 rounds pi / 2 up by 4e-8).
+_ANGLE_SLACK = 1e-6
+#: Largest relative distance of ``2 pi / (phi_i span)`` from its symmetry fold (an integer).
+_FOLD_TOL = 0.01
+#: Largest symmetry fold of an anisotropic file (a phi_i span of one degree).
+MAX_REDUCTION = 360
 
 
 def parse_tensor_file(data: bytes, path: PathLike = "<bytes>") -> dict[str, np.ndarray]:
@@ -218,6 +230,13 @@ class RGLFile:
             colour = need("rgb", 5)
             wavelengths = np.arange(3.0)
         np_, nt = len(phi_i), len(theta_i)
+        if spectral and len(wavelengths) > MAX_WAVELENGTHS:
+            raise fail(
+                path,
+                f"field 'wavelengths' holds {len(wavelengths)} wavelengths, more than the "
+                f"{MAX_WAVELENGTHS} a spectral RGL file may have",
+            )
+        _check_angles(path, theta_i, phi_i)
         for name, arr in (("vndf", vndf), ("luminance", luminance), (colour_name, colour)):
             if arr.shape[:2] != (np_, nt):
                 raise fail(
@@ -269,6 +288,8 @@ class RGLFile:
             sums = arr.reshape(np_ * nt, -1).sum(axis=1)
             if np.any(sums <= 0):
                 raise fail(path, f"field {name!r} has an identically zero slice")
+        if bool(jac[0]):
+            _check_jacobian_bound(path, colour_name, colour, ndf, sigma)
         isotropic = np_ <= 2
         reduction = 0
         if not isotropic:
@@ -297,6 +318,56 @@ class RGLFile:
         if self.spectral:
             return Channels.spectral(self.wavelengths)
         return Channels.rgb()
+
+
+def _check_angles(path: PathLike, theta_i: np.ndarray, phi_i: np.ndarray) -> None:
+    """``theta_i`` in [0, pi/2], ``phi_i`` in [-pi, 2 pi], both with steps of at least
+    :data:`MIN_ANGLE_STEP`; an anisotropic ``phi_i`` spans ``2 pi / n`` for an integer fold
+    ``n <= MAX_REDUCTION``."""
+    for name, arr, lo, hi in (
+        ("theta_i", theta_i, 0.0, math.pi / 2),
+        ("phi_i", phi_i, -math.pi, 2 * math.pi),
+    ):
+        a = arr.astype(np.float64)
+        if float(a.min()) < lo - _ANGLE_SLACK or float(a.max()) > hi + _ANGLE_SLACK:
+            raise fail(
+                path,
+                f"field {name!r} spans [{float(a.min()):.6g}, {float(a.max()):.6g}] rad, "
+                f"outside [{lo:.6g}, {hi:.6g}]",
+            )
+        if len(a) > 1 and float(np.min(np.diff(a))) < MIN_ANGLE_STEP:
+            raise fail(
+                path,
+                f"field {name!r} values are not increasing by at least {MIN_ANGLE_STEP:g} rad "
+                f"(smallest step {float(np.min(np.diff(a))):.3g})",
+            )
+    if len(phi_i) > 2:
+        fold = 2 * math.pi / (float(phi_i[-1]) - float(phi_i[0]))
+        n = round(fold)
+        if not 1 <= n <= MAX_REDUCTION or abs(fold - n) > _FOLD_TOL * n:
+            raise fail(
+                path,
+                f"field 'phi_i' spans 2 pi / {fold:.4g}: an anisotropic file's azimuths span "
+                f"2 pi / n for a whole symmetry fold n <= {MAX_REDUCTION}",
+            )
+
+
+def _check_jacobian_bound(
+    path: PathLike, colour_name: str, colour: np.ndarray, ndf: np.ndarray, sigma: np.ndarray
+) -> None:
+    """With the Jacobian the file's value is ``colour * ndf / (4 sigma)`` at interpolated
+    points; its bound ``max|colour| max(ndf) / (4 min(sigma))`` must stay below ``MAX_BRDF``."""
+    top = (
+        float(np.max(np.abs(colour)))
+        * float(np.max(ndf))
+        / (4.0 * float(np.min(sigma.astype(np.float64))))
+    )
+    if not top <= MAX_BRDF:
+        raise fail(
+            path,
+            f"fields 'ndf' and 'sigma' scale {colour_name!r} up to {top:.3g} (colour x ndf / "
+            f"(4 sigma)), beyond any reflectance ({MAX_BRDF:g} 1/sr)",
+        )
 
 
 def read_rgl(path: PathLike) -> RGLFile:

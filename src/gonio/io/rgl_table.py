@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio.io._sanity import check_brdf_values
 from gonio.io.rgl import HORIZON_MIN_COS
 
 
@@ -74,6 +75,13 @@ def tabulate(
     -------
     TabulatedBRDF
         ``values`` float32 ``(*grid, C)``, ``mask`` the cells kept by ``min_cos``.
+
+    Raises
+    ------
+    FormatError
+        The tabulated values at valid cells fail the readers' checks
+        (:func:`gonio.io._sanity.check_brdf_values`: NaN/Inf, beyond ``MAX_BRDF``, clearly
+        negative): the file evaluates to what no table may hold.
     """
     from gonio.brdf.tabulated import TabulatedBRDF
     from gonio.io._geometry import half_diff_to_directions
@@ -111,6 +119,8 @@ def tabulate(
         if progress is not None:
             progress(sl.stop, total)
     assert values is not None  # total > 0: every axis has nodes
+    # the table must pass the checks every reader of tables applies (what convert writes loads)
+    check_brdf_values(bsdf.path, "tabulated f_r", values, valid)
     return TabulatedBRDF(
         values=values.reshape(*shape, values.shape[-1]),
         axes=tuple(axes),
