@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 from typing import Any
 
-from gonio._bounded import dumps_json
 from gonio.errors import ParameterError
 from gonio.io.atomic import same_file
 
@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         paths = e.write(args.out)
         report["files"] = [str(p) for p in paths]
         if args.json:
-            print(dumps_json(report, indent=2))
+            print(json.dumps(report, indent=2))
         else:
             for line in _summary_lines(e):
                 print(line)
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.json:
         report["files"] = e.files
-        print(dumps_json(report, indent=2))
+        print(json.dumps(report, indent=2))
     else:
         sys.stdout.write(e.text)
         for line in _summary_lines(e):

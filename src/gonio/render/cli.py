@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
@@ -345,9 +346,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             _write_figure_image(out, only, exposure)
     if args.json:
-        from gonio._bounded import dumps_json
-
-        print(dumps_json(report, indent=2))
+        print(json.dumps(report, indent=2))
     else:
         for label, e in report.get("errors", {}).items():
             ssim = "n/a" if e["ssim"] is None else f"{e['ssim']:.4f}"
