@@ -382,6 +382,12 @@ def interpolate_samples(
     )
 
 
+def above_horizon(table: TabulatedBRDF) -> np.ndarray:
+    """``table.shape`` bool: the nodes whose directions are both above the horizon."""
+    wi, wo = table.node_directions()
+    return ((wi[:, 2] > 0) & (wo[:, 2] > 0)).reshape(table.shape)
+
+
 def filled_interpolant(
     samples: Any, axes: tuple[Axis, ...] | None = None
 ) -> tuple[TabulatedBRDF, float]:
@@ -399,8 +405,7 @@ def filled_interpolant(
         the samples' hull (the rest are extrapolated).
     """
     t = interpolate_samples(samples, axes)
-    wi, wo = t.node_directions()
-    above = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).reshape(t.shape)
+    above = above_horizon(t)
     covered = float(np.asarray(t.mask).sum()) / max(int(above.sum()), 1)
     return t.replace(mask=above, sigma=None), covered
 

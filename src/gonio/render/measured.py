@@ -63,11 +63,6 @@ def _rgb_table(obj: Any, illuminant: str) -> Any:
     return obj.replace(values=vals, sigma=sig, channels=Channels.rgb(), meta=meta)
 
 
-def _above_horizon(table: Any) -> np.ndarray:
-    wi, wo = table.node_directions()
-    return ((wi[:, 2] > 0) & (wo[:, 2] > 0)).reshape(table.shape)
-
-
 def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
     """``obj`` (anything :func:`gonio.io.load` returns) as a material the renderer accepts.
 
@@ -98,15 +93,15 @@ def renderable(obj: Any, *, illuminant: str = "D65") -> tuple[Any, list[str]]:
         )
         return table, notes
     if isinstance(obj, TabulatedBRDF):
-        above = _above_horizon(obj)
+        from gonio.brdf.gridding import above_horizon, filled_interpolant, render_axes
+
+        above = above_horizon(obj)
         missing = above & ~obj.mask
         if missing.any() and obj.parameterization == "half_diff_iso":
             n_valid = int((obj.mask & above).sum())
             if n_valid == 0:
                 raise ParameterError("the table has no valid nodes to render")
             if n_valid <= MAX_FILL_NODES:
-                from gonio.brdf.gridding import filled_interpolant, render_axes
-
                 fine = render_axes()
                 coarse = int(np.prod(obj.shape)) < int(np.prod([a.size for a in fine]))
                 table, _ = filled_interpolant(
