@@ -15,8 +15,8 @@ real measurement needs and far below what would exhaust a workstation:
 * :data:`MAX_TEXT_BYTES` — numeric text files (Cornell, ALTA) are at most 64 MiB (the largest
   published one is about 1 MB); binary files at most :data:`MAX_DECODED_BYTES` plus 1 MiB.
 
-What gonio prints or writes as JSON is strict JSON (:func:`dumps_json`): a NaN or infinite
-number becomes ``null``, and the paths it stood at are listed under :data:`NONFINITE_KEY`.
+Writing is the other side: what gonio prints or writes as JSON is strict JSON through
+:mod:`gonio.io.strict_json`.
 
 This module imports nothing of gonio but :mod:`gonio.errors`, so every subpackage may use it.
 """
@@ -39,8 +39,6 @@ MAX_NESTING = 64
 MAX_JSON_BYTES = 64 << 20
 MAX_TOML_BYTES = 1 << 20
 MAX_TEXT_BYTES = 64 << 20
-#: Key under which :func:`dumps_json` lists the non-finite numbers it wrote as null.
-NONFINITE_KEY = "nonfinite_as_null"
 
 
 def decode_utf8(data: bytes, source: str, error: type[GonioError] = FormatError) -> str:
@@ -188,32 +186,3 @@ def bad_number_path(
         elif isinstance(node, list):
             stack += [(f"{where}[{i}]", v) for i, v in enumerate(node)]
     return None
-
-
-def finite_json(obj: Any, where: str = "") -> tuple[Any, dict[str, str]]:
-    """A copy of ``obj`` (dicts, lists and tuples of JSON values) whose NaN and infinite floats
-    are None, and ``{dotted path: "NaN" | "Infinity" | "-Infinity"}`` of those replaced."""
-    replaced: dict[str, str] = {}
-
-    def walk(node: Any, at: str) -> Any:
-        if isinstance(node, float) and not math.isfinite(node):
-            replaced[at or "<root>"] = json.dumps(float(node))
-            return None
-        if isinstance(node, dict):
-            return {k: walk(v, f"{at}.{k}" if at else str(k)) for k, v in node.items()}
-        if isinstance(node, list | tuple):
-            return [walk(v, f"{at}[{i}]") for i, v in enumerate(node)]
-        return node
-
-    return walk(obj, where), replaced
-
-
-def dumps_json(obj: Any, **kwargs: Any) -> str:
-    """``json.dumps(obj, **kwargs)`` as strict JSON: non-finite numbers are written as null and,
-    when ``obj`` is an object, listed with their value under :data:`NONFINITE_KEY` (the reason
-    a reader finds null there); ``allow_nan`` is always False."""
-    kwargs.pop("allow_nan", None)
-    clean, replaced = finite_json(obj)
-    if replaced and isinstance(clean, dict):
-        clean = {**clean, NONFINITE_KEY: replaced}
-    return json.dumps(clean, allow_nan=False, **kwargs)

@@ -226,7 +226,7 @@ def test_info_json_prints_strict_json_for_a_nan_in_the_provenance(tmp_path):
 
 
 def test_dumps_json_is_strict():
-    from gonio._bounded import dumps_json
+    from gonio.io.strict_json import dumps_json
 
     assert _strict(dumps_json([1.0, float("nan")])) == [1.0, None]
     assert _strict(dumps_json({"a": {"b": float("-inf")}, "c": (2, 3)})) == {

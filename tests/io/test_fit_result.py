@@ -97,14 +97,19 @@ def test_console_script_refuses_a_mistyped_fit_in_one_line(tmp_path, command, na
 
 
 def test_round_trip_and_strict_writer(tmp_path):
-    path = fit_result.write_json(_record(), tmp_path / "fit.json")
+    path = fit_result.write_result(_record(), tmp_path / "fit.json")
     model = fit_result.load_model(path)
     np.testing.assert_allclose(np.asarray(model.lobes[0].albedo), [0.5, 0.4, 0.3])
     record = fit_result.read_result(path)
     assert record["data"]["channels"] == ["R", "G", "B"]
-    with pytest.raises(FormatError, match=r"loss.*non-finite"):
-        fit_result.write_json({**_record(), "loss": math.nan}, tmp_path / "nan.json")
+    with pytest.raises(FormatError, match=r"nan.json: loss is NaN; JSON has no NaN"):
+        fit_result.write_result({**_record(), "loss": math.nan}, tmp_path / "nan.json")
     assert not (tmp_path / "nan.json").exists()
+    # the writer applies the reader's checks: a record read_result would refuse is not written
+    with pytest.raises(FormatError, match=r"bad.json: .*model_spec"):
+        bad = {**_record(), "model_spec": {"children": None}}
+        fit_result.write_result(bad, tmp_path / "bad.json")
+    assert not (tmp_path / "bad.json").exists()
     assert fit_result.to_jsonable({"loss": math.inf})["loss"] is None
 
 

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from gonio._bounded import dumps_json
 from gonio.errors import ParameterError
+from gonio.io.strict_json import dumps_json
 
 _PLAN_HELP = (
     "built-in plan name ({names}) or path to a plan TOML file. Plan files: kind = 'grid4d' |"

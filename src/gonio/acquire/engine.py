@@ -40,12 +40,12 @@ from pathlib import Path
 import numpy as np
 
 from gonio import interrupts
-from gonio._bounded import dumps_json
 from gonio.acquire import rundir, stopping
 from gonio.acquire.journal import Journal, PlannedConfig
 from gonio.acquire.ordering import move_times, path_time, plan_route
 from gonio.acquire.plans import Plan, Result, load_plan
 from gonio.errors import DeviceError, FrameError, PlanError
+from gonio.io.strict_json import dumps_json
 from gonio.rigs.config import RigConfig, load_rig
 from gonio.rigs.devices import Geometry
 from gonio.rigs.kinematics import Kinematics, Pose
@@ -212,7 +212,7 @@ def _refuse_if_nothing(sp: StagePlan) -> None:
 
 class RunLog:
     """Append-only JSON-lines log (one flushed line per event, strict JSON:
-    :func:`gonio._bounded.dumps_json`)."""
+    :func:`gonio.io.strict_json.dumps_json`)."""
 
     def __init__(self, path: Path) -> None:
         self._fh = open(path, "a", encoding="utf-8")

@@ -40,6 +40,7 @@ from gonio.acquire.pose import BoardPose, estimate_pose, mosaic_to_gray, pose_sa
 from gonio.acquire.radiometry import measure_brdf, pixel_rays_to_plane
 from gonio.errors import DeviceError, FrameError
 from gonio.io.dng import read_dng
+from gonio.io.strict_json import dumps_json
 from gonio.rigs.devices import Capture, Geometry
 
 
@@ -407,19 +408,19 @@ class ImagingCamera:
         attrs = {
             "gonio_units": "DN/s (dark-subtracted, relative to the full light output)",
             "gonio_index": str(geometry.index),
-            "gonio_exposures_s": json.dumps(list(exposures)),
-            "gonio_effective_exposures_s": json.dumps([float(x) for x in hdr.exposures_s]),
-            "gonio_pose_R": json.dumps(np.asarray(pose.rotation).tolist()),
-            "gonio_pose_t_m": json.dumps(np.asarray(pose.translation).tolist()),
+            "gonio_exposures_s": dumps_json(list(exposures)),
+            "gonio_effective_exposures_s": dumps_json([float(x) for x in hdr.exposures_s]),
+            "gonio_pose_R": dumps_json(np.asarray(pose.rotation).tolist()),
+            "gonio_pose_t_m": dumps_json(np.asarray(pose.translation).tolist()),
             "gonio_pose_reprojection_px": f"{pose.reprojection_px:.6g}",
-            "gonio_joints_deg": json.dumps(geometry.joints_deg),
-            "gonio_light_pos_m": json.dumps(np.asarray(geometry.light_pos_m).tolist()),
-            "gonio_camera_pos_m": json.dumps(pose.camera_position.tolist()),
-            "gonio_wi": json.dumps(np.asarray(m.wi).tolist()),
-            "gonio_wo": json.dumps(np.asarray(m.wo).tolist()),
-            "gonio_f": json.dumps(np.asarray(m.f).tolist()),
-            "gonio_sigma": json.dumps(np.asarray(m.sigma).tolist()),
-            "gonio_plan_hint_e_per_s": json.dumps(
+            "gonio_joints_deg": dumps_json(geometry.joints_deg),
+            "gonio_light_pos_m": dumps_json(np.asarray(geometry.light_pos_m).tolist()),
+            "gonio_camera_pos_m": dumps_json(pose.camera_position.tolist()),
+            "gonio_wi": dumps_json(np.asarray(m.wi).tolist()),
+            "gonio_wo": dumps_json(np.asarray(m.wo).tolist()),
+            "gonio_f": dumps_json(np.asarray(m.f).tolist()),
+            "gonio_sigma": dumps_json(np.asarray(m.sigma).tolist()),
+            "gonio_plan_hint_e_per_s": dumps_json(
                 None if hint is None else [hint.rate_max, hint.rate_min]
             ),
         }

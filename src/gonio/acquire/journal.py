@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from gonio.errors import FormatError
+from gonio.io.strict_json import dumps_json
 
 SCHEMA_VERSION = 1
 
@@ -199,7 +200,7 @@ class Journal:
                         *c.wi,
                         *c.wo,
                         int(c.isotropic),
-                        json.dumps(c.joints_deg) if c.joints_deg is not None else None,
+                        dumps_json(c.joints_deg) if c.joints_deg is not None else None,
                         c.status,
                         c.reason,
                     )
@@ -253,11 +254,11 @@ class Journal:
             " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 idx,
-                json.dumps(joints_deg),
+                dumps_json(joints_deg),
                 *map(float, wi),
                 *map(float, wo),
-                json.dumps([float(v) for v in value]),
-                json.dumps([float(v) for v in sigma]),
+                dumps_json([float(v) for v in value]),
+                dumps_json([float(v) for v in sigma]),
                 timings.get("motion", 0.0),
                 timings.get("settle", 0.0),
                 timings.get("capture", 0.0),
@@ -298,8 +299,8 @@ class Journal:
                     joints_deg=json.loads(r[1]),
                     wi=np.array(r[2:5]),
                     wo=np.array(r[5:8]),
-                    value=np.array(json.loads(r[8])),
-                    sigma=np.array(json.loads(r[9])),
+                    value=np.array(json.loads(r[8]), dtype=float),  # null: NaN
+                    sigma=np.array(json.loads(r[9]), dtype=float),
                     timings={"motion": r[10], "settle": r[11], "capture": r[12], "book": r[13]},
                     recoveries=r[14],
                 )

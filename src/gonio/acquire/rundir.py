@@ -20,6 +20,7 @@ from pathlib import Path
 from gonio.acquire.journal import Journal
 from gonio.acquire.plans import Plan, plan_from_spec
 from gonio.errors import FormatError, PlanError
+from gonio.io.strict_json import dumps_json
 from gonio.rigs.config import RigConfig, parse_rig
 
 
@@ -49,7 +50,7 @@ def start_new(run_dir: Path, rig: RigConfig, plan_spec: dict, meta: dict[str, st
             "gonio_version": __version__,
             "rig_text": rig.text,
             "rig_source": rig.source,
-            "plan_spec": json.dumps(plan_spec),
+            "plan_spec": dumps_json(plan_spec),
             "created": str(time.time()),
             **meta,
         }

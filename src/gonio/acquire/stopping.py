@@ -10,10 +10,10 @@ exception it re-raises (the command line prints it on the same line as the error
 
 from __future__ import annotations
 
-import json
 import time
 
 from gonio.interrupts import StopFlag
+from gonio.io.strict_json import dumps_json
 from gonio.rigs.dynamixel import BusLost
 
 
@@ -63,6 +63,6 @@ def record_stop(journal, log, reason: str, parked: bool, phrase: str) -> None:
     except Exception:
         pass
     try:
-        journal.set_meta({"last_stop": json.dumps(entry)})
+        journal.set_meta({"last_stop": dumps_json(entry)})
     except Exception:
         pass

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from gonio._bounded import dumps_json
+from gonio.io.strict_json import dumps_json
 
 
 def register(sub: Any) -> None:

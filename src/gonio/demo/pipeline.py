@@ -331,7 +331,7 @@ def run_demo(
         files=files,
     )
     from gonio.demo.report import write_report
-    from gonio.io.fit_result import write_json
+    from gonio.io.strict_json import write_json
 
     # writing the report takes milliseconds: the total is taken just before it
     timings["total"] = time.monotonic() - t0

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 from gonio.errors import ParameterError
 from gonio.io.atomic import same_file
+from gonio.io.strict_json import dumps_json
 
 #: ``gonio export``'s one-line help (``gonio --help`` shows it without importing this module).
 HELP = "write a fit as a renderer's material (gonio export --help lists the targets)"
@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         paths = e.write(args.out)
         report["files"] = [str(p) for p in paths]
         if args.json:
-            print(json.dumps(report, indent=2))
+            print(dumps_json(report, indent=2))
         else:
             for line in _summary_lines(e):
                 print(line)
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.json:
         report["files"] = e.files
-        print(json.dumps(report, indent=2))
+        print(dumps_json(report, indent=2))
     else:
         sys.stdout.write(e.text)
         for line in _summary_lines(e):

@@ -19,7 +19,6 @@ directional light at 27 degrees: 0.9 % relative RMSE for GGX at alpha = 0.5, <= 
 
 from __future__ import annotations
 
-import json
 import xml.etree.ElementTree as ET
 from typing import Any
 
@@ -27,6 +26,7 @@ import numpy as np
 
 from gonio.export._common import Export, family_name, fmt, rgb, template, uniform
 from gonio.export._lobes import Lobes
+from gonio.io.strict_json import dumps_json
 
 TARGET = "mitsuba"
 TITLE = "Mitsuba 3"
@@ -173,7 +173,7 @@ def build(name: str, lobes: Lobes) -> Export:
     header = f"gonio export: {name} for Mitsuba 3 ({family_name(lobes)})"
     files = {
         ".xml": to_xml(bsdf, name, header),
-        ".json": json.dumps(bsdf, indent=2) + "\n",
+        ".json": dumps_json(bsdf, indent=2, nonfinite="refuse", source=f"{name}.json") + "\n",
     }
     notes = [SEPARABLE_NOTE] if lobes.specular is not None else []
     return Export(TARGET, name, files, "exact", family_name(lobes), params, notes=notes, data=bsdf)

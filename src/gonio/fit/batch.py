@@ -28,8 +28,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-from gonio._bounded import dumps_json
 from gonio.errors import FitError, GonioError, ParameterError
+from gonio.io.strict_json import dumps_json
 
 #: File name endings considered measurement files when a folder is given.
 DATA_SUFFIXES = (".h5", ".hdf5", ".binary", ".bsdf", ".brdf", ".alta", ".dat", ".csv")
@@ -97,7 +97,7 @@ def safe_stem(name: str) -> str:
 def fit_options_key(options: dict[str, Any]) -> Any:
     """The fit options (``options["fit"]``) as recorded in a material's ``summary.json``:
     JSON-normalized so that a rerun can tell whether a material was fitted the same way."""
-    return json.loads(json.dumps(options.get("fit", {}), sort_keys=True, default=str))
+    return json.loads(dumps_json(options.get("fit", {}), sort_keys=True, default=str))
 
 
 def _summary(folder: Path) -> dict[str, Any]:
@@ -127,7 +127,7 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     import gonio.brdf  # noqa: F401  (float64)
     from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
-    from gonio.io.fit_result import write_json
+    from gonio.io.strict_json import write_json
 
     src = Path(path)
     name = options.get("material") or material_name(src)

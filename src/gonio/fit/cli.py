@@ -10,8 +10,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from gonio._bounded import dumps_json
 from gonio.errors import FitError, ParameterError
+from gonio.io.strict_json import dumps_json
 
 #: Names of :data:`gonio.fit.losses.LOSSES` (written out so that building the parser does not
 #: import JAX; a test checks that the two agree).
@@ -241,7 +241,7 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     from gonio.fit.batch import safe_stem
     from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
-    from gonio.io.fit_result import write_json
+    from gonio.io.strict_json import write_json
 
     console = Console(stderr=True)
     opts = dict(options["fit"])

@@ -15,7 +15,7 @@ import numpy as np
 
 from gonio.brdf.models import BRDFModel
 from gonio.fit.uncertainty import Uncertainty
-from gonio.io.fit_result import SCHEMA_ID, SCHEMA_VERSION, to_jsonable, write_json
+from gonio.io.fit_result import SCHEMA_ID, SCHEMA_VERSION, to_jsonable, write_result
 
 
 @dataclass
@@ -149,4 +149,4 @@ class FitResult:
 
     def save(self, path: str | Path) -> Path:
         """Write the JSON atomically (temporary file, then rename); returns the path."""
-        return write_json(self.to_json(), path)
+        return write_result(self.to_json(), path)

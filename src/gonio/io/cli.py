@@ -7,9 +7,9 @@ import os
 import sys
 from typing import Any
 
-from gonio._bounded import dumps_json
 from gonio.errors import ParameterError
 from gonio.io.atomic import same_file
+from gonio.io.strict_json import dumps_json
 
 
 def register(subparsers: Any) -> None:

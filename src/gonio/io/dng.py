@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from gonio._bounded import dumps_json
 from gonio.errors import FormatError
 from gonio.io.atomic import atomic_output
+from gonio.io.strict_json import dumps_json
 
 #: DNG CFAPattern codes: 0 red, 1 green, 2 blue.
 _CFA_CODES = {"R": 0, "G": 1, "B": 2}

@@ -10,7 +10,6 @@ mapping.
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
@@ -20,6 +19,7 @@ from gonio._bounded import MAX_COMPRESSION_RATIO, MAX_DECODED_BYTES, loads_json
 from gonio.errors import GonioError, ParameterError
 from gonio.io._common import PathLike, atomic_output, check_input_file, fail
 from gonio.io._sanity import check_brdf_values
+from gonio.io.strict_json import dumps_json
 
 
 def _openexr() -> Any:
@@ -152,7 +152,7 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
         names = ["R", "G", "B"]
     if "A" in names:
         raise ParameterError("a table channel named 'A' clashes with the validity channel")
-    axes_json = json.dumps(
+    axes_json = dumps_json(
         [
             {
                 "name": a.name,
@@ -178,7 +178,7 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
                 "gonio_phi_d_rad": f"{phi[k]:.9g}",
                 "gonio_units": "1/sr",
                 "gonio_axes": axes_json,
-                "gonio_channels": json.dumps(names),
+                "gonio_channels": dumps_json(names),
             }
         )
         parts.append(ox.Part(header, channels, f"phi_d={math.degrees(phi[k]):.3f}"))

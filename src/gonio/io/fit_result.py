@@ -11,7 +11,9 @@ Every command that reads a fit (``gonio render``, ``export``, ``plot``, ``fit --
 demo) reads it here: :func:`read_result` checks the file against :data:`SCHEMA` and the model
 description field by field (:func:`check_model_spec`), so a mistyped field is one
 :class:`~gonio.errors.FormatError` naming it, never a ``TypeError`` from deep inside a command.
-The record class :class:`gonio.fit.FitResult` writes the files (:func:`write_json`).
+The record class :class:`gonio.fit.FitResult` writes the files through :func:`write_result`,
+which applies the reader's checks (:func:`validate`) before writing strict JSON: gonio never
+writes a fit result it would refuse to read.
 
 This module imports only :mod:`gonio.brdf` (the model registry), and that only when a model is
 rebuilt, so that ``fit``, ``render`` and ``export`` may all use it.
@@ -19,17 +21,16 @@ rebuilt, so that ``fit``, ``render`` and ``export`` may all use it.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from gonio._bounded import bad_number_path, read_json
+from gonio._bounded import read_json
 from gonio.errors import FormatError
-from gonio.io.atomic import atomic_output
 from gonio.io.schemas import default_dir, register_schema, render
+from gonio.io.strict_json import write_json
 
 SCHEMA_ID = "gonio/fit-result"
 SCHEMA_VERSION = 1
@@ -166,26 +167,13 @@ def to_jsonable(x: Any) -> Any:
     return x
 
 
-def write_json(obj: Any, path: str | Path) -> Path:
-    """Write ``obj`` as indented, strict JSON atomically (temporary file, then rename).
-
-    Raises
-    ------
-    FormatError
-        When ``obj`` holds a NaN or infinite number (strict JSON has none: pass the object
-        through :func:`to_jsonable`, which writes them as null); nothing is written.
-    """
+def write_result(record: dict[str, Any], path: str | Path) -> Path:
+    """Write a fit-result record (``FitResult.to_json()``) as strict JSON, atomically, after
+    the checks the reader applies (:func:`validate`): a record the reader would refuse is a
+    FormatError naming ``path`` and the field, and nothing is written."""
     path = Path(path)
-    where = bad_number_path(obj)
-    if where is not None:
-        raise FormatError(
-            f"{path}: {where} is non-finite; JSON has no NaN or Infinity (to_jsonable writes "
-            "such a number as null)"
-        )
-    with atomic_output(path, make_parents=True) as tmp, open(tmp, "w") as fh:
-        json.dump(obj, fh, indent=2, allow_nan=False)
-        fh.write("\n")
-    return path
+    validate(record, str(path))
+    return write_json(record, path)
 
 
 # -- reading and validation --------------------------------------------------------------------

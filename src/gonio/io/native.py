@@ -41,6 +41,7 @@ from gonio.io._hdf5_guard import (
 )
 from gonio.io._sanity import check_axis_range, check_brdf_values, check_directions
 from gonio.io.lossy import LossyEncoding, decode_lossy, encode_lossy, lossy_stats
+from gonio.io.strict_json import dumps_json
 
 FORMAT_NAME = "gonio-brdf"
 FORMAT_VERSION = 1
@@ -77,7 +78,8 @@ _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 # writing
 # --------------------------------------------------------------------------------------------
 def _jsonable(obj: Any) -> Any:
-    """Turn metadata into plain JSON types (NumPy scalars and arrays included)."""
+    """Turn metadata into plain JSON types (NumPy scalars and arrays included; a NaN or infinite
+    number stays a float, which :func:`~gonio.io.strict_json.dumps_json` writes as null)."""
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
@@ -86,8 +88,6 @@ def _jsonable(obj: Any) -> Any:
         return _jsonable(obj.tolist())
     if isinstance(obj, np.generic):
         return obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return str(obj)
     if obj is None or isinstance(obj, bool | int | float | str):
         return obj
     if isinstance(obj, os.PathLike):
@@ -141,7 +141,7 @@ def _common_attrs(h5: Any, kind: str, meta: dict) -> None:
     h5.attrs["units"] = UNITS
     h5.attrs["software"] = f"gonio {__version__}"
     h5.attrs["created_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    h5.attrs["metadata"] = json.dumps(_jsonable(meta or {}), sort_keys=True)
+    h5.attrs["metadata"] = dumps_json(_jsonable(meta or {}), sort_keys=True)
 
 
 def _check_finite(path: PathLike, name: str, arr: np.ndarray, valid: np.ndarray | None) -> None:

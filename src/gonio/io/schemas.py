@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
+
+from gonio.io.strict_json import dumps_json
 
 #: Modules whose import registers schemas (append yours; the generator imports each one).
 SCHEMA_MODULES: tuple[str, ...] = (
@@ -66,7 +67,17 @@ def generate_all() -> dict[str, dict]:
 
 def render(schema: dict) -> str:
     """The exact text committed for ``schema`` (stable key order, two-space indent, newline)."""
-    return json.dumps(schema, indent=2, sort_keys=False, ensure_ascii=False) + "\n"
+    return (
+        dumps_json(
+            schema,
+            nonfinite="refuse",
+            source="schema",
+            indent=2,
+            sort_keys=False,
+            ensure_ascii=False,
+        )
+        + "\n"
+    )
 
 
 def default_dir() -> Path:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -12,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from gonio.errors import FormatError, ParameterError
+from gonio.io.strict_json import dumps_json
 
 #: Largest --spp: 2^16 samples per pixel already takes minutes at 256^2 (3.4e9 samples); the
 #: 10^8 of a typo would run for days with no sign of it but the progress bar.
@@ -346,7 +346,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             _write_figure_image(out, only, exposure)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(dumps_json(report, indent=2))
     else:
         for label, e in report.get("errors", {}).items():
             ssim = "n/a" if e["ssim"] is None else f"{e['ssim']:.4f}"

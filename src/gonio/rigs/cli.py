@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from gonio._bounded import dumps_json
 from gonio.errors import DeviceError
+from gonio.io.strict_json import dumps_json
 
 
 def register(sub) -> None:

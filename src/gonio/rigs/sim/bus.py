@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gonio.errors import ParameterError
+from gonio.io.strict_json import dumps_json
 from gonio.rigs import control_table as ct
 from gonio.rigs import protocol as p
 from gonio.rigs.sim.pty_device import PtyDevice
@@ -566,7 +567,7 @@ class ServoChainEmulator(PtyDevice):
         if self._packet_log_path is not None:
             with open(self._packet_log_path, "a", encoding="utf-8") as fh:
                 fh.write(
-                    json.dumps(
+                    dumps_json(
                         {
                             "t": rec.time,
                             "id": rec.id,
@@ -588,7 +589,7 @@ class ServoChainEmulator(PtyDevice):
         if self._goal_log_path is not None:
             with open(self._goal_log_path, "a", encoding="utf-8") as fh:
                 fh.write(
-                    json.dumps({"t": rec.time, "id": servo_id, "ticks": ticks, "ok": accepted})
+                    dumps_json({"t": rec.time, "id": servo_id, "ticks": ticks, "ok": accepted})
                     + "\n"
                 )
 
