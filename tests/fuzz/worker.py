@@ -131,7 +131,8 @@ def _load(path: str) -> Any:
 
 
 def c_native(path: str) -> str:
-    out = check_table(_load(path))
+    obj = _load(path)
+    out = check_table(obj)
     from gonio.io.native import read_native
 
     try:  # a run file keeps its gridded table in a group
@@ -141,19 +142,84 @@ def c_native(path: str) -> str:
 
         if not isinstance(exc, GonioError):
             raise
+    return f"{out}; {round_trip(obj, path)}"
+
+
+def _load_checked(path: str) -> str:
+    obj = _load(path)
+    return f"{check_table(obj)}; {round_trip(obj, path)}"
+
+
+c_merl = c_cornell = c_alta = _load_checked
+
+
+#: Tables up to this many values go through every writer that takes them in each case's round
+#: trip; larger ones (a MERL grid: 4.4 M values) through the writer of their own format only.
+ROUND_TRIP_VALUES = 1 << 18
+
+
+def _writers(obj: Any) -> list[tuple[str, dict]]:
+    """The ``io.save`` targets (``gonio convert``'s) of a case's round trip, as
+    ``(suffix, keyword arguments)``: every target for small objects (a refusal on write is
+    allowed and cheap for what a format cannot hold), the cell-for-cell MERL writer for a
+    table on MERL's grid. Resampling writers (MERL from another grid, RGL tensor files from
+    a table: seconds each) are exercised on the corpus by ``test_round_trip_resampling``."""
+    from gonio.brdf.tabulated import TabulatedBRDF
+    from gonio.io.merl import MERL_DIMS
+
+    small = int(np.size(obj.values)) <= ROUND_TRIP_VALUES
+    out = [(".brdf.h5", {}), (".brdf.h5", {"lossy": 0.01}), (".exr", {})] if small else []
+    if isinstance(obj, TabulatedBRDF) and obj.shape[:3] == MERL_DIMS and len(obj.axes) == 3:
+        out.append((".binary", {}))
     return out
 
 
-def c_merl(path: str) -> str:
-    return check_table(_load(path))
+def read_back(out: Path) -> Any:
+    """What gonio reads from a file it wrote: ``io.load``, or the EXR slice reader."""
+    from gonio import io
+    from gonio.io.exr import read_table_slices
+
+    return read_table_slices(out) if out.suffix == ".exr" else io.load(out)
 
 
-def c_cornell(path: str) -> str:
-    return check_table(_load(path))
+def round_trip(obj: Any, path: str, writers: list[tuple[str, dict]] | None = None) -> str:
+    """The round-trip oracle: ``obj`` (what a case loaded) through each writer of
+    :func:`_writers`, then back through its reader. A writer may refuse (a typed, one-line
+    error: the format cannot hold the object, or the reader's own checks say no); it may not
+    write a file its reader refuses, nor one whose content fails the case's check."""
+    from gonio import io
+    from gonio.errors import GonioError
 
-
-def c_alta(path: str) -> str:
-    return check_table(_load(path))
+    counts = {"written": 0, "refused": 0}
+    stem = Path(path).name.split(".")[0]
+    for suffix, kw in _writers(obj) if writers is None else writers:
+        out = Path(path).with_name(f"{stem}-trip{'-lossy' if kw else ''}{suffix}")
+        try:
+            try:
+                io.save(obj, out, **kw)
+            except GonioError as exc:
+                if "\n" in str(exc):
+                    raise Lie(
+                        f"multi-line refusal writing {out.name}: {str(exc)[:200]!r}"
+                    ) from None
+                counts["refused"] += 1
+                continue
+            try:
+                back = read_back(out)
+            except GonioError as exc:
+                raise Lie(
+                    f"{out.name}, as gonio wrote it, is refused by its reader: {exc}"
+                ) from None
+            if isinstance(back, dict):
+                _check_values("slices read back", back["values"], back["mask"], True)
+            elif hasattr(back, "to_table"):  # an RGL file: an evaluator, signed like its colour
+                _check_values("RGL f read back", np.asarray(back.f(*_dirs(16, 1))), None, False)
+            else:
+                check_table(back)
+            counts["written"] += 1
+        finally:
+            out.unlink(missing_ok=True)
+    return f"round trip: {counts['written']} written and read back, {counts['refused']} refused"
 
 
 #: Fixed outgoing directions and unit-square points for the RGL evaluator's ``sample``.
@@ -199,22 +265,12 @@ def c_rgl(path: str) -> str:
 def _rgl_round_trip(b: Any, path: str) -> str:
     """What ``gonio convert`` writes, the native reader reads: a coarse tabulation (batches of
     16, the size ``f`` was just compiled for), saved as ``.brdf.h5`` and loaded back. The
-    tabulation may refuse (a typed error, as convert's); the reader may not."""
-    from gonio import io
-    from gonio.errors import GonioError
+    tabulation may refuse (a typed error, as convert's); the reader may not
+    (:func:`round_trip`: native, lossy native and EXR slices)."""
     from gonio.io.merl import merl_axes
 
     table = b.to_table(axes=merl_axes((6, 6, 12)), chunk=16)
-    out = Path(path).with_name(Path(path).stem + "-trip.brdf.h5")
-    try:
-        io.save(table, out)
-        try:
-            io.load(out)
-        except GonioError as exc:
-            raise Lie(f"the table convert wrote is refused by its reader: {exc}") from None
-    finally:
-        out.unlink(missing_ok=True)
-    return "round trip through .brdf.h5"
+    return round_trip(table, path)
 
 
 #: A network's ``f`` may dip below 0 in dark cells (nothing is clamped, gonio.io.nbrdf);
@@ -243,7 +299,8 @@ def c_nbrdf(path: str) -> str:
         _check_values(f"{name} f", net.f(wi, wo), None, True, NBRDF_NEGATIVE_TOLERANCE)
         t = net.to_table((4, 4, 8))
         _check_values(f"{name} table", t.values, t.mask, True, NBRDF_NEGATIVE_TOLERANCE)
-    return f"nbrdf archive: {len(listed)} materials, read {names}"
+        trip = round_trip(t, path)
+    return f"nbrdf archive: {len(listed)} materials, read {names}" + (f"; {trip}" if names else "")
 
 
 def c_exr(path: str) -> str:
@@ -339,7 +396,30 @@ def c_fit(path: str) -> str:
         raise Lie(f"parameters {missing} missing or null in the file, loaded with defaults")
     wi, wo = _dirs(16, 2)
     _check_values("model f", np.asarray(model.f(wi, wo)), None, nonneg=True)
-    return f"model {type(model).__name__}"
+    return f"model {type(model).__name__}; {_fit_round_trip(obj, path)}"
+
+
+def _fit_round_trip(obj: dict, path: str) -> str:
+    """The fit-result writer (``FitResult.save``'s :func:`write_result`) on what the reader
+    accepted: it may not refuse it, and the reader must read back the same record."""
+    from gonio.errors import GonioError
+    from gonio.io.fit_result import read_result, write_result
+
+    out = Path(path).with_name(Path(path).name.split(".")[0] + "-trip.fit.json")
+    try:
+        try:
+            write_result(obj, out)
+        except GonioError as exc:
+            raise Lie(f"the fit writer refuses a record its reader accepted: {exc}") from None
+        try:
+            back = read_result(out)
+        except GonioError as exc:
+            raise Lie(f"{out.name}, as gonio wrote it, is refused by its reader: {exc}") from None
+    finally:
+        out.unlink(missing_ok=True)
+    if back != obj:
+        raise Lie("the fit result read back differs from the one written")
+    return "round trip through write_result"
 
 
 def c_selftest_hang(path: str) -> str:

@@ -1,4 +1,5 @@
-"""Checks every reader applies to the numbers it loads: values that cannot be right are errors.
+"""Checks every reader applies to the numbers it loads (and writers to what they write): values
+that cannot be right are errors.
 
 A loaded table must not lie: a BRDF is finite, non-negative (where the format stores f_r or
 f_r cos, as every format gonio reads except RGL does) and below :data:`gonio._bounded.MAX_BRDF`.
@@ -90,3 +91,34 @@ def check_directions(path: PathLike, what: str, d: Any) -> None:
     if d.size and np.min(d[:, 2]) < -HORIZON_TOL:
         n = int(np.count_nonzero(d[:, 2] < -HORIZON_TOL))
         raise fail(path, f"{what}: {n} direction(s) below the horizon")
+
+
+def check_table_arrays(path: PathLike, arrays: dict, extrapolated: bool = False) -> None:
+    """The checks of a native table's stored numbers, the same when it is read and before it is
+    written (:mod:`gonio.io.native`: the writer never writes what the reader refuses).
+
+    ``arrays``: ``values`` as stored (float32, lossy codes decoded) and, where present (absent
+    or None otherwise), ``mask`` (gridded), ``sigma``, ``wi``, ``wo``, ``weights``. A BRDF in
+    1/sr (and its standard deviation) is finite, not clearly negative and below ``MAX_BRDF``
+    at valid cells (every cell when ``extrapolated``: a filled table's extrapolation is data
+    too); directions are unit vectors above the horizon; weights are finite and >= 0.
+    FormatError naming ``path``.
+    """
+    arrays = {k: v for k, v in arrays.items() if v is not None}
+    values = arrays["values"]
+    if "mask" in arrays:
+        valid = np.broadcast_to(np.asarray(arrays["mask"], bool)[..., None], values.shape)
+        if extrapolated:
+            check_brdf_values(path, "/values", values)
+    else:
+        valid = np.ones(values.shape, dtype=bool)
+    for name in ("values", "sigma"):
+        if name in arrays:
+            check_brdf_values(path, f"/{name}", arrays[name], valid[..., 0])
+    for name in ("wi", "wo"):
+        if name in arrays:
+            check_directions(path, f"/{name}", arrays[name])
+    if "weights" in arrays:
+        w = arrays["weights"]
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise fail(path, "/weights: NaN/Inf or negative weights")

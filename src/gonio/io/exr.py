@@ -166,6 +166,10 @@ def write_table_slices(table: Any, path: PathLike, every: int = 1) -> int:
         ]
     )
     phi = np.asarray(table.axes[2].nodes(), dtype=np.float64)
+    kept = np.arange(0, values.shape[2], every)
+    # the reader's checks, on what it will read: never write a file it refuses
+    stored = np.where(mask[..., None], values, np.float32(0))
+    _check_slices(path, stored[:, :, kept], mask[:, :, kept], phi[kept])
     parts = []
     for k in range(0, values.shape[2], every):
         channels = {
@@ -240,7 +244,13 @@ def read_table_slices(path: PathLike) -> dict[str, Any]:
     except (RuntimeError, OSError, ValueError, KeyError, TypeError) as exc:
         raise fail(p, f"cannot read EXR table slices ({exc})") from None
     phi = np.asarray(phis)
-    if not np.all(np.isfinite(phi)) or np.any(phi < 0) or np.any(phi > 2 * math.pi + 1e-6):
-        raise fail(p, "gonio_phi_d_rad outside [0, 2 pi]")
-    check_brdf_values(p, "slice values", values, mask)
+    _check_slices(p, values, mask, phi)
     return {"values": values, "mask": mask, "phi_d": phi, "channels": names, "axes": axes}
+
+
+def _check_slices(path: PathLike, values: np.ndarray, mask: np.ndarray, phi: np.ndarray) -> None:
+    """The checks of table slices, on read and before writing: ``phi_d`` of each part in
+    [0, 2 pi], values a BRDF at valid pixels (:func:`gonio.io._sanity.check_brdf_values`)."""
+    if not np.all(np.isfinite(phi)) or np.any(phi < 0) or np.any(phi > 2 * math.pi + 1e-6):
+        raise fail(path, "gonio_phi_d_rad outside [0, 2 pi]")
+    check_brdf_values(path, "slice values", values, mask)

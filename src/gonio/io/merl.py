@@ -225,7 +225,9 @@ def write_merl(table: Any, path: PathLike) -> None:
     else (another grid, a MERL-like grid of another resolution, an anisotropic table, an analytic
     model with ``f``) is resampled by evaluating ``table.f`` at the MERL cell centres: MERL's
     reference reader accepts no other dimensions (gonio reads them). Invalid cells are written
-    as -1.
+    as -1. The bytes pass the reader's checks (:func:`parse_merl_bytes`) before anything is
+    written: a table the reader would refuse (a value beyond 1e10 1/sr, no valid cell, a
+    channel negative where the others are measured) is a FormatError naming ``path``.
     """
     from gonio.brdf import frames
     from gonio.brdf.measured import MeasuredSamples
@@ -254,5 +256,6 @@ def write_merl(table: Any, path: PathLike) -> None:
     if values.shape[-1] == 1:
         values = np.repeat(values, 3, axis=-1)
     data = merl_bytes(values, mask)
+    parse_merl_bytes(data, path)  # the reader's checks: never write a file it refuses
     with atomic_output(path) as tmp:
         tmp.write_bytes(data)

@@ -39,7 +39,7 @@ from gonio.io._hdf5_guard import (
     check_group_datasets,
     open_bounded,
 )
-from gonio.io._sanity import check_axis_range, check_brdf_values, check_directions
+from gonio.io._sanity import check_axis_range, check_table_arrays
 from gonio.io.lossy import LossyEncoding, decode_lossy, encode_lossy, lossy_stats
 from gonio.io.strict_json import dumps_json
 
@@ -247,6 +247,7 @@ def _write_gridded(
     axes = h5.create_group("axes")
     axes.attrs["order"] = np.array([a.name for a in t.axes], dtype=object)
     for i, a in enumerate(t.axes):
+        check_axis_range(path, a.name, a.lo, a.hi)  # the reader's check of each axis
         g = axes.create_group(a.name)
         g.attrs["index"] = np.int64(i)
         g.attrs["size"] = np.int64(a.size)
@@ -257,13 +258,19 @@ def _write_gridded(
         g.attrs["node_offset"] = float(a.node_offset)
         g.create_dataset("nodes", data=np.asarray(a.nodes(), dtype=np.float64))
     clean = np.where(kept[..., None] & np.isfinite(values), values, np.float32(0))
+    sigma = None
+    if t.sigma is not None:
+        sigma = np.where(mask[..., None], np.asarray(t.sigma, dtype=np.float32), np.float32(0))
     report: dict = {}
     if lossy is None:
+        check_table_arrays(path, {"values": clean, "mask": mask, "sigma": sigma}, filled)
         ds = _dataset(h5, "values", clean, True, level)
         ds.attrs["encoding"] = "float32"
     else:
         codes, enc = encode_lossy(clean, kept, lossy)
         decoded = decode_lossy(codes, enc)
+        # what the reader will decode is what must pass its checks
+        check_table_arrays(path, {"values": decoded, "mask": mask, "sigma": sigma}, filled)
         achieved = lossy_stats(clean, decoded, mask, enc.floor)
         ds = _dataset(h5, "values", codes, True, max(level, 6))
         ds.attrs["encoding"] = "log-quantized-delta"
@@ -279,9 +286,8 @@ def _write_gridded(
         hook("values")
     ds = _dataset(h5, "mask", mask.astype(np.uint8), False, level)
     ds.attrs["invalid_values"] = INVALID_VALUES[1] if filled else INVALID_VALUES[0]
-    if t.sigma is not None:
-        sigma = np.asarray(t.sigma, dtype=np.float32)
-        ds = _dataset(h5, "sigma", np.where(mask[..., None], sigma, np.float32(0)), True, level)
+    if sigma is not None:
+        ds = _dataset(h5, "sigma", sigma, True, level)
         ds.attrs["units"] = UNITS
     if t.counts is not None:
         _dataset(h5, "counts", np.asarray(t.counts).astype(np.uint32), False, level)
@@ -291,16 +297,24 @@ def _write_gridded(
 def _write_scattered(h5: Any, s: Any, path: PathLike, level: int) -> None:
     values = np.asarray(s.values, dtype=np.float32)
     _check_finite(path, "values", values, None)
-    _dataset(h5, "wi", np.asarray(s.wi, dtype=np.float64), False, level)
-    _dataset(h5, "wo", np.asarray(s.wo, dtype=np.float64), False, level)
+    arrays = {
+        "values": values,
+        "wi": np.asarray(s.wi, np.float64),
+        "wo": np.asarray(s.wo, np.float64),
+    }
+    for name, arr, dtype in (("sigma", s.sigma, np.float32), ("weights", s.weights, np.float64)):
+        arrays[name] = None if arr is None else np.asarray(arr, dtype)
+    check_table_arrays(path, arrays)
+    _dataset(h5, "wi", arrays["wi"], False, level)
+    _dataset(h5, "wo", arrays["wo"], False, level)
     ds = _dataset(h5, "values", values, True, level)
     ds.attrs["encoding"] = "float32"
     ds.attrs["units"] = UNITS
-    if s.sigma is not None:
-        ds = _dataset(h5, "sigma", np.asarray(s.sigma, dtype=np.float32), True, level)
+    if arrays["sigma"] is not None:
+        ds = _dataset(h5, "sigma", arrays["sigma"], True, level)
         ds.attrs["units"] = UNITS
-    if s.weights is not None:
-        _dataset(h5, "weights", np.asarray(s.weights, dtype=np.float64), False, level)
+    if arrays["weights"] is not None:
+        _dataset(h5, "weights", arrays["weights"], False, level)
 
 
 # --------------------------------------------------------------------------------------------
@@ -637,22 +651,8 @@ def _read_arrays(h5: Any, header: dict, path: PathLike) -> dict:
         out["mask"] = np.asarray(h5["mask"][()]) != 0
         if "counts" in h5:
             out["counts"] = np.asarray(h5["counts"][()])
-        valid = np.broadcast_to(out["mask"][..., None], out["values"].shape)
-        if header["grid"]["invalid_values"] == "extrapolated":  # every stored value is data
-            check_brdf_values(path, "/values", out["values"])
-    else:
-        valid = np.ones(out["values"].shape, dtype=bool)
-    # a BRDF in 1/sr (and its standard deviation) is finite, >= 0 and below MAX_BRDF
-    for name in ("values", "sigma"):
-        if name in out:
-            check_brdf_values(path, f"/{name}", out[name], valid[..., 0])
-    for name in ("wi", "wo"):
-        if name in out:
-            check_directions(path, f"/{name}", out[name])
-    if "weights" in out:
-        w = out["weights"]
-        if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise fail(path, "/weights: NaN/Inf or negative weights")
+    check_table_arrays(path, out, header["kind"] == "gridded" and
+                 header["grid"]["invalid_values"] == "extrapolated")  # fmt: skip
     return out
 
 

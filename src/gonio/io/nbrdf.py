@@ -201,7 +201,8 @@ class NBRDF:
 
         Pairs with a direction at or below the horizon give 0 (gonio's convention for every BRDF);
         negative outputs are clamped at 0 as the authors' decoder does, unless ``negative`` is
-        ``"keep"`` (module docstring).
+        ``"keep"`` (module docstring). An output that is not finite or beyond ``MAX_BRDF`` at
+        any pair above the horizon is a FormatError naming the archive, as in :meth:`to_table`.
         """
         if negative not in NEGATIVE_POLICIES:
             raise ValueError(f"negative must be one of {NEGATIVE_POLICIES}, not {negative!r}")
@@ -213,9 +214,13 @@ class NBRDF:
         out = np.empty((wi.shape[0], 3), dtype=np.float64)
         for s in range(0, wi.shape[0], chunk):
             sl = slice(s, s + chunk)
-            out[sl] = np.expm1(self.forward(self.features(wi[sl], wo[sl])))
+            with np.errstate(over="ignore", invalid="ignore"):  # non-finite: refused below
+                out[sl] = np.expm1(self.forward(self.features(wi[sl], wo[sl])))
         ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
         out[~ok] = 0.0
+        if np.any(ok):  # what the network gives, not only what its table stores, is checked
+            where = self.source.get("archive", self.name)
+            check_brdf_values(where, f"{self.name}: network output", out[ok], non_negative=False)
         if negative == "clamp":
             np.maximum(out, 0.0, out=out)
         return out.reshape(*shape, 3)
