@@ -12,6 +12,9 @@ real measurement needs and far below what would exhaust a workstation:
   decoded size (deflate cannot exceed about 1032:1, so only a crafted filter pipeline can).
 * :data:`MAX_NESTING`, :data:`MAX_JSON_BYTES`, :data:`MAX_TOML_BYTES` — JSON and TOML
   documents (fit results, rig and plan files) are at most 64 levels deep and 64 MiB / 1 MiB.
+* :data:`MAX_CHANNELS` — a table holds at most 128 channels (wavelengths): the published
+  spectral files hold a few dozen, and a fit's and a tabulation's memory grow with the count
+  (a 2,000-wavelength Cornell file of 20 samples took 16 GiB in ``gonio fit``).
 * :data:`MAX_TEXT_BYTES` — numeric text files (Cornell, ALTA) are at most 64 MiB (the largest
   published one is about 1 MB); binary files at most :data:`MAX_DECODED_BYTES` plus 1 MiB.
 
@@ -39,6 +42,7 @@ MAX_NESTING = 64
 MAX_JSON_BYTES = 64 << 20
 MAX_TOML_BYTES = 1 << 20
 MAX_TEXT_BYTES = 64 << 20
+MAX_CHANNELS = 128
 
 
 def decode_utf8(data: bytes, source: str, error: type[GonioError] = FormatError) -> str:

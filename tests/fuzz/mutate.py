@@ -577,13 +577,67 @@ def _scale_column(lines: list[str], rng: Rng) -> tuple[bytes, str]:
     return "\n".join(lines).encode(), f"data column {col + 1} scaled by {f:.6g}"
 
 
+#: Channel counts a widened text file declares, within and beyond the 128 a table may hold.
+WIDTHS = (2, 31, 128, 129, 1000, 5000)
+
+
+def _widen_cornell(lines: list[str], k: int) -> tuple[bytes, str]:
+    """A Cornell file re-declared with ``k`` wavelengths, consistently: the wavelength list and
+    every record's spectrum resampled to ``k`` values (one record a line)."""
+    body = [ln for ln in lines if not ln.lstrip().startswith("#")]
+    nums = np.array([float(t) for ln in body for t in ln.split()])
+    n = int(nums[0])
+    wl, rest = nums[1 : 1 + n], nums[1 + n :]
+    rows = rest[: len(rest) // (4 + n) * (4 + n)].reshape(-1, 4 + n)
+    new_wl = np.linspace(wl[0], wl[-1] + k, k)
+    spectra = [np.interp(np.linspace(0, n - 1, k), np.arange(n), r[4:]) for r in rows]
+    out = [ln for ln in lines if ln.lstrip().startswith("#")] + [str(k)]
+    out.append(" ".join(f"{w:.4f}" for w in new_wl))
+    out += [
+        " ".join(f"{x:.6g}" for x in (*r[:4], *sp)) for r, sp in zip(rows, spectra, strict=True)
+    ]
+    return "\n".join(out).encode(), f"Cornell widened from {n} to {k} wavelengths"
+
+
+def _widen_alta(lines: list[str], k: int) -> tuple[bytes, str]:
+    """An ALTA file re-declared with ``k`` outputs, consistently: ``#DIM`` and every row's
+    outputs (and their ``#VS`` columns) repeated to ``k``."""
+    dim = next(i for i, ln in enumerate(lines) if ln.strip().upper().startswith("#DIM"))
+    n_in, n_out = (int(t) for t in lines[dim].split()[1:3])
+    vs = next((int(ln.split()[1]) for ln in lines if ln.strip().upper().startswith("#VS")), 0)
+    out = list(lines)
+    out[dim] = f"#DIM {n_in} {k}"
+    for i, ln in enumerate(lines):
+        toks = ln.split()
+        if ln.lstrip().startswith("#") or len(toks) != n_in + n_out * (1 + vs):
+            continue
+        vals, extra = toks[n_in : n_in + n_out], toks[n_in + n_out :]
+        wide = [vals[j % n_out] for j in range(k)]
+        wide_extra = [extra[j % len(extra)] for j in range(k * vs)] if extra else []
+        out[i] = " ".join(toks[:n_in] + wide + wide_extra)
+    return "\n".join(out).encode(), f"ALTA widened from {n_out} to {k} outputs"
+
+
+def _widen(lines: list[str], rng: Rng) -> tuple[bytes, str]:
+    """The channel count of a Cornell or ALTA file changed consistently (:data:`WIDTHS`)."""
+    k = int(_pick(rng, WIDTHS))
+    try:
+        if any(ln.strip().upper().startswith("#DIM") for ln in lines):
+            return _widen_alta(lines, k)
+        return _widen_cornell(lines, k)
+    except (ValueError, IndexError, StopIteration):
+        return "\n".join(lines).encode(), "not widened (unparsed layout)"
+
+
 def m_text(d: bytes, rng: Rng) -> tuple[bytes, str]:
     text = d.decode("utf-8", "replace")
     lines = text.split("\n")
     op = str(_pick(rng, ["number", "number", "number", "drop", "dup", "swap", "utf8", "header",
-                         "scale"]))  # fmt: skip
+                         "scale", "widen"]))  # fmt: skip
     if op == "scale":
         return _scale_column(lines, rng)
+    if op == "widen":
+        return _widen(lines, rng)
     if op in ("number", "header"):
         header = op == "header"
         cand = [

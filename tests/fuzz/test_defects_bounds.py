@@ -251,3 +251,37 @@ def test_run_log_is_strict_json_and_its_reader_takes_null(tmp_path):
     assert e["move_wall_s"] is None and e["nonfinite_as_null"] == {"move_wall_s": "NaN"}
     costs = costs_from_run(tmp_path)
     assert costs.capture_s == 2.0 and costs.book_s == 0.5 and costs.move_overhead_s == 0.0
+
+
+# ------------------------------------------------------------------------- channel counts
+def _cornell(path: Path, n_wl: int, rows: int = 20) -> Path:
+    rng = np.random.default_rng(0)
+    lines = [str(n_wl), " ".join(f"{w:.3f}" for w in np.linspace(380, 780, n_wl))]
+    for _ in range(rows):
+        lines.append(" ".join(f"{x:.4g}" for x in (0.5, 0.1, 0.6, 2.0, *rng.uniform(0.1, 1, n_wl))))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_wavelength_count_is_bounded_before_a_fit(tmp_path):
+    """``gonio fit`` on a 300 kB Cornell file of 2,000 wavelengths and 20 samples ran for
+    minutes and reached 16 GiB; every reader now bounds the channel count at 128 (the RGL
+    reader's bound), on the declared count, and the native writer refuses what its reader
+    would."""
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.brdf.tabulated import Channels
+
+    p = _cornell(tmp_path / "wide.brdf", 2000)
+    proc = console_script.run("fit", p, "--out", tmp_path / "fit")
+    _one_line_refusal(proc, p, r"2000 wavelengths, more than the 128 a table may hold")
+    assert not (tmp_path / "fit").exists()
+    q = tmp_path / "wide.alta"
+    q.write_text("#DIM 3 129\n#PARAM_IN ISOTROPIC_TL_TV_PROJ_DPHI\n" + "0.1 0.2 0.3" + " 1" * 129)
+    _refused(q, r"129 outputs \(channels\) on #DIM \(line 1\), more than the 128")
+    assert io.load(_cornell(tmp_path / "ok.brdf", 128, rows=3)).n_channels == 128
+    s = io.load(_cornell(tmp_path / "small.brdf", 4, rows=3))
+    wide = MeasuredSamples(wi=s.wi, wo=s.wo, values=np.ones((3, 129)),
+                           channels=Channels.spectral(np.linspace(400, 700, 129)))  # fmt: skip
+    with pytest.raises(FormatError, match=r"w.brdf.h5: 129 channels, more than the 128"):
+        io.save(wide, tmp_path / "w.brdf.h5")
+    assert not (tmp_path / "w.brdf.h5").exists()

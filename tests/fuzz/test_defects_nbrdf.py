@@ -175,3 +175,19 @@ def test_global_heap_object_of_size_zero_in_the_weights_is_refused_not_looped_on
     d[obj : obj + 16] = bytes(16)  # index 0, size 0
     p = _archive(tmp_path, h5=bytes(d))
     _one_line_refusal(_gonio_info(p), p, "corrupt global heap collection")
+
+
+def test_network_output_is_checked_where_it_is_evaluated_not_only_where_it_is_tabulated():
+    """``NBRDF.f`` at any directions (a renderer's, between the nodes a read checks): an output
+    beyond 1e10 sr^-1 is the one-line error of the tabulation, not a number returned."""
+    from gonio.io.nbrdf import NBRDF
+
+    ks, bs = _network([4], 1)
+    net = NBRDF("n", tuple(ks), tuple(bs), {"archive": "t.zip"})
+    wi = np.array([[0.0, 0.6, 0.8], [0.0, 0.0, 1.0]])
+    assert np.all(np.isfinite(net.f(wi, wi[::-1])))
+    ks[0] = ks[0].copy()
+    ks[0][2, :] = 900.0  # cos(theta_h) * 900 through the layers: exp overflows
+    net = NBRDF("n", tuple(ks), tuple(bs), {"archive": "t.zip"})
+    with pytest.raises(FormatError, match=r"^t.zip: n: network output: .*(NaN/Inf|beyond)"):
+        net.f(wi, wi[::-1])

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from gonio._bounded import MAX_BRDF
+from gonio._bounded import MAX_BRDF, MAX_CHANNELS
 from gonio.io._common import PathLike, fail
 
 #: Largest ``hi`` of each half/diff axis, radians (phi_d may span [0, 2 pi) when anisotropic).
@@ -122,3 +122,10 @@ def check_table_arrays(path: PathLike, arrays: dict, extrapolated: bool = False)
         w = arrays["weights"]
         if not np.all(np.isfinite(w)) or np.any(w < 0):
             raise fail(path, "/weights: NaN/Inf or negative weights")
+
+
+def check_channel_count(path: PathLike, n: int, what: str = "channels") -> None:
+    """At most :data:`gonio._bounded.MAX_CHANNELS` channels (wavelengths) in one table, checked
+    on the declared count before anything is allocated (and by writers before writing)."""
+    if n > MAX_CHANNELS:
+        raise fail(path, f"{n} {what}, more than the {MAX_CHANNELS} a table may hold")

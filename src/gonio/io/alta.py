@@ -28,7 +28,7 @@ import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
 from gonio.io._geometry import half_diff_to_directions, spherical
-from gonio.io._sanity import check_brdf_values
+from gonio.io._sanity import check_brdf_values, check_channel_count
 from gonio.io._text import NumberBlocks, check_line_count, numbered_lines, rows_to_array
 
 PARAM_IN_DIMS = {
@@ -64,8 +64,9 @@ def parse_alta_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
                     dims = [int(p) for p in parts]
                 except ValueError:
                     raise fail(path, f"line {lineno}: bad #DIM {rest!r}") from None
-                if len(dims) != 2 or not (1 <= dims[0] <= 6 and 1 <= dims[1] <= 10_000):
+                if len(dims) != 2 or not (1 <= dims[0] <= 6 and 1 <= dims[1]):
                     raise fail(path, f"line {lineno}: impossible #DIM {rest!r}")
+                check_channel_count(path, dims[1], f"outputs (channels) on #DIM (line {lineno})")
                 header["dim"] = dims
             elif key == "PARAM_IN":
                 header["param_in"] = rest.split()[0].upper() if rest else ""

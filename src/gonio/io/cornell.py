@@ -14,10 +14,8 @@ import numpy as np
 
 from gonio.io._common import PathLike, fail, read_text
 from gonio.io._geometry import spherical
-from gonio.io._sanity import check_brdf_values
+from gonio.io._sanity import check_brdf_values, check_channel_count
 from gonio.io._text import MAX_TEXT_ROWS, NumberBlocks, check_line_count, numbered_lines
-
-_MAX_WAVELENGTHS = 100_000
 
 
 def parse_cornell_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
@@ -44,8 +42,9 @@ def parse_cornell_text(text: str, path: PathLike = "<text>") -> dict[str, Any]:
         raise fail(path, "empty Cornell BRDF file (no numbers)")
     nums = lines.numbers()  # a bad token: "line N: not a number: 'x'"
     n_wl = nums[0]
-    if not (np.isfinite(n_wl) and n_wl == int(n_wl) and 1 <= n_wl <= _MAX_WAVELENGTHS):
+    if not (np.isfinite(n_wl) and n_wl == int(n_wl) and n_wl >= 1):
         raise fail(path, f"impossible number of wavelengths {first!r}")
+    check_channel_count(path, int(n_wl), "wavelengths")
     n_wl = int(n_wl)
     if len(nums) < 1 + n_wl:
         raise fail(path, f"truncated: {n_wl} wavelengths announced, {len(nums) - 1} numbers found")

@@ -39,7 +39,7 @@ from gonio.io._hdf5_guard import (
     check_group_datasets,
     open_bounded,
 )
-from gonio.io._sanity import check_axis_range, check_table_arrays
+from gonio.io._sanity import check_axis_range, check_channel_count, check_table_arrays
 from gonio.io.lossy import LossyEncoding, decode_lossy, encode_lossy, lossy_stats
 from gonio.io.strict_json import dumps_json
 
@@ -124,7 +124,8 @@ def _dataset(h5: Any, name: str, data: np.ndarray, channel_last: bool, level: in
     )
 
 
-def _write_channels(h5: Any, channels: Any) -> None:
+def _write_channels(h5: Any, channels: Any, path: PathLike) -> None:
+    check_channel_count(path, len(channels.names))  # the reader's bound
     g = h5.create_group("channels")
     g.attrs["kind"] = str(channels.kind)
     g.attrs["names"] = np.array([str(n) for n in channels.names], dtype=object)
@@ -211,7 +212,7 @@ def write_native(
     ):
         meta = dict(obj.meta or {})
         _common_attrs(h5, "gridded" if gridded else "scattered", meta)
-        _write_channels(h5, obj.channels)
+        _write_channels(h5, obj.channels, path)
         if _hook is not None:
             _hook("attrs")
         if gridded:
@@ -224,7 +225,7 @@ def write_native(
             g = h5.create_group(name)
             extra_gridded = isinstance(extra, TabulatedBRDF)
             _common_attrs(g, "gridded" if extra_gridded else "scattered", extra.meta)
-            _write_channels(g, extra.channels)
+            _write_channels(g, extra.channels, path)
             if extra_gridded:
                 _write_gridded(g, extra, path, None, level, None)
             else:
@@ -421,6 +422,7 @@ def _read_channels(h5: Any, path: PathLike) -> dict:
     names = [
         n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(g.attrs["names"])
     ]
+    check_channel_count(path, len(names))
     wl = np.asarray(g["wavelengths_nm"][()], dtype=np.float64) if "wavelengths_nm" in g else None
     if kind == "spectral" and (wl is None or len(wl) != len(names)):
         raise fail(path, "spectral channels need one wavelength per channel")

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from gonio._bounded import MAX_BRDF
+from gonio._bounded import MAX_BRDF, MAX_CHANNELS
 from gonio.io._common import PathLike, fail, read_bytes
 
 MAGIC = b"tensor_file\x00"
@@ -47,9 +47,10 @@ _MAX_NDIM = 16
 #: database's files reach -1.4 % of their peak); below this fraction of its largest magnitude
 #: it cannot come from a measurement and the file is refused.
 COLOUR_NEGATIVE_TOLERANCE = 0.1
-#: Most wavelengths a spectral file may hold (the database's spectral files hold a few dozen);
-#: checked before anything is evaluated or tabulated, whose memory grows with the count.
-MAX_WAVELENGTHS = 128
+#: Most wavelengths a spectral file may hold (:data:`gonio._bounded.MAX_CHANNELS`; the
+#: database's spectral files hold a few dozen); checked before anything is evaluated or
+#: tabulated, whose memory grows with the count.
+MAX_WAVELENGTHS = MAX_CHANNELS
 #: Smallest step between consecutive ``theta_i`` or ``phi_i`` values, radians (0.006 degrees:
 #: finer than any goniophotometer positions; a scaled axis collapses below it).
 MIN_ANGLE_STEP = 1e-4
