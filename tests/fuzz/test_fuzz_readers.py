@@ -5,12 +5,14 @@ passes). The default run judges :data:`DEFAULT_CASES` cases; ``-m slow`` judges
 mutation and source file, and the command that replays it.
 
 Counts of the default run (seed 23, 500 cases; cases / typed errors / loads / failures): alta
-30 / 18 / 12 / 0, cornell 37 / 29 / 8 / 0, exr 36 / 22 / 14 / 0, exr_slices 42 / 39 / 3 / 0,
+30 / 22 / 8 / 0, cornell 37 / 24 / 13 / 0, exr 36 / 22 / 14 / 0, exr_slices 42 / 39 / 3 / 0,
 fit 30 / 24 / 6 / 0, merl 32 / 21 / 11 / 0, native 94 / 77 / 17 / 0, nbrdf 36 / 36 / 0 / 0, plan
-41 / 37 / 4 / 0, rgl 78 / 56 / 22 / 0, rig 44 / 36 / 8 / 0 (``nbrdf`` joins where
-``gonio.io.nbrdf`` exists). The default count was 2,000 (64 s of a 2-core test run, the
-suite's slowest test); 500 still draws every kind at least 30 times, and ``-m slow`` runs the
-20,000-case campaign.
+41 / 35 / 6 / 0, rgl 78 / 56 / 22 / 0, rig 44 / 36 / 8 / 0 (``nbrdf`` joins where
+``gonio.io.nbrdf`` exists). Every load also goes through the round-trip oracle
+(:func:`tests.fuzz.worker.round_trip`: gonio's writers, then their readers), under the same
+time limits and 2 GiB memory watchdog as the load itself. The default count was 2,000 (64 s of
+a 2-core test run, the suite's slowest test); 500 still draws every kind at least 30 times,
+and ``-m slow`` runs the 20,000-case campaign.
 """
 
 from __future__ import annotations
