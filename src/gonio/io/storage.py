@@ -41,8 +41,8 @@ def storage_errno(exc: BaseException) -> int | None:
     """The storage errno (a key of :data:`REASONS`) behind ``exc``, or None.
 
     Looks at ``exc`` and the exceptions it was raised from or during (``__cause__``,
-    ``__context__``): an ``errno`` attribute, SQLite's error name or text, or the system's
-    message for one of these errors inside the exception's text.
+    ``__context__`` unless ``from None`` hid it): an ``errno`` attribute, SQLite's error name
+    or text, or the system's message for one of these errors inside the exception's text.
     """
     seen: set[int] = set()
     e: BaseException | None = exc
@@ -63,7 +63,7 @@ def storage_errno(exc: BaseException) -> int | None:
         for c in REASONS:
             if os.strerror(c) in text:
                 return c
-        e = e.__cause__ or e.__context__
+        e = e.__cause__ or (None if e.__suppress_context__ else e.__context__)
     return None
 
 
