@@ -58,6 +58,7 @@ def test_killed_holder_is_recognised_and_taken_over(tmp_path):
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform")
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")  # the child only sleeps
 def test_forked_child_does_not_keep_the_lock(tmp_path):
     path = tmp_path / "x.lock"
     lock = Lock(path, "thing").acquire()

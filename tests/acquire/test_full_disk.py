@@ -144,9 +144,14 @@ def test_filesystem_filling_mid_run_keeps_samples_and_resumes_identically(
         whole_json_lines(run / "sim_goals.jsonl")
         whole_json_lines(run / "log.jsonl")
         assert len(read_packet_log(run / "sim_packets.jsonl")) < len(emu.packet_log)
-        # resumed once space is freed: complete, nothing lost or duplicated, the same table
+        # resumed once space is freed: complete, nothing lost or duplicated, the same table;
+        # a PID file left by a killed holder is taken over
         filler[0].unlink()
+        dead = _dead_pid()
+        (run / ".lock.pid").write_text(f"{dead}\n")
         s = acquire(run, resume=True, progress=False)
+        events = [e for e in whole_json_lines(run / "log.jsonl") if e["event"] == "lock_taken_over"]
+        assert [e["stale_pid"] for e in events] == [dead]
         assert s.complete and s.done == 12 and s.measured_now == 12 - len(kept)
         assert_same_run(run, reference)
         last = {}
@@ -191,6 +196,23 @@ def test_console_full_disk_is_one_line_and_resume_completes(tmp_path, files, ref
     )
     assert r.returncode == 0, r.stderr
     assert_same_run(run, reference)
+
+
+def _dead_pid() -> int:
+    """The PID of a process that has ended."""
+    p = subprocess.Popen(["true"])
+    p.wait()
+    return p.pid
+
+
+def test_a_start_on_a_full_filesystem_creates_no_run(tmp_path, files):
+    with small_tmpfs(tmp_path / "mnt", "256k") as mnt:
+        fill(mnt)
+        with pytest.raises(StorageError) as info:
+            acquire(mnt / "run", RIG, files / "plan.toml", progress=False)
+        assert str(info.value).startswith(f"{mnt / 'run' / 'journal.sqlite'}: no space left")
+        assert info.value.__notes__ == ["no run was created: make room, then start it again"]
+        assert [p.name for p in mnt.iterdir()] == ["filler"]
 
 
 def test_run_folder_removed_under_a_run_stops_it_parked(tmp_path, files):

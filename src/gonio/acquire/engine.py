@@ -321,6 +321,8 @@ def _acquire(
             exposure_planning = journal.get_meta("exposure_planning") == "1"
         run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample, first)
         run.hold = hold
+        if hold.lock is not None and hold.lock.stale_pid is not None:  # its holder was killed
+            run.log("lock_taken_over", stale_pid=hold.lock.stale_pid)
         try:
             run.execute(open_devices, exposure_planning)
         except BaseException:

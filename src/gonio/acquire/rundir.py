@@ -87,9 +87,11 @@ def start_new(
         tmp.replace(run_dir)
         if hold is not None and hold.lock is not None:
             hold.lock.moved(run_dir)
-    except StorageError:
+    except StorageError as exc:  # named after the run asked for, not the temporary folder
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        err = StorageError(str(exc).replace(str(tmp), str(run_dir)))
+        err.errno = exc.errno
+        raise err from None
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise PlanError(f"cannot create run directory {run_dir}: {exc}") from None
@@ -201,7 +203,9 @@ def storage_failure(exc: BaseException, run_dir: Path) -> StorageError | None:
     if err is not exc:
         for note in getattr(exc, "__notes__", ()):
             err.add_note(note)  # e.g. whether the rig was parked
-    if err.errno in REASONS:
+    if err.errno in REASONS and not Path(run_dir, Journal.FILENAME).is_file():
+        err.add_note("no run was created: make room, then start it again")
+    elif err.errno in REASONS:
         kept = _samples_kept(run_dir)
         what = "every committed sample is kept" if kept is None else f"{kept} samples kept"
         err.add_note(f"{what}: make room, then gonio acquire --resume {run_dir}")

@@ -18,7 +18,7 @@ import os
 import resource
 from pathlib import Path
 
-from gonio.errors import StorageError
+from gonio.errors import GonioError, StorageError
 
 #: errno -> what the one-line message says
 REASONS: dict[int, str] = {
@@ -42,12 +42,16 @@ def storage_errno(exc: BaseException) -> int | None:
 
     Looks at ``exc`` and the exceptions it was raised from or during (``__cause__``,
     ``__context__`` unless ``from None`` hid it): an ``errno`` attribute, SQLite's error name
-    or text, or the system's message for one of these errors inside the exception's text.
+    or text, or the system's message for one of these errors (but EIO) inside the exception's
+    text. A :class:`~gonio.errors.GonioError` other than StorageError on the way is no storage
+    error: it already says what failed (a serial port's I/O error is a DeviceError).
     """
     seen: set[int] = set()
     e: BaseException | None = exc
     while e is not None and id(e) not in seen and len(seen) < 16:
         seen.add(id(e))
+        if isinstance(e, GonioError) and not isinstance(e, StorageError):
+            return None  # already said what it is (a serial port's EIO is a DeviceError)
         code = getattr(e, "errno", None)
         if code in REASONS:
             return code
@@ -60,8 +64,8 @@ def storage_errno(exc: BaseException) -> int | None:
         for needle, c in _SQLITE_TEXT.items():
             if needle in text and type(e).__module__ == "sqlite3":
                 return c
-        for c in REASONS:
-            if os.strerror(c) in text:
+        for c in REASONS:  # EIO's text is too common (a serial port's) to be read as storage
+            if c != errno.EIO and os.strerror(c) in text:
                 return c
         e = e.__cause__ or (None if e.__suppress_context__ else e.__context__)
     return None
