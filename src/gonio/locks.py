@@ -75,7 +75,10 @@ class Lock:
     def acquire(self) -> Self:
         """Take the lock, or raise InUseError naming the holder's PID."""
         for _ in range(5):  # the lock file replaced between open and flock: open it again
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            except PermissionError:  # another user's lock file: flock needs no write access
+                fd = os.open(self.path, os.O_RDONLY | os.O_CLOEXEC)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from gonio._bounded import dumps_json
-from gonio.io.storage import storage_error
+from gonio.io.storage import append_whole, storage_error
 
 
 class RunLog:
@@ -42,16 +42,9 @@ class RunLog:
         if self.error is not None or self._fd < 0:
             return
         rec = {"t": round(time.time(), 6), "event": event, **fields}
-        data = memoryview((dumps_json(rec, default=_jsonable) + "\n").encode("utf-8"))
-        start = -1
         try:
-            start = os.lseek(self._fd, 0, os.SEEK_END)
-            while data:
-                data = data[os.write(self._fd, data) :]
+            append_whole(self._fd, (dumps_json(rec, default=_jsonable) + "\n").encode("utf-8"))
         except OSError as exc:
-            if start >= 0:
-                with contextlib.suppress(OSError):
-                    os.ftruncate(self._fd, start)
             self.error = storage_error(exc, self.path) or exc
 
     def check(self) -> None:

@@ -9,10 +9,12 @@ and "disk I/O error" (:class:`sqlite3.OperationalError`), or only the system's t
 another exception (OpenEXR's ``RuntimeError``). :func:`storage_errno` recognises all of them,
 and :func:`storage_error` turns one into a :class:`gonio.errors.StorageError` whose one-line
 message names the file, the reason and the filesystem (mount point, type, free space).
+:func:`append_whole` appends a log line whole or not at all.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import resource
@@ -173,6 +175,21 @@ def _cause_of_io_error(path: str | os.PathLike) -> int:
     return errno.ENOSPC if full_after_failure(path) else errno.EIO
 
 
+def append_whole(fd: int, data: bytes) -> None:
+    """Append ``data`` to the file open as ``fd`` whole or not at all: a write the storage cuts
+    short (a full disk) is cut back off the file, and its OSError raised. For logs of one
+    line per record, which then never end in a torn line."""
+    start = os.lseek(fd, 0, os.SEEK_END)
+    view = memoryview(data)
+    try:
+        while view:
+            view = view[os.write(fd, view) :]
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, start)
+        raise
+
+
 def full_after_failure(path: str | os.PathLike) -> bool:
     """Whether the filesystem holding ``path`` has no space left for this process: the last
     resort of a writer whose library reported a failed write without saying why."""
@@ -185,6 +202,7 @@ def full_after_failure(path: str | os.PathLike) -> bool:
 
 __all__ = [
     "REASONS",
+    "append_whole",
     "describe_filesystem",
     "full_after_failure",
     "mount_of",

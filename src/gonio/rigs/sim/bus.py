@@ -15,7 +15,6 @@ written (a full disk) stops, whole up to its last line, and says so in
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import math
@@ -28,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gonio.errors import ParameterError
+from gonio.io.storage import append_whole
 from gonio.rigs import control_table as ct
 from gonio.rigs import protocol as p
 from gonio.rigs.sim.pty_device import PtyDevice
@@ -589,26 +589,15 @@ class ServoChainEmulator(PtyDevice):
         failed (a full disk): that file log stops there, cut back to its last whole line, and
         :attr:`file_log_error` keeps the failure, while the bus goes on answering and the
         in-memory logs stay complete."""
-        data = memoryview((json.dumps(record) + "\n").encode())
         try:
             fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            try:
+                append_whole(fd, (json.dumps(record) + "\n").encode())
+            finally:
+                os.close(fd)
         except OSError as exc:
             self.file_log_error = self.file_log_error or OSError(exc.errno, exc.strerror, str(path))
             return None
-        try:
-            start = os.lseek(fd, 0, os.SEEK_END)
-            try:
-                while data:
-                    data = data[os.write(fd, data) :]
-            except OSError as exc:
-                with contextlib.suppress(OSError):
-                    os.ftruncate(fd, start)
-                self.file_log_error = self.file_log_error or OSError(
-                    exc.errno, exc.strerror, str(path)
-                )
-                return None
-        finally:
-            os.close(fd)
         return path
 
 
