@@ -142,6 +142,8 @@ class RunHold:
         """Lock ``folder`` (default ``RUN``; a new run's temporary folder before its rename):
         InUseError naming the holder's PID if another process holds it."""
         folder = Path(folder or self.run_dir)
+        if not (folder / Journal.FILENAME).is_file():  # no lock file left in a stranger's folder
+            raise FormatError(f"{self.run_dir} is not a gonio run (no {Journal.FILENAME})")
         lock = Lock(
             folder / LOCK_NAME,
             f"run folder {self.run_dir}",
@@ -150,15 +152,13 @@ class RunHold:
         )
         try:
             lock.acquire()
-        except FileNotFoundError:
-            raise FormatError(f"{self.run_dir} is not a gonio run (no such folder)") from None
         except OSError as exc:
             raise storage_error(exc, folder) or exc from None
         self.lock = lock
         try:
             self._ident = (os.stat(folder), os.stat(folder / Journal.FILENAME))
         except OSError:
-            self._ident = None  # no journal: open_run says so
+            self._ident = None  # gone already: open_run says so
 
     def check(self) -> None:
         """StorageError if ``RUN`` or its journal is no longer the one this process holds
