@@ -68,3 +68,22 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, message: str = "interrupted", signum: int = 2) -> None:
         super().__init__(message)
         self.signum = signum
+
+
+class StorageError(GonioError, OSError):
+    """A file could not be written because of where it lives, not what it holds: the
+    filesystem is full (``ENOSPC``), a quota is exhausted (``EDQUOT``), a file-size limit is
+    reached (``EFBIG``), the filesystem is read-only (``EROFS``) or failing (``EIO``), or a run
+    folder was removed under a running acquisition. The message names the file and the
+    filesystem (its mount point); ``errno`` is the system's error number where there is one.
+    Nothing partial is left under the output's name; an acquisition keeps every sample it
+    committed and continues with ``gonio acquire --resume RUN`` once space is freed."""
+
+    exit_code = 5
+
+
+class InUseError(GonioError):
+    """A run folder or a serial port is held by another process (its PID is in the message):
+    a run folder by the acquisition writing it, a port by the process driving it."""
+
+    exit_code = 6

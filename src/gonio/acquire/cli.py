@@ -91,6 +91,10 @@ def register(sub) -> None:
             " turns torque off when it cannot, and the one-line error says which. A start that"
             " fails leaves no RUN behind. RUN/log.jsonl is a structured"
             " log; RUN/table.brdf.h5 is written when the run completes (needs gonio.io)."
+            " A full disk (or quota, file-size limit, read-only disk) stops the run parked with"
+            " every committed sample kept, exit status 5: make room, then --resume RUN. One"
+            " process writes a run folder and drives a serial port at a time: a second is"
+            " refused naming the holder's PID, exit status 6."
         ),
     )
     a.add_argument(

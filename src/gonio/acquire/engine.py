@@ -44,8 +44,8 @@ from gonio.acquire import rundir, stopping
 from gonio.acquire.journal import Journal, PlannedConfig
 from gonio.acquire.ordering import move_times, path_time, plan_route
 from gonio.acquire.plans import Plan, Result, load_plan
+from gonio.acquire.runlog import RunLog
 from gonio.errors import DeviceError, FrameError, PlanError
-from gonio.io.strict_json import dumps_json
 from gonio.rigs.config import RigConfig, load_rig
 from gonio.rigs.devices import Geometry
 from gonio.rigs.kinematics import Kinematics, Pose
@@ -210,30 +210,6 @@ def _refuse_if_nothing(sp: StagePlan) -> None:
 # --- the run ------------------------------------------------------------------------------
 
 
-class RunLog:
-    """Append-only JSON-lines log (one flushed line per event, strict JSON:
-    :func:`gonio.io.strict_json.dumps_json`)."""
-
-    def __init__(self, path: Path) -> None:
-        self._fh = open(path, "a", encoding="utf-8")
-
-    def __call__(self, event: str, **fields) -> None:
-        rec = {"t": round(time.time(), 6), "event": event, **fields}
-        self._fh.write(dumps_json(rec, default=_jsonable) + "\n")
-        self._fh.flush()
-
-    def close(self) -> None:
-        self._fh.close()
-
-
-def _jsonable(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    return str(o)
-
-
 @dataclass
 class RunSummary:
     """What a run (or a resumed part of it) did."""
@@ -296,13 +272,30 @@ def acquire(
     directory behind.
     """
     run_dir = Path(out)
+    try:
+        return _acquire(
+            run_dir, rig, plan, resume, progress, on_sample, write_table, strict,
+            exposure_planning, open_devices,
+        )  # fmt: skip
+    except Exception as exc:  # a storage failure anywhere: one StorageError saying what is kept
+        err = rundir.storage_failure(exc, run_dir)
+        if err is None:
+            raise
+        raise err from None
+
+
+def _acquire(
+    run_dir: Path, rig, plan, resume, progress, on_sample, write_table, strict,
+    exposure_planning, open_devices,
+) -> RunSummary:  # fmt: skip
     # signals are recorded, not raised, except in the loop over configurations (see
     # gonio.interrupts): the flag is checked wherever stopping is safe
-    with interrupts.installed() as flag, flag.shielded():
+    with interrupts.installed() as flag, flag.shielded(), rundir.RunHold(run_dir) as hold:
         if flag.requested:  # a signal during start-up whose exception was swallowed
             raise flag.interrupted()
         first = None  # stage 0 of a new run, planned before anything is created
         if resume:
+            hold.take()  # before anything is read: InUseError while another process writes it
             journal, rig_cfg, plan_obj = open_run(run_dir)
             if rig is not None:
                 _same_rig_or_refuse(journal, rig_cfg, rig, run_dir)
@@ -321,12 +314,15 @@ def acquire(
             meta = {"strict": "1" if strict else "0"}
             if exposure_planning is not None:  # a resumed run keeps the choice
                 meta["exposure_planning"] = "1" if exposure_planning else "0"
-            existed = rundir.start_new(run_dir, rig_cfg, spec, meta)
+            existed = rundir.start_new(run_dir, rig_cfg, spec, meta, hold)
             journal = Journal(run_dir)
             created = True
         if exposure_planning is None and journal.get_meta("exposure_planning") is not None:
             exposure_planning = journal.get_meta("exposure_planning") == "1"
         run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample, first)
+        run.hold = hold
+        if hold.lock is not None and hold.lock.stale_pid is not None:  # its holder was killed
+            run.log("lock_taken_over", stale_pid=hold.lock.stale_pid)
         try:
             run.execute(open_devices, exposure_planning)
         except BaseException:
@@ -384,6 +380,7 @@ class _Run:
         self._closed = False
         self.first_stage: StagePlan | None = first_stage  # stage 0 planned before the bus opened
         self.channels: tuple[str, ...] = ()  # the camera's, once the devices are open
+        self.hold = rundir.RunHold(run_dir)  # the run folder's lock, held by acquire()
 
     def execute(self, open_devices, exposure_planning) -> None:
         from gonio.acquire.imaging import measurement
@@ -481,6 +478,7 @@ class _Run:
                         raise flag.interrupted()
                     if flag.requested:
                         return
+                    self.check_storage()
                     if _measure(chain, camera, kin, journal, log, cfg, scale):
                         self.measured_now += 1
                     bar.advance()
@@ -488,6 +486,13 @@ class _Run:
                         self.on_sample(self.measured_now, ses)
                 if flag.requested:
                     return
+        self.check_storage()
+
+    def check_storage(self) -> None:
+        """StorageError if the run folder is gone or the log could not be written (the
+        journal's own failures raise where they happen)."""
+        self.hold.check()
+        self.log.check()
 
     def close(self) -> None:
         if not self._closed:

@@ -14,10 +14,16 @@ Tables
                                 targets (sample frame) and planned joint angles (deg, JSON).
 ``samples(idx, joints, wi_*, wo_*, value, sigma, t_*, recoveries, captured_at)``
                                 what was measured: read-back angles and directions.
+
+A write that the storage refuses (a full filesystem, a quota, a file-size limit, a read-only or
+failing disk; SQLite's "database or disk is full" and "disk I/O error") raises
+:class:`gonio.errors.StorageError` naming the journal and its filesystem; SQLite rolls the
+failed statement back, so every sample committed before it is kept.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import sqlite3
 import time
@@ -28,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from gonio.errors import FormatError
+from gonio.io.storage import storage_error
 from gonio.io.strict_json import dumps_json
 
 SCHEMA_VERSION = 1
@@ -49,6 +56,22 @@ CREATE TABLE IF NOT EXISTS samples(
     t_motion REAL, t_settle REAL, t_capture REAL, t_book REAL,
     recoveries INTEGER NOT NULL DEFAULT 0, captured_at REAL NOT NULL);
 """
+
+
+def _writes(method):
+    """A journal method whose storage failures raise StorageError (see the module)."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.Error as exc:
+            err = storage_error(exc, self.path)
+            if err is None:
+                raise
+            raise err from None
+
+    return wrapper
 
 
 @dataclass(frozen=True)
@@ -116,7 +139,9 @@ class Journal:
                     raise FormatError(f"{self.path}: unknown journal schema version {ver!r}")
         except sqlite3.DatabaseError as exc:
             self.db.close()
-            raise FormatError(f"{self.path}: not a usable journal ({exc})") from None
+            raise storage_error(exc, self.path) or FormatError(
+                f"{self.path}: not a usable journal ({exc})"
+            ) from None
 
     def close(self) -> None:
         self.db.close()
@@ -139,7 +164,9 @@ class Journal:
                 )
             configs, samples = self.configs(), self.samples()
         except sqlite3.DatabaseError as exc:
-            raise FormatError(f"{self.path}: damaged journal ({exc})") from None
+            raise storage_error(exc, self.path) or FormatError(
+                f"{self.path}: damaged journal ({exc})"
+            ) from None
         except (ValueError, TypeError) as exc:  # a row that is not what the journal writes
             raise FormatError(f"{self.path}: a row does not decode ({exc})") from None
         status = {c.idx: c.status for c in configs}
@@ -151,6 +178,7 @@ class Journal:
             )
 
     # --- meta ---------------------------------------------------------------------------------
+    @_writes
     def set_meta(self, items: dict[str, str]) -> None:
         with self._tx():
             self.db.executemany(
@@ -186,6 +214,7 @@ class Journal:
         row = self.db.execute("SELECT COALESCE(MAX(idx), -1) + 1 FROM configs").fetchone()
         return int(row[0])
 
+    @_writes
     def plan_stage(self, stage: int, configs: Sequence[PlannedConfig]) -> None:
         """Record a whole stage atomically (configs already carry idx and seq)."""
         with self._tx():
@@ -236,6 +265,7 @@ class Journal:
         return [_planned(r) for r in rows]
 
     # --- samples ------------------------------------------------------------------------------
+    @_writes
     def record(
         self,
         idx: int,
@@ -268,6 +298,7 @@ class Journal:
             ),
         )
 
+    @_writes
     def reject(self, idx: int, reason: str) -> None:
         """Mark a planned configuration whose frame could not be measured as rejected (it is
         not retried on resume; :meth:`pending` skips it)."""
@@ -277,6 +308,7 @@ class Journal:
             (reason, idx),
         )
 
+    @_writes
     def set_book_time(self, idx: int, t_book: float) -> None:
         self.db.execute("UPDATE samples SET t_book = ? WHERE idx = ?", (t_book, idx))
 

@@ -10,7 +10,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from gonio.errors import FitError, ParameterError
+from gonio.errors import FitError, ParameterError, StorageError
 from gonio.io.strict_json import dumps_json
 
 #: Names of :data:`gonio.fit.losses.LOSSES` (written out so that building the parser does not
@@ -273,7 +273,9 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         try:
             staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
         except OSError as exc:  # named after the folder asked for, not the staging one
-            raise OSError(exc.errno, exc.strerror, str(out)) from None
+            from gonio.io.storage import storage_error
+
+            raise storage_error(exc, out) or OSError(exc.errno, exc.strerror, str(out)) from None
         try:
             files = []
             for r in results:
@@ -294,6 +296,10 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
             out.mkdir(parents=True, exist_ok=True)
             for f in sorted(staging.iterdir()):
                 os.replace(f, out / f.name)
+        except StorageError as exc:  # named after the folder asked for, not the staging one
+            err = StorageError(str(exc).replace(str(staging), str(out)))
+            err.errno = exc.errno
+            raise err from None
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     if as_json:

@@ -26,6 +26,7 @@ trusted as JAX's compilation cache beside it is, whose files are native code.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
@@ -166,11 +167,14 @@ def _dtype(x: Any) -> Any:
 def _write(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (a concurrent reader never sees a partial file);
     errors are ignored (the file only saves time)."""
+    tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)
-    except OSError:
-        pass
+    except OSError:  # a full disk: no partial file left in the cache either
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)

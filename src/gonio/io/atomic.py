@@ -8,12 +8,14 @@ temporary file, then renamed).
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from gonio.errors import FormatError
+from gonio.errors import FormatError, StorageError
+from gonio.io.storage import full_after_failure, storage_error
 
 PathLike = str | os.PathLike[str]
 
@@ -36,6 +38,9 @@ def atomic_output(
     (``0o666`` less the umask; :func:`tempfile.mkstemp` creates it ``0o600``). If the body raises
     (``KeyboardInterrupt`` included), the temporary file is removed and ``path`` is left as it
     was: a crash never leaves a half-written file under the final name, nor a stale temporary.
+    A failure of the storage itself (a full filesystem, a quota, a file-size limit, a read-only
+    or failing filesystem: :mod:`gonio.io.storage`), whatever library reported it, is raised
+    as one :class:`~gonio.errors.StorageError` naming ``path`` and its filesystem.
 
     Parameters
     ----------
@@ -47,28 +52,42 @@ def atomic_output(
     ------
     FormatError
         ``path`` is a folder, or its folder does not exist (and ``make_parents`` is False).
+    StorageError
+        The storage refused the file (see above).
     """
     dest = Path(path)
     folder = dest.parent if str(dest.parent) else Path(".")
     if dest.is_dir():
         raise FormatError(f"{os.fspath(dest)}: is a directory, cannot write a file there")
     if make_parents:
-        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise storage_error(exc, folder) or exc from None
     elif not folder.is_dir():
         raise FormatError(f"{os.fspath(dest)}: output folder {folder} does not exist")
     try:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=suffix, dir=folder)
     except OSError as exc:  # named after the file asked for, not the temporary one
-        raise OSError(exc.errno, exc.strerror, os.fspath(dest)) from None
+        raise storage_error(exc, dest) or OSError(
+            exc.errno, exc.strerror, os.fspath(dest)
+        ) from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, dest)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+        if isinstance(exc, Exception) and not isinstance(exc, StorageError):
+            err = storage_error(exc, dest)
+            if err is None and isinstance(exc, OSError | RuntimeError) and full_after_failure(dest):
+                # a library that reports a failed write without its reason, on a full disk
+                err = storage_error(OSError(errno.ENOSPC, ""), dest)
+            if err is not None:
+                raise err from None
         raise
 
 

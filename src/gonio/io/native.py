@@ -22,6 +22,7 @@ Reading is bounded (:mod:`gonio.io._hdf5_guard`): only this layout is accepted.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -206,10 +207,9 @@ def write_native(
     if lossy is not None and not gridded:
         raise ParameterError("lossy encoding applies to gridded tables only")
     report: dict = {}
-    with (
-        atomic_output(path, suffix=".h5.tmp") as tmp,
-        h5py.File(tmp, "w", libver=("v108", "v108")) as h5,
-    ):
+    # built in memory: HDF5 never meets a full disk (its clean-up crashes after a failed close)
+    image = io.BytesIO()
+    with h5py.File(image, "w", libver=("v108", "v108")) as h5:
         meta = dict(obj.meta or {})
         _common_attrs(h5, "gridded" if gridded else "scattered", meta)
         _write_channels(h5, obj.channels, path)
@@ -230,6 +230,8 @@ def write_native(
                 _write_gridded(g, extra, path, None, level, None)
             else:
                 _write_scattered(g, extra, path, level)
+    with atomic_output(path, suffix=".h5.tmp") as tmp:
+        tmp.write_bytes(image.getbuffer())
     return report
 
 

@@ -59,6 +59,11 @@ def register(sub) -> None:
     e.add_argument(
         "--goal-log", metavar="FILE", help="append every received Goal Position (JSON lines)"
     )
+    e.add_argument(
+        "--packet-log",
+        metavar="FILE",
+        help="append every instruction packet received, before any injected fault (JSON lines)",
+    )
     e.set_defaults(func=_emulate)
     lst = rs.add_parser("list", help="list the rigs shipped with gonio")
     lst.set_defaults(func=_list)
@@ -139,7 +144,7 @@ def _emulate(args: argparse.Namespace) -> int:
     if args.time_scale is not None and not args.time_scale > 0:
         raise ParameterError("--time-scale must be > 0")
     faults = parse_faults(args.sim_faults) if args.sim_faults else None
-    emu = make_emulator(rig, faults, args.goal_log, args.time_scale)
+    emu = make_emulator(rig, faults, args.goal_log, args.time_scale, args.packet_log)
     done = threading.Event()
     old = {s: signal.signal(s, lambda *_: done.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:

@@ -10,6 +10,10 @@ engine parks inside the block, :mod:`gonio.acquire.stopping`). The backends come
 For the simulated rig (``bus.port = "sim"``) the servo-chain emulator is started on a
 pseudo-terminal and its slave path replaces the port; everything after that
 (``dynamixel_sdk``, :class:`~gonio.rigs.dynamixel.ServoChain`) is the same code as on hardware.
+The port is locked before the driver opens it (:func:`gonio.locks.hold_port`, keyed by its real
+path): a second process on the same adapter or pseudo-terminal is refused in one line naming
+the holder's PID, before it sends any packet. The simulator's file logs never stop its bus: one
+that cannot be written (a full disk) stops, and the error leaving the session says so.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gonio.errors import ParameterError
+from gonio.locks import hold_port
 from gonio.rigs import factory
 from gonio.rigs.config import RigConfig
 from gonio.rigs.dynamixel import ServoChain
@@ -133,7 +138,13 @@ def open_rig(
             ses.emulator, ses.chain = _open_servos(
                 stack, rig, faults, goal_log_path, initialize, time_scale, log_dir
             )
-        yield ses
+        try:
+            yield ses
+        except BaseException as exc:
+            if ses.emulator is not None and ses.emulator.file_log_error is not None:
+                e = ses.emulator.file_log_error
+                exc.add_note(f"the simulator's log stopped at {e.filename}: {e.strerror or e}")
+            raise
 
 
 def _open_servos(stack, rig, faults, goal_log_path, initialize, time_scale, log_dir):
@@ -149,6 +160,8 @@ def _open_servos(stack, rig, faults, goal_log_path, initialize, time_scale, log_
         emu = make_emulator(rig, faults, goal_log_path, time_scale, packets)
         port = emu.start()
         stack.callback(emu.stop)
+    # one process drives a port: a second one is refused here, before it sends any packet
+    stack.enter_context(hold_port(port or rig.bus.port))
     chain = ServoChain(rig, port=port)
     chain.open()
     stack.callback(chain.close)

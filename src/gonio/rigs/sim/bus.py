@@ -8,7 +8,9 @@ Profile Acceleration; ``time_scale`` makes simulated time run faster than wall t
 quick. Faults can be injected: dropped instructions, garbled replies, CRC errors, overload with
 torque shutdown, a servo that stops answering. Every Goal Position write that reaches a servo is
 recorded in :attr:`ServoChainEmulator.goal_log` (and optionally appended to a JSON-lines file)
-so tests can prove that no goal beyond the limits was ever sent.
+so tests can prove that no goal beyond the limits was ever sent. A file log that cannot be
+written (a full disk) stops, whole up to its last line, and says so in
+:attr:`ServoChainEmulator.file_log_error`; the bus never stops answering for it.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gonio.errors import ParameterError
+from gonio.io.storage import append_whole
 from gonio.io.strict_json import dumps_json
 from gonio.rigs import control_table as ct
 from gonio.rigs import protocol as p
@@ -327,6 +330,8 @@ class ServoChainEmulator(PtyDevice):
         self.packets_in = 0
         self.crc_errors_seen = 0
         self._goal_log_path = Path(goal_log_path) if goal_log_path else None
+        #: the first failed write of a file log (goal or packet log), which then stopped
+        self.file_log_error: OSError | None = None
 
     # --- lifecycle ---------------------------------------------------------------------------
     def now(self) -> float:
@@ -565,18 +570,8 @@ class ServoChainEmulator(PtyDevice):
         rec = PacketRecord(time.time(), pkt.id, pkt.instruction, bytes(pkt.params))
         self.packet_log.append(rec)
         if self._packet_log_path is not None:
-            with open(self._packet_log_path, "a", encoding="utf-8") as fh:
-                fh.write(
-                    dumps_json(
-                        {
-                            "t": rec.time,
-                            "id": rec.id,
-                            "inst": rec.instruction,
-                            "params": rec.params.hex(),
-                        }
-                    )
-                    + "\n"
-                )
+            d = {"t": rec.time, "id": rec.id, "inst": rec.instruction, "params": rec.params.hex()}
+            self._packet_log_path = self._append(self._packet_log_path, d)
 
     def writes(self, reg: tuple[int, int]) -> list[tuple[int, int]]:
         """``(servo id, value)`` of every write of ``reg`` sent on the bus so far, in order."""
@@ -587,11 +582,24 @@ class ServoChainEmulator(PtyDevice):
         rec = GoalRecord(time.time(), servo_id, ticks, accepted)
         self.goal_log.append(rec)
         if self._goal_log_path is not None:
-            with open(self._goal_log_path, "a", encoding="utf-8") as fh:
-                fh.write(
-                    dumps_json({"t": rec.time, "id": servo_id, "ticks": ticks, "ok": accepted})
-                    + "\n"
-                )
+            d = {"t": rec.time, "id": servo_id, "ticks": ticks, "ok": accepted}
+            self._goal_log_path = self._append(self._goal_log_path, d)
+
+    def _append(self, path: Path, record: dict) -> Path | None:
+        """Append ``record`` as one line to a file log; returns the path, or None once a write
+        failed (a full disk): that file log stops there, cut back to its last whole line, and
+        :attr:`file_log_error` keeps the failure, while the bus goes on answering and the
+        in-memory logs stay complete."""
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            try:
+                append_whole(fd, (dumps_json(record) + "\n").encode())
+            finally:
+                os.close(fd)
+        except OSError as exc:
+            self.file_log_error = self.file_log_error or OSError(exc.errno, exc.strerror, str(path))
+            return None
+        return path
 
 
 def read_packet_log(path: str | os.PathLike) -> list[PacketRecord]:
