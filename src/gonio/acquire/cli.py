@@ -111,8 +111,9 @@ def register(sub) -> None:
         "--sim-faults",
         metavar="SPEC",
         help=(
-            "simulated rig only: inject bus faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,"
-            "overload=0.005,seed=1' (probabilities per packet; overload per move)"
+            "simulated rig only: inject bus faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,seed=1'"
+            " (probabilities per packet); overload=P (per move) and block_servo=ID,block_after=N"
+            " (that joint stopped half-way by an obstacle on its move N+1) stop the run"
         ),
     )
     a.add_argument(

@@ -329,7 +329,11 @@ def acquire(
         run = _Run(run_dir, journal, rig_cfg, plan_obj, flag, resume, progress, on_sample, first)
         try:
             run.execute(open_devices, exposure_planning)
-        except BaseException:
+        except BaseException as exc:
+            if not run.started:  # a latched servo error found at open: journaled when resuming
+                stopping.record_fault(
+                    journal, run.log, exc, "; ".join(getattr(exc, "__notes__", ()))
+                )
             run.close()
             if created and not run.started:
                 rundir.discard(run_dir, existed)
@@ -429,7 +433,8 @@ class _Run:
             self.log("interrupted", signal=self.flag.signum, message=str(exc))
         else:
             self.log("aborted", error=type(exc).__name__, message=str(exc))
-        parked, phrase = stopping.bring_to_rest(chain, self.flag)
+        parked, phrase = stopping.bring_to_rest(chain, self.flag, exc)
+        stopping.record_fault(self.journal, self.log, exc, phrase)
         stopping.record_stop(self.journal, self.log, _reason(exc), parked, phrase)
         if parked:
             self.log("parked", pose=self.rig.park_deg)
@@ -438,6 +443,8 @@ class _Run:
         except Exception:
             pass
         exc.add_note(phrase)
+        if getattr(exc, "next_step", None):  # a servo fault: what the policy table says to do
+            exc.add_note(f"next: {exc.next_step}")
 
     def _loop(self, chain, camera, ses) -> None:
         rig, plan, journal, log, flag = self.rig, self.plan, self.journal, self.log, self.flag
