@@ -87,9 +87,15 @@ def soak(
     run: Path,
     retries: int = 6,
     max_stops: int = 20,
+    minutes: float | None = None,
 ):
     """Run the soak into ``run`` (the rig's ``bus.retries`` set to ``retries``; a run stopped by
-    a bus fault is resumed up to ``max_stops`` times); (window rows, summary dict)."""
+    a bus fault is resumed up to ``max_stops`` times; after ``minutes`` of wall time the run is
+    stopped as Ctrl-C stops it, and the summary covers what was measured); (window rows,
+    summary dict)."""
+    import os
+    import signal
+
     from gonio.acquire.engine import acquire
     from gonio.acquire.journal import Journal
     from gonio.errors import DeviceError
@@ -118,6 +124,10 @@ def soak(
     def hook(_: int, ses) -> None:
         state["done"] += 1
         done = state["done"]
+        if minutes is not None and time.perf_counter() - t0 > 60.0 * minutes:
+            if not state.get("deadline"):
+                state["deadline"] = True
+                os.kill(os.getpid(), signal.SIGINT)  # finish this configuration, park, stop
         if done % window:
             return
         now = time.perf_counter()
@@ -163,6 +173,11 @@ def soak(
                 ),
             )
             break
+        except KeyboardInterrupt:
+            if not state.get("deadline"):
+                raise
+            summary = None
+            break
         except DeviceError as exc:
             stops.append(str(exc))
             print(f"stopped after {state['done']} configurations: {exc}; resuming", flush=True)
@@ -173,12 +188,15 @@ def soak(
     j = Journal(run)
     planned = {c.idx for c in j.configs() if c.status == "planned"}
     sampled = [s.idx for s in j.samples()]
+    done_total = j.counts()["done"]
     j.close()
     logged = [
         json.loads(x)["idx"]
         for x in (run / "log.jsonl").read_text().splitlines()
         if json.loads(x)["event"] == "sample"
     ]
+    if not rows:
+        raise SystemExit(f"no window of {window} configurations completed")
     warm = max(1, len(rows) // 10)  # the first tenth of the run is warm-up
     rss_warm = rows[warm - 1]["rss_mb"]
     after = rows[warm:]
@@ -186,11 +204,12 @@ def soak(
     q = max(1, len(cpm) // 4)
     out = {
         "configs": n,
-        "done": summary.done,
+        "done": done_total,
+        "stopped_at_deadline": bool(state.get("deadline")),
         "time_scale": time_scale,
         "fault_p": fault_p,
         "wall_s": round(wall, 1),
-        "configs_per_min": round(summary.done * 60.0 / wall, 1),
+        "configs_per_min": round(done_total * 60.0 / wall, 1),
         "cpm_first_quarter": round(sum(cpm[:q]) / q, 1),
         "cpm_last_quarter": round(sum(cpm[-q:]) / q, 1),
         "rss_warm_mb": rss_warm,
@@ -202,7 +221,9 @@ def soak(
         "journal_bytes_per_config": round(
             1e6 * _size_mb(run / "journal.sqlite", run / "journal.sqlite-wal") / max(1, n)
         ),
-        "lost": len(planned - set(sampled)),
+        # lost: planned and logged as measured but not in the journal, or (run complete)
+        # planned and never measured
+        "lost": len((set(logged) if summary is None else planned) - set(sampled)),
         "duplicated": (len(sampled) - len(set(sampled))) + (len(logged) - len(set(logged))),
         "bus_retries_setting": retries,
         "stops": len(stops),
@@ -251,6 +272,8 @@ def main() -> None:
     ap.add_argument("--window", type=int, default=250, help="configurations per recorded row")
     ap.add_argument("--seed", type=int, default=1, help="fault seed")
     ap.add_argument("--retries", type=int, default=6, help="the rig's bus.retries (sim_sample: 6)")
+    ap.add_argument("--max-stops", type=int, default=20, help="bus stops resumed, at most")
+    ap.add_argument("--minutes", type=float, help="stop (as Ctrl-C does) after this wall time")
     ap.add_argument("--run", type=Path, help="run directory to keep (default: a temporary one)")
     args = ap.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
@@ -258,7 +281,15 @@ def main() -> None:
         run = args.run or Path(tmp) / "run"
         run.parent.mkdir(parents=True, exist_ok=True)
         rows, summary = soak(
-            args.n, args.time_scale, args.faults, args.window, args.seed, run, args.retries
+            args.n,
+            args.time_scale,
+            args.faults,
+            args.window,
+            args.seed,
+            run,
+            args.retries,
+            args.max_stops,
+            args.minutes,
         )
     with open(OUT / "soak.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=WINDOW_FIELDS)

@@ -311,8 +311,8 @@ def _acquire(args: argparse.Namespace) -> int:
         )
         print(
             f"  bus: {summary.bus.get('transactions', 0)} transactions,"
-            f" {summary.bus.get('retries', 0)} retries, {summary.bus.get('recoveries', 0)}"
-            " recoveries"
+            f" {summary.bus.get('retries', 0)} retries,"
+            f" {summary.bus.get('resent_goals', 0)} goals re-sent"
         )
         if summary.table:
             print(f"  table: {summary.table}")

@@ -5,7 +5,7 @@
 * ``journal.sqlite`` — the journal (:mod:`gonio.acquire.journal`); resuming continues from it
   with no lost and no duplicated sample;
 * ``log.jsonl`` — a structured log, one JSON object per line (events, per-configuration timings,
-  faults and recoveries);
+  servo faults);
 * ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received
   (and ``sim_packets.jsonl``, every instruction packet, with ``[sim] packet_log = true``);
 * ``table.brdf.h5`` — the samples as a table through :mod:`gonio.io` when the run completes.

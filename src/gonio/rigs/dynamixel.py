@@ -85,6 +85,7 @@ class MoveResult:
     motion_s: float
     settle_s: float
     polls: int
+    #: reboots during the move: always 0 (a hardware error stops the run; gonio.rigs.faults)
     recoveries: int
     #: the profile time predicted for the move (rig time; both phases of a two-phase move)
     predicted_s: float = 0.0
@@ -360,7 +361,7 @@ class ServoChain:
         return silent
 
     def bus_stats(self) -> dict[str, int]:
-        """Counters of this bus session (transactions, retries, timeouts, recoveries, ...)."""
+        """Counters of this bus session (transactions, retries, timeouts, re-sent goals, ...)."""
         return dict(vars(self.bus.stats))
 
     def arm_transit_hold(
