@@ -218,3 +218,30 @@ def test_blocked_joint_from_the_rig_file_stops_the_cli_in_one_line(tmp_path, pla
     (event,) = j.events()
     j.close()
     assert event[1] == "stall" and event[2]["joints"] == ["camera_arm"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("joint", JOINTS)
+@pytest.mark.parametrize("bit", BITS, ids=[ct.HW_ERROR_NAMES[b] for b in BITS])
+def test_every_bit_on_every_joint_stops_a_run_as_the_policy_says(tmp_path, plan, bit, joint):
+    jid = RIG.joint(joint).id
+    run = tmp_path / "run"
+    packets = []
+
+    def hook(n, ses):
+        if n == 2:
+            ses.emulator.hardware_error(jid, bit, next_move=True)
+            packets.append(ses.emulator)
+
+    with pytest.raises(HardwareFault) as err:
+        acquire(run, RIG, plan, progress=False, on_sample=hook, write_table=False)
+    assert err.value.faults == {joint: bit}
+    assert f"{joint} torque off, the other joints parked" in err.value.__notes__
+    emu = packets[0]
+    n_fault = max(i for i, r in enumerate(emu.packet_log) if r.instruction == 0x02)  # its read
+    _check_rest(emu, emu.packet_log[n_fault:], joint, err.value.policy)
+    assert not [r for r in emu.packet_log if r.instruction == REBOOT]
+    j = Journal(run)
+    (event,) = j.events()
+    j.close()
+    assert event[1] == "hardware error" and event[2]["bits"] == {joint: bit}
