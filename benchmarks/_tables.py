@@ -30,6 +30,7 @@ BENCHMARKS = (
     "bench_imaging",
     "bench_rig",
     "bench_route",
+    "bench_soak",
     "bench_formats",
     "bench_fit",
     "bench_published",

@@ -116,7 +116,7 @@ def test_read_back_directions_match_targets(reference_run):
 
 def test_faulty_bus_still_gives_every_sample_identically(reference, tmp_path, plan_file):
     ref, _ = reference
-    faults = FaultConfig(drop=0.03, garble=0.03, crc=0.03, overload=0.01, seed=11)
+    faults = FaultConfig(drop=0.03, garble=0.03, crc=0.03, seed=11)
     s = acquire(
         tmp_path / "run",
         "sim_sample",
@@ -218,7 +218,7 @@ def test_sigkill_and_resume_gives_the_uninterrupted_samples(reference, tmp_path,
 
 @pytest.mark.slow
 def test_sigkill_many_times_on_a_faulty_bus(reference, tmp_path, plan_file):
-    faults = ("--sim-faults", "drop=0.03,garble=0.03,crc=0.03,overload=0.01,seed=4")
+    faults = ("--sim-faults", "drop=0.03,garble=0.03,crc=0.03,seed=4")
     _kill_and_resume(reference, tmp_path, plan_file, kills=6, seed=9, extra=faults)
 
 

@@ -1,4 +1,4 @@
-"""ServoChain over dynamixel-sdk against the emulator: motion, limits, faults, recovery."""
+"""ServoChain over dynamixel-sdk against the emulator: motion, limits, faults."""
 
 from __future__ import annotations
 
@@ -76,24 +76,39 @@ def test_moves_complete_under_packet_faults():
         assert s.emulator.crc_errors_seen > 0
 
 
-def test_overload_is_recovered_by_reboot_and_rehome():
+def test_overload_raises_and_nothing_reboots_or_moves_it_again():
+    # the old design rebooted the servo and drove it into the same move; an overload means the
+    # arm met something (a cable, a hand): the move stops, nothing is rebooted or re-sent
     with open_rig(RIG) as s:
         s.chain.move(POSE)
+        n_goals = len(s.emulator.goal_log)
         s.emulator.overload(3)
-        res = s.chain.move({**POSE, "tilt": -10.0})
-        assert res.recoveries == 1
-        within_tol(res, {**POSE, "tilt": -10.0})
-        assert s.emulator.register(3, ct.HARDWARE_ERROR_STATUS) == 0
-        # re-homing went through the park pose
-        park_ticks = RIG.joint("tilt").to_ticks(RIG.park_deg["tilt"])
-        assert park_ticks in [g.ticks for g in s.emulator.goal_log if g.id == 3]
+        with pytest.raises(HardwareFault, match=r"servo 3 \(tilt\): overload") as err:
+            s.chain.move({**POSE, "tilt": -10.0})
+        assert err.value.joints == ("tilt",) and err.value.faults == {"tilt": ct.HW_OVERLOAD}
+        assert err.value.policy.key == "overload"
+        assert s.emulator.register(3, ct.HARDWARE_ERROR_STATUS) == ct.HW_OVERLOAD
+        assert s.emulator.register(3, ct.TORQUE_ENABLE) == 0
+        assert not [r for r in s.emulator.packet_log if r.instruction == 0x08]  # no reboot
+        # the failed move's goals went out once (a lost one re-sent), none after the fault
+        assert len(s.emulator.goal_log) - n_goals <= 4
 
 
-def test_overload_without_recovery_raises_hardware_fault():
+def test_overload_of_a_resting_servo_raises_hardware_fault():
     with open_rig(RIG) as s:
         s.emulator.overload(2)
-        with pytest.raises(HardwareFault, match="camera_arm: overload"):
-            s.chain.move(POSE, recover=False)
+        with pytest.raises(HardwareFault, match=r"camera_arm\): overload"):
+            s.chain.move(POSE)
+
+
+def test_reboot_is_explicit_and_leaves_torque_off():
+    with open_rig(RIG, initialize=False) as s:
+        s.emulator.hardware_error(2, ct.HW_OVERHEATING)
+        assert s.chain.reboot() == {"camera_arm": ct.HW_OVERHEATING}
+        assert s.emulator.register(2, ct.HARDWARE_ERROR_STATUS) == 0
+        assert s.emulator.register(2, ct.TORQUE_ENABLE) == 0
+        assert [r.id for r in s.emulator.packet_log if r.instruction == 0x08] == [2]
+        assert s.emulator.goal_log == []
 
 
 def test_dead_servo_gives_device_error_naming_it():
@@ -122,7 +137,7 @@ def test_check_reports_models_and_hardware_errors():
         infos = s.chain.check()
     assert [i.model for i in infos] == ["XM430-W350"] * 4
     assert [i.firmware for i in infos] == [RIG.sim.firmware] * 4
-    assert infos[0].hardware_error == ct.HW_OVERLOAD and not infos[0].ok
+    assert infos[0].hardware_error == ct.HW_OVERLOAD and infos[0].alert and not infos[0].ok
     assert all(i.ok for i in infos[1:])
 
 

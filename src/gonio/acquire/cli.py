@@ -115,8 +115,9 @@ def register(sub) -> None:
         "--sim-faults",
         metavar="SPEC",
         help=(
-            "simulated rig only: inject bus faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,"
-            "overload=0.005,seed=1' (probabilities per packet; overload per move)"
+            "simulated rig only: inject bus faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,seed=1'"
+            " (probabilities per packet); overload=P (per move) and block_servo=ID,block_after=N"
+            " (that joint stopped half-way by an obstacle on its move N+1) stop the run"
         ),
     )
     a.add_argument(
@@ -314,8 +315,8 @@ def _acquire(args: argparse.Namespace) -> int:
         )
         print(
             f"  bus: {summary.bus.get('transactions', 0)} transactions,"
-            f" {summary.bus.get('retries', 0)} retries, {summary.bus.get('recoveries', 0)}"
-            " recoveries"
+            f" {summary.bus.get('retries', 0)} retries,"
+            f" {summary.bus.get('resent_goals', 0)} goals re-sent"
         )
         if summary.table:
             print(f"  table: {summary.table}")

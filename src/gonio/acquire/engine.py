@@ -5,7 +5,7 @@
 * ``journal.sqlite`` — the journal (:mod:`gonio.acquire.journal`); resuming continues from it
   with no lost and no duplicated sample;
 * ``log.jsonl`` — a structured log, one JSON object per line (events, per-configuration timings,
-  faults and recoveries);
+  servo faults);
 * ``sim_goals.jsonl`` — for the simulated rig, every Goal Position the emulated servos received
   (and ``sim_packets.jsonl``, every instruction packet, with ``[sim] packet_log = true``);
 * ``table.brdf.h5`` — the samples as a table through :mod:`gonio.io` when the run completes.
@@ -325,7 +325,11 @@ def _acquire(
             run.log("lock_taken_over", stale_pid=hold.lock.stale_pid)
         try:
             run.execute(open_devices, exposure_planning)
-        except BaseException:
+        except BaseException as exc:
+            if not run.started:  # a latched servo error found at open: journaled when resuming
+                stopping.record_fault(
+                    journal, run.log, exc, "; ".join(getattr(exc, "__notes__", ()))
+                )
             run.close()
             if created and not run.started:
                 rundir.discard(run_dir, existed)
@@ -426,7 +430,8 @@ class _Run:
             self.log("interrupted", signal=self.flag.signum, message=str(exc))
         else:
             self.log("aborted", error=type(exc).__name__, message=str(exc))
-        parked, phrase = stopping.bring_to_rest(chain, self.flag)
+        parked, phrase = stopping.bring_to_rest(chain, self.flag, exc)
+        stopping.record_fault(self.journal, self.log, exc, phrase)
         stopping.record_stop(self.journal, self.log, _reason(exc), parked, phrase)
         if parked:
             self.log("parked", pose=self.rig.park_deg)
@@ -435,6 +440,8 @@ class _Run:
         except Exception:
             pass
         exc.add_note(phrase)
+        if getattr(exc, "next_step", None):  # a servo fault: what the policy table says to do
+            exc.add_note(f"next: {exc.next_step}")
 
     def _loop(self, chain, camera, ses) -> None:
         rig, plan, journal, log, flag = self.rig, self.plan, self.journal, self.log, self.flag

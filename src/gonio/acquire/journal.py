@@ -14,6 +14,8 @@ Tables
                                 targets (sample frame) and planned joint angles (deg, JSON).
 ``samples(idx, joints, wi_*, wo_*, value, sigma, t_*, recoveries, captured_at)``
                                 what was measured: read-back angles and directions.
+``events(n, t, kind, detail)``  what happened to the rig: servo faults and what was done
+                                (JSON detail; created by the first :meth:`Journal.event`).
 
 A write that the storage refuses (a full filesystem, a quota, a file-size limit, a read-only or
 failing disk; SQLite's "database or disk is full" and "disk I/O error") raises
@@ -338,6 +340,29 @@ class Journal:
                 )
             )
         return out
+
+    # --- events -------------------------------------------------------------------------------
+    def event(self, kind: str, detail: dict) -> None:
+        """Record an event of the rig (a servo fault: its joints, bits, what was done, what to
+        do next) with the time; the table is created by the first event, so journals written
+        before it existed stay readable."""
+        with self._tx():
+            self.db.execute(
+                "CREATE TABLE IF NOT EXISTS events(n INTEGER PRIMARY KEY, t REAL NOT NULL,"
+                " kind TEXT NOT NULL, detail TEXT NOT NULL)"
+            )
+            self.db.execute(
+                "INSERT INTO events(t, kind, detail) VALUES (?, ?, ?)",
+                (time.time(), kind, json.dumps(detail, default=str)),
+            )
+
+    def events(self) -> list[tuple[float, str, dict]]:
+        """``(time, kind, detail)`` of every event, in order ([] when there is none)."""
+        try:
+            rows = self.db.execute("SELECT t, kind, detail FROM events ORDER BY n").fetchall()
+        except sqlite3.OperationalError:  # no event yet: no table
+            return []
+        return [(t, k, json.loads(d)) for t, k, d in rows]
 
     def counts(self) -> dict[str, int]:
         """``planned``: configurations the planner accepted (measured, pending or rejected);

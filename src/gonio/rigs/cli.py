@@ -21,9 +21,10 @@ def register(sub) -> None:
         help="ping every servo; report models, firmware, hardware errors and limits",
         description=(
             "Open the rig's bus, ping every joint's servo and report its model (checked against the"
-            " rig file), firmware, Hardware Error Status, torque, present angle and software"
-            " limits. Moves nothing. Exit status 3 if a servo is missing, of the wrong model or in"
-            " a hardware-error state."
+            " rig file), firmware, latched hardware error (register 70, Hardware Error Status, and"
+            " the alert bit of its status packets), torque, present angle and software limits."
+            " Moves and writes nothing. Exit status 3 if a servo is missing, of the wrong model or"
+            " has a latched hardware error (the line says what to do next)."
         ),
     )
     c.add_argument(
@@ -33,6 +34,26 @@ def register(sub) -> None:
     )
     c.add_argument("--json", action="store_true", help="print the report as JSON")
     c.set_defaults(func=_check)
+    r = rs.add_parser(
+        "reboot",
+        help="reboot servos to clear their latched hardware errors (moves nothing)",
+        description=(
+            "Reboot the servos whose hardware error is latched (Hardware Error Status != 0 or the"
+            " alert bit set), or those of --joint, to clear it. gonio never reboots a servo by"
+            " itself: clear the cause first (the safety policy in docs/guide/rig.md says what each"
+            " error asks for). A rebooted servo comes back with torque off and moves nothing; the"
+            " next 'gonio acquire' (or --resume) powers it again. Exit status 3 if an error"
+            " persists after the reboot."
+        ),
+    )
+    r.add_argument("--rig", default="sim", help="rig name or rig TOML path (default: sim)")
+    r.add_argument(
+        "--joint",
+        action="append",
+        metavar="NAME",
+        help="reboot this joint's servo even without a latched error (repeatable)",
+    )
+    r.set_defaults(func=_reboot)
     s = rs.add_parser("schema", help="print the JSON schema of rig files")
     s.set_defaults(func=_schema)
     e = rs.add_parser(
@@ -49,7 +70,10 @@ def register(sub) -> None:
     e.add_argument(
         "--sim-faults",
         metavar="SPEC",
-        help="inject faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,overload=0.005,seed=1'",
+        help=(
+            "inject faults, e.g. 'drop=0.02,garble=0.02,crc=0.02,seed=1', 'overload=0.01',"
+            " 'block_servo=2,block_after=3'"
+        ),
     )
     e.add_argument(
         "--time-scale",
@@ -77,6 +101,8 @@ def _check(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
     with open_rig(rig, initialize=False, devices=("servos",)) as ses:
         infos = ses.chain.check()
+    from gonio.rigs.control_table import hardware_error_text
+
     bad = [i for i in infos if not i.ok]
     if args.json:
         out = {
@@ -92,6 +118,8 @@ def _check(args: argparse.Namespace) -> int:
                     "expected_model": i.expected_model,
                     "firmware": i.firmware,
                     "hardware_error": i.hardware_error,
+                    "hardware_error_text": hardware_error_text(i.hardware_error),
+                    "alert": i.alert,
                     "torque": i.torque,
                     "position_deg": round(i.position_deg, 4),
                     "limits_deg": [i.min_deg, i.max_deg],
@@ -103,8 +131,6 @@ def _check(args: argparse.Namespace) -> int:
     else:
         from rich.console import Console
         from rich.table import Table
-
-        from gonio.rigs.control_table import hardware_error_text
 
         t = Table(title=f"rig {rig.name} on {rig.bus.port}")
         for col in ("joint", "id", "model", "fw", "hw error", "torque", "angle (deg)", "limits"):
@@ -120,14 +146,55 @@ def _check(args: argparse.Namespace) -> int:
                 str(i.id),
                 model,
                 str(i.firmware),
-                hardware_error_text(i.hardware_error),
+                hardware_error_text(i.hardware_error) + (" (alert)" if i.alert else ""),
                 "on" if i.torque else "off",
                 f"{i.position_deg:.2f}",
                 f"[{i.min_deg}, {i.max_deg}]",
             )
         Console(file=sys.stdout).print(t)
     if bad:
-        raise DeviceError("servo check failed: " + ", ".join(f"{i.joint} (id {i.id})" for i in bad))
+        raise DeviceError(
+            "servo check failed: "
+            + ", ".join(
+                f"{i.joint} (id {i.id})"
+                + (f": {hardware_error_text(i.hardware_error)}" if i.hardware_error else "")
+                for i in bad
+            )
+            + _latched_next(bad)
+        )
+    return 0
+
+
+def _latched_next(bad) -> str:
+    """The policy table's next step for the latched errors among ``bad`` ServoInfos."""
+    from gonio.rigs.faults import bit_policies
+
+    bits = 0
+    for i in bad:
+        bits |= i.hardware_error
+    steps = dict.fromkeys(p.next_step for p in bit_policies(bits))
+    return f"; next: {' '.join(steps)}" if steps else ""
+
+
+def _reboot(args: argparse.Namespace) -> int:
+    from gonio.rigs.config import load_rig
+    from gonio.rigs.control_table import hardware_error_text
+    from gonio.rigs.session import open_rig
+
+    rig = load_rig(args.rig)
+    names = set(args.joint or ())
+    unknown = sorted(names - {j.name for j in rig.joints})
+    if unknown:
+        from gonio.errors import ParameterError
+
+        raise ParameterError(f"--joint {unknown[0]}: no such joint in rig {rig.name}")
+    with open_rig(rig, initialize=False, devices=("servos",)) as ses:
+        done = ses.chain.reboot(names or None)
+    if not done:
+        print(f"rig {rig.name}: no servo has a latched hardware error; nothing rebooted")
+    for name, bits in done.items():
+        j = rig.joint(name)
+        print(f"rebooted servo {j.id} ({name}): {hardware_error_text(bits)} cleared, torque off")
     return 0
 
 

@@ -115,7 +115,9 @@ SPEC: dict = {
             "Delay between position polls while settling (ms).", minimum=0, maximum=10_000
         ),
         "max_recoveries": _int(
-            "Reboot-and-re-home attempts per move after a hardware error.", minimum=0, maximum=10
+            "Unused: a hardware error stops the run, nothing reboots (accepted in old files).",
+            minimum=0,
+            maximum=10,
         ),
     },
     "joints": [_JOINT],
@@ -272,6 +274,8 @@ SPEC: dict = {
                 "Moves ending in an overload (torque shutdown).", minimum=0, maximum=1
             ),
             "seed": _int("Fault seed.", minimum=0, maximum=2**63 - 1),
+            "block_servo": _int("Servo id of a joint that meets an obstacle (0: none).", minimum=0),
+            "block_after": _int("Its moves before the one stopped half-way.", minimum=0),
         },
     },
 }

@@ -88,7 +88,6 @@ class BusStats:
     corrupt: int = 0
     crc_errors: int = 0
     resent_goals: int = 0
-    recoveries: int = 0
 
 
 class DynamixelBus:

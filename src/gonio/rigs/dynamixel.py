@@ -8,9 +8,16 @@ Two layers:
   after a timeout, a corrupt reply or a CRC error reported by the servo.
 * :class:`ServoChain` — joints from a rig file: identify models, configure operating mode and
   motion profile, check software limits **before** sending anything, sync-write all goals at
-  once, poll (sync read) until every joint has settled, reboot and re-home after a hardware
-  error, and return the positions actually reached as read back from the servos. Every goal
-  passes :class:`gonio.rigs.guard.GoalGuard` at the last moment before its packet is written.
+  once, poll (sync read) until every joint has settled, and return the positions actually
+  reached as read back from the servos. Every goal passes :class:`gonio.rigs.guard.GoalGuard`
+  at the last moment before its packet is written.
+
+A hardware error (the alert bit of a status packet, then register 70) raises
+:class:`~gonio.rigs.faults.HardwareFault`, a joint that does not reach its goal in time
+:class:`~gonio.rigs.faults.MotionTimeout`, a latched error found when the rig is initialized
+:class:`~gonio.rigs.faults.LatchedAtOpen`; what happens then is the policy table of
+:mod:`gonio.rigs.faults`. Nothing here reboots a servo except :meth:`ServoChain.reboot`, which
+only ``gonio rig reboot`` calls.
 
 Angles at this interface are joint angles in **degrees** keyed by joint name (the rig file's
 unit); the kinematics layer converts to radians.
@@ -20,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +36,7 @@ from gonio.errors import DeviceError, Interrupted, PlanError
 from gonio.rigs import control_table as ct
 from gonio.rigs.config import JointConfig, RigConfig
 from gonio.rigs.dxl_bus import BusLost, BusStats, DynamixelBus
+from gonio.rigs.faults import HardwareFault, LatchedAtOpen, MotionTimeout
 from gonio.rigs.guard import GoalGuard
 
 __all__ = [
@@ -36,21 +44,14 @@ __all__ = [
     "BusStats",
     "DynamixelBus",
     "HardwareFault",
+    "LatchedAtOpen",
+    "MotionTimeout",
     "MoveResult",
     "ServoChain",
     "ServoInfo",
 ]
 
 log = logging.getLogger("gonio.rigs.dynamixel")
-
-
-class HardwareFault(DeviceError):
-    """A servo reports a hardware error (Hardware Error Status != 0); torque is off."""
-
-    def __init__(self, faults: Mapping[str, int]) -> None:
-        self.faults = dict(faults)
-        text = "; ".join(f"{j}: {ct.hardware_error_text(b)}" for j, b in self.faults.items())
-        super().__init__(f"servo hardware error ({text})")
 
 
 @dataclass(frozen=True)
@@ -68,10 +69,12 @@ class ServoInfo:
     min_deg: float
     max_deg: float
     expected_model: str
+    #: the alert bit (0x80) of the servo's status packets: a hardware error is latched
+    alert: bool = False
 
     @property
     def ok(self) -> bool:
-        return self.model == self.expected_model and self.hardware_error == 0
+        return self.model == self.expected_model and self.hardware_error == 0 and not self.alert
 
 
 @dataclass(frozen=True)
@@ -82,6 +85,7 @@ class MoveResult:
     motion_s: float
     settle_s: float
     polls: int
+    #: reboots during the move: always 0 (a hardware error stops the run; gonio.rigs.faults)
     recoveries: int
     #: the profile time predicted for the move (rig time; both phases of a two-phase move)
     predicted_s: float = 0.0
@@ -127,12 +131,14 @@ class ServoChain:
         self.close()
 
     def check(self) -> list[ServoInfo]:
-        """Ping every servo and read model, firmware, hardware error, torque and position."""
+        """Ping every servo and read model, firmware, hardware error (register 70 and the
+        alert bit of its status packets), torque and position. Moves and writes nothing."""
         out = []
         for j in self.joints:
             model = self.bus.ping(j.id)
             fw = self.bus.read(j.id, ct.FIRMWARE_VERSION)
             hw = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
+            alert = j.id in self.bus.alerts
             tq = self.bus.read(j.id, ct.TORQUE_ENABLE)
             pos = self.bus.read(j.id, ct.PRESENT_POSITION, signed=True)
             out.append(
@@ -148,6 +154,7 @@ class ServoChain:
                     j.min_deg,
                     j.max_deg,
                     j.model,
+                    alert,
                 )
             )
         return out
@@ -164,11 +171,13 @@ class ServoChain:
         self.bus.write(j.id, ct.TORQUE_ENABLE, 1)
 
     def initialize(self) -> None:
-        """Identify every servo, clear hardware errors (reboot), set mode/profile, torque on.
+        """Identify every servo, refuse latched hardware errors, set mode/profile, torque on.
 
-        Every servo is identified before any is written to: a wrong model anywhere in the
-        chain refuses the rig with no torque on. If configuring fails part-way, torque is
-        switched off again on every servo.
+        Every servo is identified and its Hardware Error Status read before any is written to:
+        a wrong model anywhere in the chain refuses the rig with no torque on, and so does a
+        latched hardware error (:class:`~gonio.rigs.faults.LatchedAtOpen`, after torque off on
+        every servo; nothing is rebooted: the user clears it with ``gonio rig reboot``). If
+        configuring fails part-way, torque is switched off again on every servo.
         """
         for j in self.joints:
             model = self.bus.ping(j.id)
@@ -177,10 +186,23 @@ class ServoChain:
                 raise DeviceError(
                     f"joint {j.name}: servo {j.id} is {name}, rig file says {j.model}"
                 )
+        latched = {}
+        for j in self.joints:
+            bits = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
+            if bits or j.id in self.bus.alerts:
+                latched[j.name] = bits
+        if latched:
+            exc = LatchedAtOpen(latched, self._ids_of(latched))
+            try:
+                silent = self.torque_off()
+            except Exception:
+                exc.add_note("torque off failed")
+            else:
+                exc.add_note("nothing moved, torque off" + _unconfirmed(silent))
+            exc.add_note(f"next: {exc.next_step}")
+            raise exc
         try:
             for j in self.joints:
-                if self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS):
-                    self._reboot(j)
                 self._configure(j)
         except BaseException as exc:
             try:
@@ -191,8 +213,28 @@ class ServoChain:
                 exc.add_note("torque off")
             raise
 
-    def _reboot(self, j: JointConfig) -> None:
-        bits = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
+    def _ids_of(self, names) -> dict[str, int]:
+        return {n: self.rig.joint(n).id for n in names}
+
+    def reboot(self, names=None) -> dict[str, int]:
+        """Reboot servos to clear their latched hardware errors: those of ``names`` (joint
+        names), or by default every servo whose Hardware Error Status is not 0 or whose status
+        packets carry the alert bit. Only ``gonio rig reboot`` calls this.
+
+        A rebooted servo comes back with torque off and its RAM registers at their defaults; it
+        moves nothing. Returns ``{joint: bits it had}``; DeviceError when an error persists.
+        """
+        out = {}
+        for j in self.joints:
+            bits = self.bus.read(j.id, ct.HARDWARE_ERROR_STATUS)
+            if (names is None and (bits or j.id in self.bus.alerts)) or (
+                names is not None and j.name in names
+            ):
+                out[j.name] = bits
+                self._reboot(j, bits)
+        return out
+
+    def _reboot(self, j: JointConfig, bits: int) -> None:
         log.warning("rebooting servo %d (%s): %s", j.id, j.name, ct.hardware_error_text(bits))
         self.bus.reboot(j.id)
         deadline = time.monotonic() + 2.0
@@ -266,62 +308,50 @@ class ServoChain:
         self,
         targets_deg: Mapping[str, float],
         timeout_s: float | None = None,
-        recover: bool = True,
         poll_s: float | None = None,
+        hold: Collection[str] = (),
     ) -> MoveResult:
         """Move every joint at once and wait until all have settled.
 
         Limits are checked first (PlanError, nothing sent). Goals go out in one Sync Write;
         a Sync Read block (Goal .. Present Position) is polled: a goal that did not arrive is
-        re-sent, the alert bit triggers reboot + re-home + retry (up to
-        ``rig.bus.max_recoveries``), and the move ends when every joint has stopped within its
-        settle tolerance. Returns the angles read back.
+        re-sent, the alert bit raises :class:`~gonio.rigs.faults.HardwareFault`, a joint still
+        short of its goal after the predicted time plus ``bus.motion_timeout_s`` raises
+        :class:`~gonio.rigs.faults.MotionTimeout`, and the move ends when every joint has
+        stopped within its settle tolerance. Returns the angles read back.
+
+        ``hold`` names joints that are sent nothing and not polled (a faulted joint with torque
+        off while the others park): their target must be their present angle, and the whole
+        pose, theirs included, passes the safety checks.
         """
         goals = self.check_limits(targets_deg)
-        recoveries = 0
-        rehome = False
         self._predicted_s = 0.0
-        while True:
-            try:
-                if rehome:
-                    self._move_once(self.check_limits(self.park_pose()), None, None)
-                    rehome = False
-                res = self._move_once(goals, timeout_s, poll_s)
-                return MoveResult(res[0], res[1], res[2], res[3], recoveries, self._predicted_s)
-            except HardwareFault as fault:
-                if not recover or recoveries >= self.rig.bus.max_recoveries:
-                    raise
-                recoveries += 1
-                self.bus.stats.recoveries += 1
-                log.warning("%s; rebooting and re-homing", fault)
-                self.recover(fault)
-                rehome = True
+        moving = [j.id for j in self.joints if j.name not in hold]
+        res = self._move_once(goals, timeout_s, poll_s, moving=moving)
+        return MoveResult(res[0], res[1], res[2], res[3], 0, self._predicted_s)
 
-    def recover(self, fault: HardwareFault) -> None:
-        """Reboot the faulted servos and restore their configuration (torque back on)."""
-        for name in fault.faults:
-            j = next(x for x in self.joints if x.name == name)
-            self._reboot(j)
-            self._configure(j)
-
-    def park_pose(self) -> dict[str, float]:
-        """The rig file's park pose; joints it does not name keep their present angle."""
+    def park_pose(self, hold: Collection[str] = ()) -> dict[str, float]:
+        """The rig file's park pose; joints it does not name, and joints in ``hold``, keep
+        their present angle."""
         present = self.read_positions()
-        return {j.name: self.rig.park_deg.get(j.name, present[j.name]) for j in self.joints}
+        park = {n: a for n, a in self.rig.park_deg.items() if n not in hold}
+        return {j.name: park.get(j.name, present[j.name]) for j in self.joints}
 
-    def park(self) -> MoveResult:
-        """Move to the park pose."""
-        return self.move(self.park_pose())
+    def park(self, hold: Collection[str] = ()) -> MoveResult:
+        """Move to the park pose; the joints in ``hold`` stay where they are (see :meth:`move`)."""
+        return self.move(self.park_pose(hold), hold=hold)
 
-    def torque_off(self) -> list[int]:
-        """Torque off on every servo: one Sync Write, then a write each servo acknowledges.
+    def torque_off(self, joints: Collection[str] | None = None) -> list[int]:
+        """Torque off on every servo (or those of ``joints``): one Sync Write, then a write
+        each servo acknowledges.
 
         Returns the ids of servos that did not acknowledge; raises DeviceError only when the
         bus itself is gone.
         """
-        self.bus.sync_write(ct.TORQUE_ENABLE, dict.fromkeys(self.ids, 0))
+        ids = self.ids if joints is None else [j.id for j in self.joints if j.name in joints]
+        self.bus.sync_write(ct.TORQUE_ENABLE, dict.fromkeys(ids, 0))
         silent = []
-        for sid in self.ids:
+        for sid in ids:
             try:
                 self.bus.write(sid, ct.TORQUE_ENABLE, 0)
             except BusLost:
@@ -331,7 +361,7 @@ class ServoChain:
         return silent
 
     def bus_stats(self) -> dict[str, int]:
-        """Counters of this bus session (transactions, retries, timeouts, recoveries, ...)."""
+        """Counters of this bus session (transactions, retries, timeouts, re-sent goals, ...)."""
         return dict(vars(self.bus.stats))
 
     def arm_transit_hold(
@@ -375,9 +405,10 @@ class ServoChain:
             return jc.name
         return jl.name
 
-    def _move_once(self, goals: dict[int, int], timeout_s, poll_s, split: bool = True):
+    def _move_once(self, goals: dict[int, int], timeout_s, poll_s, split: bool = True, moving=None):
         a, n = ct.POLL_BLOCK
         t0 = time.monotonic()
+        ids = self.ids if moving is None else list(moving)
         start = self.bus.sync_read(a, n, self.ids)
         start_deg = {
             self._by_id[i].name: self._by_id[i].from_ticks(_field(d, ct.PRESENT_POSITION))
@@ -392,8 +423,10 @@ class ServoChain:
             first[j.id] = self.last_goal_ticks.get(j.id, _field(start[j.id], ct.PRESENT_POSITION))
             log.info("two-phase move: %s waits for the other arm", hold)
             self.two_phase_moves += 1
-            self._move_once(first, None, poll_s, split=False)
-            reached, _, settle, polls = self._move_once(goals, timeout_s, poll_s, split=False)
+            self._move_once(first, None, poll_s, split=False, moving=ids)
+            reached, _, settle, polls = self._move_once(
+                goals, timeout_s, poll_s, split=False, moving=ids
+            )
             t_end = time.monotonic()
             return reached, t_end - t0 - settle, settle, polls
         predicted = self.predicted_time(start_deg, goal_deg)
@@ -403,8 +436,9 @@ class ServoChain:
         if poll_s is None:
             poll_s = self.rig.bus.poll_interval_ms / 1000.0
         self.guard.check(goals, start_deg)  # the whole pose; the bus checks each goal again
-        self.bus.sync_write(ct.GOAL_POSITION, goals)
-        self.last_goal_ticks = dict(goals)
+        send = {sid: goals[sid] for sid in ids}
+        self.bus.sync_write(ct.GOAL_POSITION, send)
+        self.last_goal_ticks.update(send)
         t_sent = time.monotonic()
         t_stopped: float | None = None
         polls = 0
@@ -412,15 +446,16 @@ class ServoChain:
         while True:
             if self.should_abort():
                 raise Interrupted("move abandoned on a second interrupt")
-            data = self.bus.sync_read(a, n, self.ids)
+            data = self.bus.sync_read(a, n, ids)
             polls += 1
-            if self.bus.alerts & set(self.ids):
+            if self.bus.alerts & set(ids):
                 faults = {}
-                for sid in sorted(self.bus.alerts & set(self.ids)):
+                for sid in sorted(self.bus.alerts & set(ids)):
                     bits = self.bus.read(sid, ct.HARDWARE_ERROR_STATUS)
                     faults[self._by_id[sid].name] = bits
                 if any(faults.values()):
-                    raise HardwareFault({k: v for k, v in faults.items() if v})
+                    bad = {k: v for k, v in faults.items() if v}
+                    raise HardwareFault(bad, self._ids_of(bad))
             lost = {
                 sid: goals[sid]
                 for sid, d in data.items()
@@ -455,17 +490,29 @@ class ServoChain:
                     t_stopped = None
             if time.monotonic() > deadline:
                 far = [
-                    f"{self._by_id[sid].name} at tick {_field(d, ct.PRESENT_POSITION)}"
-                    f" (goal {goals[sid]})"
+                    sid
                     for sid, d in data.items()
                     if abs(_field(d, ct.PRESENT_POSITION) - goals[sid])
                     > self._by_id[sid].tolerance_ticks
                 ]
-                raise DeviceError(
-                    f"move did not settle within {timeout_s:.2f} s: {', '.join(far) or 'moving'}"
+                text = [
+                    f"servo {sid} ({self._by_id[sid].name}) stopped at"
+                    f" {self._by_id[sid].from_ticks(_field(data[sid], ct.PRESENT_POSITION)):.2f}"
+                    f" deg, goal {self._by_id[sid].from_ticks(goals[sid]):.2f} deg"
+                    for sid in far
+                ]
+                stuck = [self._by_id[sid].name for sid in (far or ids)]
+                raise MotionTimeout(
+                    f"move did not settle within {timeout_s:.2f} s:"
+                    f" {', '.join(text) or 'still moving'}",
+                    stuck,
                 )
             if poll_s:
                 time.sleep(poll_s)
+
+
+def _unconfirmed(silent: list[int]) -> str:
+    return f" sent (servo {', '.join(map(str, silent))} did not confirm)" if silent else ""
 
 
 def _field(block: bytes, reg: tuple[int, int]) -> int:

@@ -6,9 +6,12 @@ packets byte-exactly (:mod:`gonio.rigs.protocol`), applies them to per-servo con
 answers with status packets. Motion follows the trapezoidal profile set by Profile Velocity and
 Profile Acceleration; ``time_scale`` makes simulated time run faster than wall time so tests are
 quick. Faults can be injected: dropped instructions, garbled replies, CRC errors, overload with
-torque shutdown, a servo that stops answering. Every Goal Position write that reaches a servo is
-recorded in :attr:`ServoChainEmulator.goal_log` (and optionally appended to a JSON-lines file)
-so tests can prove that no goal beyond the limits was ever sent. A file log that cannot be
+torque shutdown, any hardware error bit (:meth:`ServoChainEmulator.hardware_error`), a joint
+blocked short of its goal (:meth:`ServoChainEmulator.block`), a servo that stops answering.
+Every Goal Position write that reaches a servo is recorded in
+:attr:`ServoChainEmulator.goal_log` (and optionally appended to a JSON-lines file) so tests can
+prove that no goal beyond the limits was ever sent.
+A file log that cannot be
 written (a full disk) stops, whole up to its last line, and says so in
 :attr:`ServoChainEmulator.file_log_error`; the bus never stops answering for it.
 """
@@ -62,6 +65,11 @@ class FaultConfig:
         switches torque off and stops where it is.
     seed : int
         Seed of the fault generator.
+    block_servo : int
+        Id of a servo whose joint meets an obstacle (0: none): after ``block_after`` moves, its
+        next move stops half-way, torque on, short of its goal (:meth:`ServoChainEmulator.block`).
+    block_after : int
+        Moves the blocked servo makes normally before it meets the obstacle.
     """
 
     drop: float = 0.0
@@ -69,22 +77,26 @@ class FaultConfig:
     crc: float = 0.0
     overload: float = 0.0
     seed: int = 0
+    block_servo: int = 0
+    block_after: int = 0
 
 
 def parse_faults(spec: str):
     """'drop=0.02,crc=0.01,seed=3' -> FaultConfig; ParameterError on bad input."""
     kw: dict = {}
+    ints = ("seed", "block_servo", "block_after")
+    keys = ("drop", "garble", "crc", "overload", *ints)
     for part in filter(None, (s.strip() for s in spec.split(","))):
         key, sep, val = part.partition("=")
-        if not sep or key not in ("drop", "garble", "crc", "overload", "seed"):
-            raise ParameterError(
-                f"--sim-faults: bad item {part!r} (keys: drop, garble, crc, overload, seed)"
-            )
+        if not sep or key not in keys:
+            raise ParameterError(f"--sim-faults: bad item {part!r} (keys: {', '.join(keys)})")
         try:
-            kw[key] = int(val) if key == "seed" else float(val)
+            kw[key] = int(val) if key in ints else float(val)
         except ValueError:
             raise ParameterError(f"--sim-faults: {key} needs a number, got {val!r}") from None
-        if key != "seed" and not 0.0 <= kw[key] <= 1.0:
+        if key in ints and not 0 <= kw[key] <= 2**63 - 1:
+            raise ParameterError(f"--sim-faults: {key} must be >= 0")
+        if key not in ints and not 0.0 <= kw[key] <= 1.0:
             raise ParameterError(f"--sim-faults: {key} must be a probability in [0, 1]")
     return FaultConfig(**kw)
 
@@ -152,8 +164,15 @@ class _Servo:
     ring_T: float = 0.0
     frozen_at: float | None = None
     dead_until: float = 0.0
-    overload_pending: bool = False
+    #: hardware error bits that latch half-way through the current move
+    pending_bits: int = 0
+    #: hardware error bits to latch half-way through the next move
+    next_move_bits: int = 0
     ring_time: float = 0.12
+    #: an obstacle the joint cannot pass (ticks), once met; None: free
+    obstacle: float | None = None
+    #: moves left before the joint meets an obstacle half-way through its move (None: never)
+    block_in: int | None = None
 
     # --- register helpers -------------------------------------------------------------------
     def get(self, reg: tuple[int, int], signed: bool = False) -> int:
@@ -198,6 +217,14 @@ class _Servo:
     def stop(self, now: float) -> None:
         self.frozen_at = self.position(now)
 
+    def latch(self, bits: int, now: float) -> None:
+        """Latch hardware error ``bits``; a bit of the Shutdown register also stops the servo
+        and switches its torque off."""
+        self.set(ct.HARDWARE_ERROR_STATUS, self.get(ct.HARDWARE_ERROR_STATUS) | bits)
+        if bits & self.get(ct.SHUTDOWN):
+            self.stop(now)
+            self.set(ct.TORQUE_ENABLE, 0)
+
     def start_move(self, goal: int, now: float, overload: bool) -> None:
         here = self.position(now)
         err = self.settle_error(goal)
@@ -208,26 +235,34 @@ class _Servo:
         self.move_a = ct.acceleration_raw_to_deg_s2(a_raw) * tick_per_deg if a_raw else 0.0
         self.move_from = here
         self.move_to = float(goal + err)
+        if self.block_in is not None and abs(self.move_to - here) > 20:
+            if self.block_in == 0:
+                self.obstacle = here + 0.5 * (self.move_to - here)
+                self.block_in = None
+            else:
+                self.block_in -= 1
+        ob = self.obstacle
+        if ob is not None and min(here, self.move_to) < ob < max(here, self.move_to):
+            self.move_to = ob  # stalls against the obstacle, torque on, short of its goal
         self.move_start = now
         self.move_T = ct.trapezoid_time(self.move_to - here, self.move_v, self.move_a)
         # overshoot grows with the cruise speed reached; moves of a few ticks do not ring
         dist = abs(self.move_to - here)
-        if dist > 8:
+        if dist > 8 and self.move_to != ob:
             v_peak = min(self.move_v, math.sqrt(dist * self.move_a) if self.move_a else self.move_v)
             self.ring_amp = math.copysign(min(6.0, 1.0 + v_peak / 400.0), self.move_to - here)
             self.ring_T = self.ring_time
         else:
             self.ring_amp, self.ring_T = 0.0, 0.0
         self.frozen_at = None
-        self.overload_pending = overload
+        self.pending_bits = (ct.HW_OVERLOAD if overload else 0) | self.next_move_bits
+        self.next_move_bits = 0
 
     def refresh(self, now: float) -> None:
-        """Update the dynamic registers (and fire a pending overload) at time ``now``."""
-        if self.overload_pending and now - self.move_start >= 0.5 * self.move_T:
-            self.overload_pending = False
-            self.stop(now)
-            self.set(ct.HARDWARE_ERROR_STATUS, self.get(ct.HARDWARE_ERROR_STATUS) | ct.HW_OVERLOAD)
-            self.set(ct.TORQUE_ENABLE, 0)
+        """Update the dynamic registers (and latch a pending hardware error) at time ``now``."""
+        if self.pending_bits and now - self.move_start >= 0.5 * self.move_T:
+            self.latch(self.pending_bits, now)
+            self.pending_bits = 0
         pos = self.position(now)
         self.set(ct.PRESENT_POSITION, round(pos))
         mv = self.moving(now)
@@ -322,6 +357,10 @@ class ServoChainEmulator(PtyDevice):
             servo.set(ct.GOAL_POSITION, rest)
             self._servos[spec.id] = servo
         self._rng = random.Random(self.faults.seed)
+        if self.faults.block_servo:
+            if self.faults.block_servo not in self._servos:
+                raise ValueError(f"block_servo: no servo {self.faults.block_servo} on the bus")
+            self._servos[self.faults.block_servo].block_in = int(self.faults.block_after)
         self._lock = threading.Lock()
         self.goal_log: list[GoalRecord] = []
         #: every decoded instruction packet, in order (see :class:`PacketRecord`)
@@ -350,12 +389,36 @@ class ServoChainEmulator(PtyDevice):
 
     def overload(self, servo_id: int) -> None:
         """Trip an overload now: Hardware Error Status bit 5, torque off, motion stops."""
+        self.hardware_error(servo_id, ct.HW_OVERLOAD)
+
+    def hardware_error(self, servo_id: int, bits: int, next_move: bool = False) -> None:
+        """Latch hardware error ``bits`` (Hardware Error Status) now, or half-way through the
+        servo's next move (``next_move``), as the servo would.
+
+        Every status packet then carries the alert bit. A bit in the servo's Shutdown register
+        (overload, overheating, electrical shock by default) also switches torque off and stops
+        the motion; the others leave the servo moving. Torque-on is refused until a reboot.
+        """
         with self._lock:
             s = self._servos[servo_id]
+            if next_move:
+                s.next_move_bits |= bits
+                return
             now = self.now()
-            s.stop(now)
-            s.set(ct.HARDWARE_ERROR_STATUS, s.get(ct.HARDWARE_ERROR_STATUS) | ct.HW_OVERLOAD)
-            s.set(ct.TORQUE_ENABLE, 0)
+            s.latch(bits, now)
+            s.refresh(now)
+
+    def block(self, servo_id: int, after_moves: int = 0) -> None:
+        """Put an obstacle in a joint's way: after ``after_moves`` moves, its next move stops
+        half-way, torque on, short of its goal, and no later move passes that point until
+        :meth:`unblock` (a reboot does not move an obstacle)."""
+        with self._lock:
+            self._servos[servo_id].block_in = int(after_moves)
+
+    def unblock(self, servo_id: int) -> None:
+        with self._lock:
+            s = self._servos[servo_id]
+            s.obstacle, s.block_in = None, None
 
     def register(self, servo_id: int, reg: tuple[int, int], signed: bool = False) -> int:
         """Current value of a register of one servo (refreshed to now)."""
@@ -562,7 +625,7 @@ class ServoChainEmulator(PtyDevice):
         fresh[: ct.EEPROM_END] = eeprom
         s.table[:] = fresh
         s.frozen_at = float(pos)
-        s.overload_pending = False
+        s.pending_bits = 0
         s.set(ct.GOAL_POSITION, pos)
         s.refresh(now)
 
