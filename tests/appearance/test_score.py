@@ -44,6 +44,7 @@ def test_point_light_images_are_exact(lambert_ref):
     assert not im.images["0"][~px.mask].any()
 
 
+@pytest.mark.slow
 def test_studio_estimate_of_a_lambertian_sphere_converges():
     # f = a / pi: the pixel is a / pi * integral L cos over the hemisphere, estimated with 70
     # and 700 samples per pixel and different seeds; the sums over the sphere agree within 3 %

@@ -1,7 +1,9 @@
 """Image differences of the appearance score: HDR-FLIP and the relative L1.
 
 ``relative_l1(ref, test, mask) = sum |test - ref| / sum ref`` over the sphere's pixels and every
-channel (dimensionless; 0 for identical images, ``|s - 1|`` for ``test = s ref``).
+channel (dimensionless; 0 for identical images, ``|s - 1|`` for ``test = s ref``). A model's
+negative values (a published fit may have some, e.g. Bagher et al.'s Fresnel term) count as
+they are here; HDR-FLIP sees them as 0.
 
 ``hdr_flip(ref, test, mask)``: NVIDIA's HDR-FLIP (Andersson et al., "FLIP: A Difference Evaluator
 for Alternating Images", HPG 2020; "Visualizing Errors in Rendered High Dynamic Range Images",
