@@ -34,6 +34,7 @@ BENCHMARKS = (
     "bench_formats",
     "bench_fit",
     "bench_published",
+    "bench_appearance",
     "bench_render",
     "bench_scattered_render",
     "bench_equal_time",

@@ -1,4 +1,5 @@
-"""DESIGN.md's dependency rule for gonio.export: it imports brdf, io and fit, never render."""
+"""DESIGN.md's dependency rule for gonio.export: it imports brdf, appearance, io and fit, never
+render."""
 
 from __future__ import annotations
 
@@ -7,7 +8,14 @@ from pathlib import Path
 
 import gonio.export
 
-ALLOWED = ("gonio.brdf", "gonio.io", "gonio.fit", "gonio.errors", "gonio.export")
+ALLOWED = (
+    "gonio.brdf",
+    "gonio.appearance",
+    "gonio.io",
+    "gonio.fit",
+    "gonio.errors",
+    "gonio.export",
+)
 
 
 def test_export_imports_only_brdf_io_fit():

@@ -134,17 +134,16 @@ class _Parser:
             if tok != ",":
                 raise FormatError(f"line {self.line_no}: expected ',' or ')', got {tok!r}")
 
-    def value(self) -> float | tuple[float, ...]:
+    def value(self, depth: int = 0) -> float | tuple:
+        """A number, or a list of values nested at most two deep (Bagher's ``eta = [[..],
+        [..]]``)."""
         kind, tok = self._next()
         if kind == "num":
             return float(tok)
-        if tok == "[":
-            values = []
+        if tok == "[" and depth < 2:
+            values: list = []
             while True:
-                kind, tok = self._next()
-                if kind != "num":
-                    raise FormatError(f"line {self.line_no}: expected a number, got {tok!r}")
-                values.append(float(tok))
+                values.append(self.value(depth + 1))
                 kind, tok = self._next()
                 if tok == "]":
                     return tuple(values)

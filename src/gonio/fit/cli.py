@@ -65,9 +65,14 @@ def register(subparsers: Any) -> None:
         nargs="*",
         metavar="MODEL_FILE",
         help="print Ngan's cosine-weighted L2 and Low's log metric E2 on the data's own cells "
-        "(theta <= --theta-max, exact cell solid angles). Without files: of the fitted models. "
-        "With files, score those instead of fitting: fit results (.json) or published fits "
-        "(ngan_*.fit, the input's material; or FILE.fit::MATERIAL)",
+        "(theta <= --theta-max, exact cell solid angles) and the appearance score: the "
+        "measured and the model's spheres (96 px, light at 0, 30 and 60 deg from the view, and "
+        "a generated studio environment) compared by HDR-FLIP and relative L1 "
+        "(docs/guide/fitting.md). Without files: of the fitted models (also in the table and "
+        "the JSON). With files, score those instead of fitting: fit results (.json) or published "
+        "fits (any .fit file of Ngan et al., Low et al. or Bagher et al., for the input's "
+        "material; or FILE.fit::MATERIAL); with several files, one without the material is "
+        "skipped with a note",
     )
     p.add_argument(
         "--uncertainty",
@@ -266,6 +271,9 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         for m in options["models"]:
             r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
             results += r if isinstance(r, list) else [r]
+        if options.get("score"):
+            bar.update(task, description="appearance score")
+            _score_appearance(path, results, console, as_json)
         comp = summarize(results)
         # Write into a hidden staging folder beside OUT and move the files in at the end, so
         # that Ctrl-C (or an error) while writing leaves no half-written result behind.
@@ -310,35 +318,85 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         _print_table(out_console, summary, data.source.get("name") or path.name, results)
         if options.get("score"):
             for r in results:
-                _print_score(out_console, r.name, r.metrics, data)
+                _print_score(out_console, r.name, r.metrics, data, r.appearance)
     return 0
 
 
-def _print_score(console: Any, label: str, metrics: dict[str, float], data: Any) -> None:
+def _score_appearance(path: Path, results: list[Any], console: Any, quiet: bool) -> None:
+    """Set each result's appearance score (per-channel fits have none: the score compares
+    whole-colour images)."""
+    from gonio.fit.score import appearance_reference, appearance_score
+
+    ref, why = appearance_reference(path)
+    if ref is None:
+        if not quiet:
+            console.print(f"appearance score skipped: {why}", highlight=False, markup=False)
+        return
+    for r in results:
+        if r.channel is None:
+            r.appearance = appearance_score(ref, r.model)
+
+
+def _print_score(
+    console: Any,
+    label: str,
+    metrics: dict[str, float],
+    data: Any,
+    appearance: dict[str, float] | None = None,
+) -> None:
     th = data.source.get("theta_max_deg", 80.0)
     console.print(
         f"score {label}: ngan {metrics['ngan']:.5g} 1/sr, low-e2 {metrics['low-e2']:.5g} "
-        f"({data.n} cells, theta <= {th:g} deg)"
+        f"({data.n} cells, theta <= {th:g} deg)",
+        highlight=False,
+        markup=False,
     )
+    if appearance:
+        from gonio.appearance import IMAGES
+
+        console.print(
+            f"  appearance ({appearance['resolution_px']:.0f} px spheres; light at 0, 30, 60 "
+            "deg, studio):",
+            highlight=False,
+            markup=False,
+        )
+        for m, name in (("hdr_flip", "HDR-FLIP"), ("rel_l1", "rel. L1 ")):
+            each = " ".join(f"{appearance[f'{m}_{i}']:.3f}" for i in IMAGES)
+            console.print(
+                f"    {name} {appearance[m]:.3f}  ({each})", highlight=False, markup=False
+            )
 
 
 def _run_score(paths: list[Path], args: argparse.Namespace) -> int:
     """``gonio fit FILE --score MODEL_FILE...``: score given models, fit nothing."""
     from rich.console import Console
 
+    from gonio.errors import GonioError
     from gonio.fit.data import prepare
-    from gonio.fit.score import load_scored_model, score
+    from gonio.fit.score import appearance_reference, appearance_score, load_scored_model, score
 
     rows = []
     console = Console()  # COLUMNS when set, else the terminal's width, 80 when piped
+    notes = Console(stderr=True)
     for path in paths:
         data = prepare(path, args.theta_max)
+        ref, why = appearance_reference(path)
+        if ref is None and not args.json:
+            notes.print(f"appearance score skipped: {why}", highlight=False, markup=False)
         for spec in args.score:
-            label, model = load_scored_model(spec, data.source.get("name"))
+            try:
+                label, model = load_scored_model(spec, data.source.get("name"))
+            except GonioError as exc:
+                if len(args.score) == 1:
+                    raise
+                if not args.json:
+                    notes.print(f"skipped {spec}: {exc}", highlight=False, markup=False)
+                continue
             s = score(model, data)
-            rows.append({"file": str(path), "model": spec, "label": label, **s})
+            app = None if ref is None else appearance_score(ref, model)
+            rows.append({"file": str(path), "model": spec, "label": label, **s, "appearance": app})
             if not args.json:
-                _print_score(console, f"{label} ({Path(spec).name})", s, data)
+                _print_score(console, f"{label} ({Path(spec).name})", s, data, app)
     if args.json:
         sys.stdout.write(dumps_json(rows, indent=2))
         sys.stdout.write("\n")

@@ -32,7 +32,8 @@ class Comparison:
     ----------
     results : one FitResult per model (in the order given).
     table : one row per model: ``model``, ``n_params``, ``loss``, ``metric``, ``chi2_dof``,
-        ``aic``, ``bic``, ``delta_bic``, ``metrics`` (every metric), ``converged``.
+        ``aic``, ``bic``, ``delta_bic``, ``metrics`` (every metric), ``appearance`` (the
+        appearance score, or None), ``converged``.
     recommended : name of the recommended model.
     reason : one sentence explaining the choice.
     """
@@ -84,6 +85,7 @@ def summarize(results: Sequence[FitResult]) -> Comparison:
                 "bic": r.bic,
                 "delta_bic": r.bic - best_bic,
                 "metrics": r.metrics,
+                "appearance": r.appearance,
                 "converged": bool(r.optimizer.get("converged")),
                 "flags": flags(r),
             }

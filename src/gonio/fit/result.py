@@ -39,6 +39,9 @@ class FitResult:
     optimizer : method, status, iterations, timings, parameters on bounds.
     warnings : caveats worth reading.
     channel : channel name when fitted per channel, else None.
+    appearance : the appearance score against the data's own sphere images
+        (:func:`gonio.appearance.score` keys: HDR-FLIP and relative L1 per image and their
+        means), or None where it was not computed (``gonio fit --score`` computes it).
     """
 
     name: str
@@ -62,6 +65,7 @@ class FitResult:
     channel: str | None = None
     wall_s: float = 0.0
     u: np.ndarray | None = None
+    appearance: dict[str, float] | None = None
 
     @property
     def n_params(self) -> int:
@@ -124,6 +128,7 @@ class FitResult:
             "loss": self.loss,
             "metric": self.metric,
             "metrics": self.metrics,
+            "appearance": self.appearance,
             "chi2": self.chi2,
             "dof": int(self.dof),
             "reduced_chi2": self.reduced_chi2,

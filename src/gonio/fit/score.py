@@ -11,9 +11,14 @@ quadrature of the integral over the hemisphere pair. The formulas are the losses
 ``low-e2`` Löw, Kronander, Ynnerman & Unger 2012, log metric: ``sqrt(sum w (ln(1 + f) -
            ln(1 + y))^2 / (C W))``.
 
-A published fit of the Ngan et al. files (``ngan_*.fit``) is scored through
-:func:`gonio.brdf.ngan.to_family`, so that it is evaluated by the same model code as gonio's fit
-of the same family.
+A published fit (any file of ``../shared/data/fits/``: Ngan et al.'s, Löw et al.'s, Bagher et
+al.'s) is scored through :func:`gonio.brdf.published.to_model`; Ngan's Cook-Torrance, Ward and
+Blinn-Phong fits through :func:`gonio.brdf.ngan.to_family`, so that they are evaluated by the
+same model code as gonio's fit of the same family.
+
+The appearance score (:mod:`gonio.appearance`) is computed beside them by
+:func:`appearance_reference` (the measurement's own sphere images, once) and
+:func:`appearance_score` (a model's images against them).
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from gonio.brdf.models import BRDFModel
-from gonio.errors import FitError, FormatError
+from gonio.errors import FitError, FormatError, GonioError
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
 from gonio.fit.losses import evaluate_many
 
@@ -82,10 +87,11 @@ def score(model: Any, data: Any, theta_max_deg: float = DEFAULT_THETA_MAX_DEG) -
 def load_scored_model(spec: str, material: str | None) -> tuple[str, BRDFModel]:
     """``(label, model)`` for a model file named on the command line.
 
-    ``FIT.json`` (a gonio fit result), ``ngan_FAMILY.fit`` (the published fit of ``material``:
-    the data's name) or ``ngan_FAMILY.fit::MATERIAL``.
+    ``FIT.json`` (a gonio fit result), a published fit file ``FILE.fit`` (the fit of
+    ``material``: the data's name) or ``FILE.fit::MATERIAL``. The label of a published fit is
+    ``published PRESET`` for Ngan's three preset families, else ``published FILE-STEM``.
     """
-    from gonio.brdf import ngan
+    from gonio.brdf import ngan, published
     from gonio.io.fit_result import load_model
 
     path, _, mat = spec.partition("::")
@@ -101,5 +107,27 @@ def load_scored_model(spec: str, material: str | None) -> tuple[str, BRDFModel]:
     mat = mat or material or ""
     if mat not in fits:
         raise FitError(f"{path}: no published fit for material {mat!r} ({len(fits)} materials)")
-    preset, model = ngan.to_family(fits[mat])
-    return f"published {preset}", model
+    fit = fits[mat]
+    model = published.to_model(fit)
+    preset = ngan.FAMILY_PRESETS.get(fit.model)
+    return f"published {preset or Path(path).stem}", model
+
+
+def appearance_reference(path: str | Path) -> tuple[Any, str | None]:
+    """``(reference, None)``: the measurement's sphere images (:class:`gonio.appearance.
+    Reference` at the default resolution and samples), or ``(None, why)`` where the file cannot
+    be rendered (e.g. a spectral measurement: the score compares 1- or 3-channel images)."""
+    from gonio import appearance, io
+
+    try:
+        return appearance.Reference.of(io.load(path)), None
+    except GonioError as exc:
+        return None, str(exc)
+
+
+def appearance_score(reference: Any, model: Any) -> dict[str, float]:
+    """The appearance score of ``model`` against ``reference`` (:func:`gonio.appearance.score`
+    keys)."""
+    from gonio import appearance
+
+    return appearance.score(reference, model)

@@ -23,6 +23,13 @@ COLUMNS: tuple[tuple[str, Any], ...] = (
     ("ok", lambda r: "yes" if r["converged"] else "NO"),
 )
 
+#: Columns added when the rows carry an appearance score (``gonio fit --score``): the mean
+#: HDR-FLIP and relative L1 of the sphere images (:mod:`gonio.appearance`).
+APPEARANCE_COLUMNS: tuple[tuple[str, Any], ...] = (
+    ("flip", lambda r: f"{r['appearance']['hdr_flip']:.3f}" if r.get("appearance") else "-"),
+    ("relL1", lambda r: f"{r['appearance']['rel_l1']:.3f}" if r.get("appearance") else "-"),
+)
+
 _GAP = "  "
 _INDENT = "    "
 
@@ -49,11 +56,12 @@ def fit_table_lines(rows: list[dict[str, Any]], width: int = 80) -> list[str]:
     ----------
     rows : the ``table`` entries of a fit comparison's JSON (``model``, ``n_params``, ``loss``,
         ``chi2_dof``, ``bic``, ``delta_bic``, ``metrics`` with ``ngan`` and ``low-e1``,
-        ``converged``).
+        ``converged``; ``appearance`` adds the :data:`APPEARANCE_COLUMNS`).
     width : the terminal's width in characters.
     """
-    cells = [[show(r) for _, show in COLUMNS] for r in rows]
-    heads = [h for h, _ in COLUMNS]
+    columns = COLUMNS + (APPEARANCE_COLUMNS if any(r.get("appearance") for r in rows) else ())
+    cells = [[show(r) for _, show in columns] for r in rows]
+    heads = [h for h, _ in columns]
     widths = [max([len(h)] + [len(c[i]) for c in cells]) for i, h in enumerate(heads)]
     names = [str(r["model"]) for r in rows]
     name_w = max([len("model")] + [len(n) for n in names])

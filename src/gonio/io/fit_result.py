@@ -100,6 +100,14 @@ SCHEMA: dict[str, Any] = {
         "loss": _num,
         "metric": {"type": "string"},
         "metrics": {"type": "object", "additionalProperties": _num},
+        "appearance": {
+            "type": ["object", "null"],
+            "additionalProperties": _num,
+            "description": "appearance score against the measurement's sphere images "
+            "(gonio.appearance): hdr_flip and rel_l1 (means over the images) and per image "
+            "(_0, _30, _60: light angle from the view in degrees; _env: the studio), "
+            "resolution_px, env_samples; null where not computed",
+        },
         "chi2": _num,
         "dof": {"type": "integer"},
         "reduced_chi2": _num,

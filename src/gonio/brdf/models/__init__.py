@@ -7,6 +7,8 @@
 from gonio.brdf.models._base import BRDFModel, BRDFSample, Node, Param, registry
 from gonio.brdf.models._sum import Sum
 from gonio.brdf.models.ashikhmin_shirley import AshikhminShirley
+from gonio.brdf.models.ashikhmin_shirley_lobe import AshikhminShirleyLobe
+from gonio.brdf.models.bagher_sgd import BagherSGD
 from gonio.brdf.models.blinn_phong import BlinnPhong
 from gonio.brdf.models.cook_torrance import CookTorrance
 from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
@@ -14,6 +16,7 @@ from gonio.brdf.models.htsg import HTSG
 from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
 from gonio.brdf.models.low_microfacet import LowMicrofacet
+from gonio.brdf.models.low_smooth import LowSmooth
 from gonio.brdf.models.ngan_blinn_phong import NganBlinnPhong
 from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
@@ -25,8 +28,10 @@ from gonio.brdf.models.ward import Ward
 __all__ = [
     "HTSG",
     "AshikhminShirley",
+    "AshikhminShirleyLobe",
     "BRDFModel",
     "BRDFSample",
+    "BagherSGD",
     "BlinnPhong",
     "Conductor",
     "CookTorrance",
@@ -35,6 +40,7 @@ __all__ = [
     "Lafortune",
     "Lambert",
     "LowMicrofacet",
+    "LowSmooth",
     "NganBlinnPhong",
     "NoFresnel",
     "Node",

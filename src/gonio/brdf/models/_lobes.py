@@ -82,3 +82,39 @@ class DiffusePlusLobe:
     def sampling_weight(self, wo: Array) -> Array:
         w = self._weights(wo)
         return jnp.broadcast_to(w[0] + w[1], wo.shape[:-1])
+
+
+class HalfVectorPowerProposal:
+    """Sampling of a specular lobe by half vectors from ``(m + 1) / (2 pi) cos^m theta_h``
+    about the normal, reflected about ``h``: ``p(wi) = p_h / (4 wo.h)``.
+
+    A model mixes this in before :class:`~gonio.brdf.models._base.BRDFModel` and provides
+    ``_exponent(dtype) -> m`` (the proposal's exponent, matched to the lobe's curvature at its
+    peak) and ``_amplitude() -> (C,)`` or scalar (for :meth:`sampling_weight`). The proposal is
+    exact for the density it reports, whatever the lobe's shape.
+    """
+
+    def _m(self, dt: object) -> Array:
+        return jnp.clip(self._exponent(dt), 0.0, 1e6)
+
+    def _pdf(self, wi: Array, wo: Array) -> Array:
+        m = self._m(wi.dtype)
+        h = wi + wo
+        hxy2 = h[..., 0] ** 2 + h[..., 1] ** 2
+        norm = safe_sqrt(jnp.sum(h * h, -1))
+        one_minus = jnp.where(
+            h[..., 2] > 0, hxy2 / jnp.maximum(norm * (norm + jnp.abs(h[..., 2])), 1e-30), 1.0
+        )
+        p_h = (m + 1.0) / (2.0 * jnp.pi) * pow_one_minus(one_minus, m)
+        return p_h / jnp.maximum(2.0 * norm, 1e-30)  # 4 wo.h = 2 |wi + wo|
+
+    def _sample(self, wo: Array, u: Array) -> Array:
+        h = power_lobe_local(u, self._m(wo.dtype))
+        return 2.0 * jnp.sum(wo * h, -1, keepdims=True) * h - wo
+
+    def sampling_weight(self, wo: Array) -> Array:
+        # A scale for lobe selection only: the amplitude times the peak-normalized lobe area.
+        m = self._m(wo.dtype)
+        area = jnp.minimum(2.0 * jnp.pi / (m + 1.0), 2.0 * jnp.pi) / jnp.pi
+        amp = jnp.mean(jnp.abs(jnp.atleast_1d(self._amplitude()))).astype(wo.dtype)
+        return jnp.broadcast_to(amp * area, wo.shape[:-1])

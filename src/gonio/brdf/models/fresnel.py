@@ -123,11 +123,12 @@ class Dielectric(Fresnel):
 
     Parameters
     ----------
-    eta : relative index of refraction (inside / outside), scalar or per channel.
+    eta : relative index of refraction (inside / outside) in [0.01, 100], scalar or per
+        channel (Löw et al.'s published Ashikhmin-Shirley fits reach 10.1).
     """
 
     PARAMS = (
-        Param("eta", 1.5, 1e-2, 10.0, "1", per_channel=True, scale="log",
+        Param("eta", 1.5, 1e-2, 100.0, "1", per_channel=True, scale="log",
               doc="relative index of refraction (inside over outside)"),
     )  # fmt: skip
 

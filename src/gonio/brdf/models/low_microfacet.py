@@ -33,7 +33,8 @@ class LowMicrofacet(BRDFModel):
     A : amplitude per channel in [0, 1e4] (dimensionless).
     B : sharpness in [1e-3, 1e8] (dimensionless).
     C : fall-off exponent in [1e-3, 10] (dimensionless).
-    eta : index of refraction in [1.01, 10] (dimensionless).
+    eta : index of refraction in [1.01, 100] (dimensionless; Löw et al.'s published fits of
+        metals reach 100, a Fresnel term near 1 at every angle).
 
     Sampling: half vectors from the power lobe ``cos^m theta_h`` with ``m = B C`` (the ABC
     distribution's curvature at the peak), reflected about ``h``; the pdf is that proposal's.
@@ -43,7 +44,7 @@ class LowMicrofacet(BRDFModel):
         Param("A", 1.0, 0.0, 1e4, "1", per_channel=True, scale="log", doc="amplitude"),
         Param("B", 100.0, 1e-3, 1e8, "1", scale="log", doc="sharpness of the ABC distribution"),
         Param("C", 1.0, 1e-3, 10.0, "1", scale="log", doc="fall-off of the ABC distribution"),
-        Param("eta", 1.5, 1.01, 10.0, "1", scale="log", doc="index of refraction (Fresnel)"),
+        Param("eta", 1.5, 1.01, 100.0, "1", scale="log", doc="index of refraction (Fresnel)"),
     )  # fmt: skip
 
     def __init__(

@@ -1,0 +1,467 @@
+"""Appearance of gonio's default fit against every published fit (issue #40).
+
+For each of the 88 complete materials of ``../shared/data/nbrdf/merl_nbrdf.zip`` (MERL-grid
+tables evaluated from the neural fits), this benchmark
+
+1. runs ``gonio fit T.binary`` with no model options (what the command does by default on the
+   branch it runs on, through the CLI entry point itself, in this process, ``--no-plots``) and
+   takes the model the command recommends;
+2. converts every published fit of that material in ``../shared/data/fits/`` (Ngan et al.'s
+   files but He, Löw et al.'s six, Bagher et al.'s: :mod:`gonio.brdf.published`);
+3. scores all of them with the appearance score (:mod:`gonio.appearance`: 96 px spheres under a
+   light at 0, 30 and 60 degrees from the view and under the studio; HDR-FLIP and relative L1
+   per image and their means) against the table's own images.
+
+The 88 materials are split once into a *tuning* half and a *held-out* half: sorted names,
+permuted by ``numpy.random.default_rng(40)``, first 44 tuning. Choices of the default fit
+(families, loss, thresholds) may look at the tuning half only; the table reports both halves and
+all. Materials are run in an order that alternates the halves, so that ``--materials N`` covers
+both.
+
+Also measured:
+
+* the studio image's noise: for the first ``--noise N`` materials run, every model is scored a
+  second time against images estimated with another seed; the change of each score is compared
+  with the differences between the models' scores that the benchmark ranks (``noise / spread``);
+* the default ``gonio fit T.binary`` (no options at all, plots included) of one MERL-grid table
+  in a fresh process with an empty compilation cache, wall time per phase
+  (``--timing``; with ``--no-timing`` skipped).
+
+Writes ``results/appearance.csv`` (one row per material and model), ``appearance_noise.csv``,
+``appearance_timing.csv``, ``appearance_summary.csv``, ``appearance.png`` and the
+``appearance`` tables of ``benchmarks/README.md``.
+
+Usage: ``python benchmarks/bench_appearance.py [--materials N] [--only NAME] [--noise N]
+[--no-timing]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import io as _io
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+SHARED = ROOT.parent / "shared" / "data"
+ARCHIVE = SHARED / "nbrdf" / "merl_nbrdf.zip"
+FITS = SHARED / "fits"
+RESULTS = HERE / "results"
+
+#: Seed of the fixed tuning / held-out split.
+SPLIT_SEED = 40
+
+
+def all_materials() -> list[str]:
+    """The archive's complete materials, sorted."""
+    from gonio.io.nbrdf import NBRDFArchive
+
+    return sorted(NBRDFArchive(str(ARCHIVE)).names)
+
+
+def split(names: list[str]) -> dict[str, str]:
+    """``{name: "tuning" | "held-out"}``: sorted names, a seeded permutation, first half tuning."""
+    names = sorted(names)
+    perm = np.random.default_rng(SPLIT_SEED).permutation(len(names))
+    half = len(names) // 2
+    return {names[i]: ("tuning" if k < half else "held-out") for k, i in enumerate(perm)}
+
+
+def run_order(names: list[str]) -> list[str]:
+    """The materials alternating tuning and held-out (each half in its permuted order)."""
+    names = sorted(names)
+    perm = np.random.default_rng(SPLIT_SEED).permutation(len(names))
+    half = len(names) // 2
+    tune, held = [names[i] for i in perm[:half]], [names[i] for i in perm[half:]]
+    out: list[str] = []
+    for a, b in zip(tune, held, strict=False):
+        out += [a, b]
+    return out + tune[len(held) :] + held[len(tune) :]
+
+
+def published_fits(material: str) -> tuple[dict[str, Any], dict[str, str]]:
+    """``({family: model}, {family: why not})`` of every published fit of ``material``."""
+    from gonio.brdf import ngan, published
+    from gonio.errors import GonioError
+
+    models, skipped = {}, {}
+    for path in sorted(FITS.glob("*.fit")):
+        fits = ngan.parse_ngan_fits(path.read_text())
+        if material not in fits:
+            continue
+        try:
+            models[path.stem] = published.to_model(fits[material])
+        except GonioError as exc:
+            skipped[path.stem] = str(exc)
+    return models, skipped
+
+
+def default_fit(table_path: Path, out: Path) -> tuple[str, Any, float]:
+    """``(name, model, wall s)`` of what ``gonio fit T --no-plots`` recommends."""
+    from gonio.cli import main
+    from gonio.io.fit_result import load_model, read_result
+
+    t0 = time.perf_counter()
+    buf = _io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = main(["fit", str(table_path), "--no-plots", "-o", str(out), "--json"])
+    wall = time.perf_counter() - t0
+    if rc != 0:
+        raise RuntimeError(f"gonio fit exited {rc}")
+    summary = json.loads((out / "summary.json").read_text())
+    chosen = summary["recommended"]
+    for f in summary["files"]:
+        p = out / Path(f).name
+        if p.suffix == ".json" and read_result(p)["model"] == chosen:
+            return chosen, load_model(p), wall
+    raise RuntimeError(f"no result file for the recommended model {chosen!r}")
+
+
+def run_material(name: str, where: str, noise: bool) -> tuple[list[dict], list[dict]]:
+    """Rows of ``appearance.csv`` (and of ``appearance_noise.csv`` when ``noise``)."""
+    from gonio import appearance, io
+
+    table = io.load(f"{ARCHIVE}::{name}")
+    with tempfile.TemporaryDirectory(prefix="bench-appearance-") as tmp:
+        path = Path(tmp) / f"{name}.binary"
+        io.save(table, path)
+        chosen, model, wall = default_fit(path, Path(tmp) / "fit")
+    models = {f"default {chosen}": model}
+    pub, skipped = published_fits(name)
+    models.update({f"published {k}": v for k, v in pub.items()})
+    ref = appearance.Reference.of(table)
+    rows = []
+    for label, m in models.items():
+        s = appearance.score(ref, m)
+        rows.append(
+            {
+                "material": name,
+                "split": where,
+                "model": label,
+                "kind": label.split()[0],
+                "fit_s": wall if label.startswith("default") else "",
+                **s,
+                "note": "",
+            }
+        )
+    for fam, why in skipped.items():
+        rows.append(
+            {
+                "material": name,
+                "split": where,
+                "model": f"published {fam}",
+                "kind": "published",
+                "note": why,
+            }
+        )
+    noise_rows = []
+    if noise:
+        ref1 = appearance.Reference.of(table, seed=1)
+        for r in rows:
+            if r["note"]:
+                continue
+            s1 = appearance.score(ref1, models[r["model"]])
+            noise_rows.append(
+                {
+                    "material": name,
+                    "model": r["model"],
+                    **{f"{k}_seed0": r[k] for k in ("hdr_flip_env", "rel_l1_env")},
+                    **{f"{k}_seed1": s1[k] for k in ("hdr_flip_env", "rel_l1_env")},
+                }
+            )
+    return rows, noise_rows
+
+
+def timing(name: str) -> list[dict]:
+    """The default ``gonio fit T.binary`` in a fresh process, empty compilation cache."""
+    from gonio import io
+
+    with tempfile.TemporaryDirectory(prefix="bench-appearance-t-") as tmp:
+        path = Path(tmp) / f"{name}.binary"
+        io.save(io.load(f"{ARCHIVE}::{name}"), path)
+        env = dict(os.environ, XDG_CACHE_HOME=str(Path(tmp) / "cache"), JAX_PLATFORMS="cpu")
+        env.pop("GONIO_COMPILE_CACHE", None)
+        env["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + env.get("PYTHONPATH", "")
+        gonio = Path(sys.executable).parent / "gonio"
+        rows = []
+        for what in ("cold (empty cache)", "warm (same cache)"):
+            out = Path(tmp) / what.split()[0]
+            t0, c0 = time.perf_counter(), os.times()
+            proc = subprocess.run(
+                [str(gonio), "fit", str(path), "-o", str(out)],
+                env=env,
+                capture_output=True,
+                text=True,
+            )
+            wall = time.perf_counter() - t0
+            c1 = os.times()
+            cpu = (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
+            if proc.returncode != 0:
+                raise RuntimeError(proc.stderr[-2000:])
+            summary = json.loads((out / "summary.json").read_text())
+            fitted = 0.0
+            for f in summary["files"]:
+                p = out / Path(f).name
+                if p.suffix != ".json":
+                    continue
+                rec = json.loads(p.read_text())
+                t = rec["optimizer"].get("timings", {})
+                fitted += rec["wall_s"]
+                for phase in ("starts", "refine", "polish"):
+                    if phase in t:
+                        rows.append(
+                            {"run": what, "phase": f"{rec['model']}: {phase}", "seconds": t[phase]}
+                        )
+                rows.append(
+                    {"run": what, "phase": f"{rec['model']}: whole fit", "seconds": rec["wall_s"]}
+                )
+            rows.append(
+                {"run": what, "phase": "start, read, plots, write (rest)", "seconds": wall - fitted}
+            )
+            rows.append(
+                {
+                    "run": what,
+                    "phase": "total wall",
+                    "seconds": wall,
+                    "cpu_s": cpu,
+                    "load1": os.getloadavg()[0],
+                    "material": name,
+                }
+            )
+    return rows
+
+
+def _median(xs: list[float]) -> float:
+    return float(np.median(xs)) if xs else math.nan
+
+
+def summarize(rows: list[dict]) -> tuple[list[dict], list[dict]]:
+    """The summary per split (``tuning``, ``held-out``, ``all``) and the worst materials."""
+    by_mat: dict[str, list[dict]] = {}
+    for r in rows:
+        if not r.get("note"):
+            by_mat.setdefault(r["material"], []).append(r)
+    per = []
+    for mat, rs in by_mat.items():
+        d = [r for r in rs if r["kind"] == "default"]
+        p = [r for r in rs if r["kind"] == "published"]
+        if not d or not p:
+            continue
+        d = d[0]
+        best_flip = min(float(r["hdr_flip"]) for r in p)
+        best_l1 = min(float(r["rel_l1"]) for r in p)
+        per.append(
+            {
+                "material": mat,
+                "split": d["split"],
+                "default": d["model"],
+                "flip": float(d["hdr_flip"]),
+                "l1": float(d["rel_l1"]),
+                "best_flip": best_flip,
+                "best_l1": best_l1,
+                "wins": float(d["hdr_flip"]) <= best_flip and float(d["rel_l1"]) <= best_l1,
+                "published": p,
+            }
+        )
+    out = []
+    for where in ("tuning", "held-out", "all"):
+        sel = [m for m in per if where == "all" or m["split"] == where]
+        fams: dict[str, list[float]] = {}
+        for m in sel:
+            for r in m["published"]:
+                fams.setdefault(r["model"], []).append(float(r["hdr_flip"]))
+        fam_med = {f: _median(v) for f, v in fams.items() if len(v) == len(sel)}
+        best_fam = min(fam_med, key=fam_med.get) if fam_med else ""
+        worst = sorted(sel, key=lambda m: m["flip"] - m["best_flip"], reverse=True)[:3]
+        out.append(
+            {
+                "split": where,
+                "materials": len(sel),
+                "default_wins_both": sum(m["wins"] for m in sel),
+                "default_wins_flip": sum(m["flip"] <= m["best_flip"] for m in sel),
+                "default_wins_l1": sum(m["l1"] <= m["best_l1"] for m in sel),
+                "median_flip_default": _median([m["flip"] for m in sel]),
+                "best_family": best_fam.removeprefix("published "),
+                "median_flip_best_family": fam_med.get(best_fam, math.nan),
+                "median_l1_default": _median([m["l1"] for m in sel]),
+                "median_best_l1_published": _median([m["best_l1"] for m in sel]),
+                "worst": "; ".join(
+                    f"{m['material']} ({m['flip']:.3f} vs {m['best_flip']:.3f})" for m in worst
+                ),
+            }
+        )
+    return out, per
+
+
+def _write_csv(rows: list[dict], name: str, comment: str = "") -> None:
+    RESULTS.mkdir(exist_ok=True)
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys and k != "published"]
+    with open(RESULTS / name, "w", newline="") as fh:
+        if comment:
+            fh.write(f"# {comment}\n")
+        w = csv.DictWriter(fh, keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _plot(per: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 4.2))
+    for ax, key, best, title in (
+        (axes[0], "flip", "best_flip", "HDR-FLIP (mean of 4 images)"),
+        (axes[1], "l1", "best_l1", "relative L1 (mean of 4 images)"),
+    ):
+        for where, colour in (("tuning", "tab:blue"), ("held-out", "tab:orange")):
+            sel = [m for m in per if m["split"] == where]
+            ax.scatter([m[best] for m in sel], [m[key] for m in sel], s=14, c=colour, label=where)
+        hi = max([m[key] for m in per] + [m[best] for m in per] + [1e-3])
+        ax.plot([0, hi], [0, hi], "k:", lw=0.8)
+        ax.set_xlabel("best published fit of the material")
+        ax.set_ylabel("gonio's default fit")
+        ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=7)
+    fig.suptitle("Below the diagonal: the default looks closer to the measurement", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def write_tables() -> None:
+    """Rewrite this benchmark's tables in benchmarks/README.md from its CSVs."""
+    import _tables
+
+    cols = [
+        ("materials", "split"),
+        ("run", "materials"),
+        ("default >= best published, both", "default_wins_both"),
+        ("… HDR-FLIP", "default_wins_flip"),
+        ("… rel. L1", "default_wins_l1"),
+        ("median HDR-FLIP default", "median_flip_default"),
+        ("best family (median HDR-FLIP)", "best_family"),
+        ("its median", "median_flip_best_family"),
+        ("median rel. L1 default", "median_l1_default"),
+        ("median best published rel. L1", "median_best_l1_published"),
+        ("worst (default vs best published HDR-FLIP)", "worst"),
+    ]
+    text = _tables.markdown(_tables.read("appearance_summary.csv"), cols)
+    noise = _tables.read("appearance_noise_summary.csv")
+    if noise and "measure" in noise[0]:
+        text += "\n\n" + _tables.markdown(
+            noise,
+            [
+                ("studio image, measure", "measure"),
+                ("models", "models"),
+                ("median |seed 0 - seed 1|", "median_noise"),
+                ("median |default - best published|", "median_spread"),
+                ("noise / spread", "ratio"),
+            ],
+        )
+    timing_rows = (
+        _tables.read("appearance_timing.csv")
+        if (RESULTS / "appearance_timing.csv").exists()
+        else []
+    )
+    if timing_rows:
+        text += "\n\n" + _tables.markdown(
+            timing_rows,
+            [
+                ("run", "run"),
+                ("phase", "phase"),
+                ("seconds", "seconds"),
+                ("CPU s", "cpu_s"),
+                ("load", "load1"),
+            ],
+        )
+    _tables.write("appearance", text)
+
+
+def _noise_summary(noise: list[dict], per: list[dict]) -> list[dict]:
+    out = []
+    mats = {r["material"] for r in noise}
+    for key in ("hdr_flip_env", "rel_l1_env"):
+        changes = [abs(r[f"{key}_seed0"] - r[f"{key}_seed1"]) for r in noise]
+        spreads = []
+        for m in mats:
+            rs = [r for r in noise if r["material"] == m]
+            d = [r[f"{key}_seed0"] for r in rs if r["model"].startswith("default")]
+            p = [r[f"{key}_seed0"] for r in rs if r["model"].startswith("published")]
+            spreads += [abs(d[0] - x) for x in p] if d else []
+        med_n, med_s = _median(changes), _median(spreads)
+        out.append(
+            {
+                "measure": key,
+                "models": len(changes),
+                "median_noise": med_n,
+                "median_spread": med_s,
+                "ratio": med_n / med_s if med_s else math.nan,
+            }
+        )
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--materials", type=int, default=0, help="run the first N (0: all 88)")
+    ap.add_argument("--only", action="append", default=[], help="run this material (repeatable)")
+    ap.add_argument("--noise", type=int, default=2, help="materials with the seed check")
+    ap.add_argument("--no-timing", action="store_true", help="skip the cold-process timing")
+    args = ap.parse_args()
+    sys.path.insert(0, str(HERE))
+    names = all_materials()
+    where = split(names)
+    order = args.only or run_order(names)
+    if args.materials:
+        order = order[: args.materials]
+    rows: list[dict] = []
+    noise: list[dict] = []
+    comment = f"gonio fit default vs published fits; split seed {SPLIT_SEED}"
+    for k, name in enumerate(order):
+        t0 = time.perf_counter()
+        r, n = run_material(name, where[name], k < args.noise)
+        rows += r
+        noise += n
+        d = next(x for x in r if x["kind"] == "default")
+        print(
+            f"[{k + 1}/{len(order)}] {name} ({where[name]}): {d['model']} "
+            f"flip {d['hdr_flip']:.3f} L1 {d['rel_l1']:.3f}; "
+            f"{time.perf_counter() - t0:.0f} s",
+            flush=True,
+        )
+        # every output after every material: an interrupted run still leaves its tables
+        _write_outputs(rows, noise, comment)
+    if not args.no_timing:
+        _write_csv(timing(order[0]), "appearance_timing.csv", "gonio fit T.binary, no options")
+        write_tables()
+
+
+def _write_outputs(rows: list[dict], noise: list[dict], comment: str) -> None:
+    summary, per = summarize(rows)
+    _write_csv(rows, "appearance.csv", comment)
+    _write_csv(summary, "appearance_summary.csv", comment)
+    _write_csv(noise, "appearance_noise.csv", comment)
+    _write_csv(_noise_summary(noise, per) if noise else [], "appearance_noise_summary.csv")
+    if per:
+        _plot(per, RESULTS / "appearance.png")
+    write_tables()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+"""``gonio fit --score``: every published fit file, and the appearance score beside the table
+metrics (console script; a small scattered measurement so that it stays fast)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gonio import appearance
+from gonio.brdf import ngan, published
+from gonio.cli import main
+from gonio.io.fit_result import read_result
+from tests import console_script as cs
+from tests.conftest import shared_file
+from tests.fit.synth import cosine_directions
+
+
+@pytest.fixture(scope="module")
+def pvc(tmp_path_factory):
+    """300 samples of Löw's smooth-surface fit of pvc, times 1.1, named pvc."""
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.io import save
+
+    text = shared_file("fits", "low_lowsmooth_E2.fit").read_text()
+    m = published.to_model(ngan.parse_ngan_fits(text)["pvc"])
+    rng = np.random.default_rng(0)
+    wi, wo = cosine_directions(300, rng), cosine_directions(300, rng)
+    p = tmp_path_factory.mktemp("score") / "pvc.brdf.h5"
+    save(MeasuredSamples(wi, wo, np.asarray(m.f(wi, wo)) * 1.1, meta={"name": "pvc"}), p)
+    return p
+
+
+def test_score_reads_low_and_bagher_files_with_the_appearance_score(pvc):
+    low = shared_file("fits", "low_lowsmooth_E2.fit")
+    bagher = shared_file("fits", "bagher_sgd.fit")
+    he = shared_file("fits", "ngan_he.fit")
+    proc = cs.run("fit", pvc, "--score", low, bagher, he, "--json")
+    cs.assert_clean(proc)
+    rows = json.loads(proc.stdout)
+    assert [r["label"] for r in rows] == ["published low_lowsmooth_E2", "published bagher_sgd"]
+    for r in rows:
+        assert r["ngan"] > 0 and r["low-e2"] > 0
+        assert set(r["appearance"]) == set(appearance.KEYS)
+        assert 0 < r["appearance"]["hdr_flip"] < 1 and r["appearance"]["resolution_px"] == 96
+    # the model the data was made from looks closer than another family's fit
+    assert rows[0]["appearance"]["rel_l1"] < rows[1]["appearance"]["rel_l1"]
+
+
+def test_fitted_models_carry_the_score_in_table_and_json(pvc, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["fit", str(pvc), "-m", "lambert", "--score", "--no-plots", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "flip" in text and "relL1" in text and "HDR-FLIP" in text
+    rec = read_result(out / "lambert.json")
+    assert set(rec["appearance"]) == set(appearance.KEYS)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["table"][0]["appearance"]["hdr_flip"] == rec["appearance"]["hdr_flip"]
