@@ -125,7 +125,7 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     ``error``). Runs in worker processes: imports happen here.
     """
     import gonio.brdf  # noqa: F401  (float64)
-    from gonio.fit.compare import summarize
+    from gonio.fit.compare import summarize, with_nested
     from gonio.fit.data import prepare
     from gonio.io.fit_result import write_json
 
@@ -145,6 +145,12 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
         results = fit(data, model=models, **opts)
         results = results if isinstance(results, list) else [results]
+
+        def fit_model(m: str) -> list[Any]:
+            r = fit(data, model=m, **opts)
+            return r if isinstance(r, list) else [r]
+
+        results = with_nested(results, fit_model)
         folder.mkdir(parents=True, exist_ok=True)
         files = []
         for r in results:

@@ -239,7 +239,7 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
 
     from gonio.fit.api import fit
     from gonio.fit.batch import safe_stem
-    from gonio.fit.compare import summarize
+    from gonio.fit.compare import summarize, with_nested
     from gonio.fit.data import prepare
     from gonio.io.fit_result import write_json
 
@@ -263,9 +263,14 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
                 f"{path.name} has no sigma: fitting with {AUTO_LOSS_WITHOUT_SIGMA} (relative "
                 "errors; see --help of --loss), not an unweighted chi-square"
             )
-        for m in options["models"]:
+
+        def fit_model(m: str) -> list[Any]:
             r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
-            results += r if isinstance(r, list) else [r]
+            return r if isinstance(r, list) else [r]
+
+        for m in options["models"]:
+            results += fit_model(m)
+        results = with_nested(results, fit_model)
         comp = summarize(results)
         # Write into a hidden staging folder beside OUT and move the files in at the end, so
         # that Ctrl-C (or an error) while writing leaves no half-written result behind.

@@ -9,18 +9,51 @@ fit go on further lines, each group of columns under its own header.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
-#: (header, how a row of ``FitComparison.to_json()["table"]`` is shown), in order.
-COLUMNS: tuple[tuple[str, Any], ...] = (
-    ("params", lambda r: str(r["n_params"])),
-    ("loss", lambda r: f"{r['loss']:.4g}"),
-    ("chi2/dof", lambda r: f"{r['chi2_dof']:.3g}"),
-    ("BIC", lambda r: f"{r['bic']:.5g}"),
-    ("dBIC", lambda r: f"{r['delta_bic']:.1f}"),
-    ("ngan", lambda r: f"{r['metrics']['ngan']:.3g}"),
-    ("low-e1", lambda r: f"{r['metrics']['low-e1']:.3g}"),
-    ("ok", lambda r: "yes" if r["converged"] else "NO"),
+#: Short forms of :func:`gonio.fit.compare.flags` for the ``flags`` column.
+_FLAG_SHORT = {
+    "parameters at their bounds": "bound",
+    "not converged": "no-conv",
+    "unconstrained parameters": "unconstr",
+}
+
+
+def _metric(name: str) -> Callable[[dict[str, Any]], Any]:
+    return lambda r: (r.get("metrics") or {}).get(name)
+
+
+def _key(name: str) -> Callable[[dict[str, Any]], Any]:
+    return lambda r: r.get(name)
+
+
+def percent_above(rel: float) -> str:
+    """``+1.2%`` for a relative excess of 0.012; ``x12.3`` beyond +1000 %."""
+    return f"+{100 * rel:.1f}%" if rel <= 10 else f"x{1 + rel:.3g}"
+
+
+def _flags(r: dict[str, Any]) -> str:
+    return ",".join(_FLAG_SHORT.get(f, f) for f in r.get("flags") or []) or "-"
+
+
+#: (header, value of a row of ``Comparison.to_json()["table"]`` (None: not shown), format), in
+#: order. A column is shown when any row has its value: ``chi2/dof``, ``BIC`` and ``dBIC`` only
+#: for data with a measured sigma, ``vs best`` (the rank measure's excess over the best, percent)
+#: only without; ``appearance`` and ``cv`` once the rows carry them (``metrics["appearance"]``,
+#: ``metrics["cv_loss"]``). The one place the fit table's columns are defined.
+COLUMNS: tuple[tuple[str, Callable[[dict[str, Any]], Any], Callable[[Any], str]], ...] = (
+    ("params", _key("n_params"), str),
+    ("loss", _key("loss"), lambda v: f"{v:.4g}"),
+    ("chi2/dof", _key("chi2_dof"), lambda v: f"{v:.3g}"),
+    ("BIC", _key("bic"), lambda v: f"{v:.5g}"),
+    ("dBIC", _key("delta_bic"), lambda v: f"{v:.1f}"),
+    ("appearance", _metric("appearance"), lambda v: f"{v:.4g}"),
+    ("cv", _metric("cv_loss"), lambda v: f"{v:.4g}"),
+    ("vs best", _key("delta_rank"), percent_above),
+    ("ngan", _metric("ngan"), lambda v: f"{v:.3g}"),
+    ("low-e1", _metric("low-e1"), lambda v: f"{v:.3g}"),
+    ("flags", _flags, str),
 )
 
 _GAP = "  "
@@ -48,12 +81,13 @@ def fit_table_lines(rows: list[dict[str, Any]], width: int = 80) -> list[str]:
     Parameters
     ----------
     rows : the ``table`` entries of a fit comparison's JSON (``model``, ``n_params``, ``loss``,
-        ``chi2_dof``, ``bic``, ``delta_bic``, ``metrics`` with ``ngan`` and ``low-e1``,
-        ``converged``).
+        ``metrics``, ``flags``; ``chi2_dof``, ``bic``, ``delta_bic`` with sigma, ``delta_rank``
+        without); the columns are :data:`COLUMNS` that any row has a value for.
     width : the terminal's width in characters.
     """
-    cells = [[show(r) for _, show in COLUMNS] for r in rows]
-    heads = [h for h, _ in COLUMNS]
+    shown = [(h, get, fmt) for h, get, fmt in COLUMNS if any(get(r) is not None for r in rows)]
+    cells = [["" if get(r) is None else fmt(get(r)) for _, get, fmt in shown] for r in rows]
+    heads = [h for h, _, _ in shown]
     widths = [max([len(h)] + [len(c[i]) for c in cells]) for i, h in enumerate(heads)]
     names = [str(r["model"]) for r in rows]
     name_w = max([len("model")] + [len(n) for n in names])

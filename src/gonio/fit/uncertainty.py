@@ -57,6 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.errors import FitError
+from gonio.fit.bounds import unconstrained
 from gonio.fit.objective import Problem
 
 Array = jnp.ndarray
@@ -82,6 +83,8 @@ class Uncertainty:
     samples : (S, P) posterior samples in physical units (MCMC), or draws of the Laplace
         Gaussian taken in the fitted coordinates and mapped to physical units (so that they
         respect the parameter bounds exactly as the intervals do).
+    unconstrained : names whose 95 % interval spans the search box
+        (:func:`gonio.fit.bounds.unconstrained`): not reported as intervals.
     """
 
     method: str
@@ -94,6 +97,7 @@ class Uncertainty:
     diagnostics: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     samples: np.ndarray | None = None
+    unconstrained: list[str] = field(default_factory=list)
 
 
 def residual_scale(problem: Problem, cost: float) -> tuple[float, float]:
@@ -203,7 +207,9 @@ def laplace(
             "on the search-box edge (Laplace interval one-sided there): "
             + ", ".join(n for n, e in zip(names, on_edge, strict=True) if e)
         )
+    loose = unconstrained(u - Z95 * sd_u, u + Z95 * sd_u, (lo_box, hi_box), names)
     return Uncertainty(
+        unconstrained=loose,
         samples=_laplace_draws(layout, u, root, weak, (lo_box, hi_box)),
         method="laplace",
         names=names,
