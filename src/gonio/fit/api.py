@@ -319,12 +319,8 @@ def _fit_one(
         say(f"{name}: Laplace approximation")
         unc = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
     elif uncertainty == "mcmc":
-        say(f"{name}: Laplace approximation")
-        init = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
-        say(f"{name}: MCMC ({mcmc_steps} steps)")
-        unc = mcmc(
-            problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed, init=init
-        )
+        say(f"{name}: MCMC (burn-in from the prior box, then {mcmc_steps} steps)")
+        unc = mcmc(problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed)
     if unc is not None:
         warnings_ += unc.warnings
     params = {
