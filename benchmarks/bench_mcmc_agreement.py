@@ -42,12 +42,13 @@ NBRDF = (
 
 
 def files(data: Path = DATA) -> list[str]:
-    """Every RGL, Cornell and ALTA file of the shared data, then the NBRDF members."""
+    """Every RGL and ALTA file of the shared data, the NBRDF members, then the Cornell files
+    (spectral: 33 parameters, the longest runs)."""
     out = []
-    for sub, ext in (("rgl", ".bsdf"), ("cornell", ".brdf"), ("alta", ".alta"), ("alta", ".dat")):
+    for sub, ext in (("rgl", ".bsdf"), ("alta", ".alta"), ("alta", ".dat")):
         out += sorted(str(p) for p in (data / sub).glob(f"*{ext}"))
     out += [f"{data / 'nbrdf' / 'merl_nbrdf.zip'}::{name}" for name in NBRDF]
-    return out
+    return out + sorted(str(p) for p in (data / "cornell").glob("*.brdf"))
 
 
 def run_one(path: str, model: str, steps: int, seed: int) -> tuple[dict, list[dict]]:

@@ -34,7 +34,7 @@ def felt(tmp_path_factory):
     path = shared_file("alta", "pink-felt-1d.alta")
     out = tmp_path_factory.mktemp("felt") / "fits"
     proc = cs.run("fit", path, "-m", "lambert+ts", "--uncertainty", "mcmc", "--mcmc-steps", "300",
-                  "--no-plots", "--out", out, columns=100)  # fmt: skip
+                  "--no-plots", "--out", out, columns=100, timeout=600)  # fmt: skip
     return proc, out
 
 
@@ -47,6 +47,7 @@ def test_mcmc_intervals_hold_the_optimum_and_walkers_start_over_the_box(felt):
     assert d["likelihood"] == "loss, residual variance marginalized"  # ALTA: no sigma
     assert d["burnt_in"] and d["n_burn"] >= 200
     assert not any("outside the MCMC" in w for w in rec["warnings"])
+    assert "lambert+ts: fitted parameters, 95 % intervals (mcmc)" in proc.stdout
 
 
 def _files():

@@ -110,3 +110,72 @@ def fit_table_lines(rows: list[dict[str, Any]], width: int = 80) -> list[str]:
         out.append(n)
         out += [_INDENT + numbers(c, g) for g in groups]
     return out
+
+
+def _number(v: Any) -> str:
+    return "nan" if v is None or v != v else f"{float(v):.4g}"
+
+
+#: Headers of :func:`param_rows`.
+PARAM_HEADERS = ("parameter", "value", "95 % interval", "unit", "note")
+
+
+def param_rows(result: Any) -> list[tuple[str, str, str, str, str]]:
+    """The parameter table of one fit: ``(parameter, value, 95 % interval, unit, note)`` per
+    scalar value (per-channel values one row each, labelled with the channel).
+
+    The interval column says ``fixed``, ``= KEY`` (tied), ``unconstrained`` (an interval over
+    the search box, :mod:`gonio.fit.bounds`), or ``[lo, hi]``; empty without uncertainty. The
+    note says ``at lower bound`` / ``at upper bound`` where the value ended on its search
+    bound. ``result``: a :class:`~gonio.fit.result.FitResult`.
+    """
+    import numpy as np
+
+    specs = result.model.param_specs()
+    channels = list(result.data.get("channels") or [])
+    iv = result.intervals(95)
+    bound = result.at_bound or {}
+    rows = []
+    for key, value in result.params.items():
+        unit = getattr(specs.get(key), "unit", "")
+        vals = np.ravel(np.asarray(value, dtype=float))
+        if vals.size == len(channels) and vals.size > 1:
+            labels = [f"{key}[{c}]" for c in channels]
+        elif vals.size > 1:
+            labels = [f"{key}[{i}]" for i in range(vals.size)]
+        else:
+            labels = [key]
+        lo = hi = None
+        if key in iv:
+            lo = np.ravel(np.asarray(iv[key][0], dtype=float))
+            hi = np.ravel(np.asarray(iv[key][1], dtype=float))
+        for i, (label, v) in enumerate(zip(labels, vals, strict=True)):
+            if key in result.fixed:
+                text = "fixed"
+            elif key in result.tied:
+                text = f"= {result.tied[key]}"
+            elif lo is None or hi is None:
+                text = ""
+            elif not (np.isfinite(lo[i % lo.size]) and np.isfinite(hi[i % hi.size])):
+                text = "unconstrained"
+            else:
+                text = f"[{_number(lo[i % lo.size])}, {_number(hi[i % hi.size])}]"
+            side = bound.get(label)
+            note = f"at {side} bound" if side and key not in result.fixed else ""
+            rows.append((label, _number(v), text, unit, note))
+    return rows
+
+
+def params_compact(params: dict[str, Any]) -> str:
+    """``albedo 0.79/0.69/0.59, alpha 0.12`` for a fit's ``params`` (keys cut to their last
+    part, per-channel values joined by ``/``; fixed zeros such as a lobe's own ``rho_d`` in a
+    sum with Lambert are left out)."""
+    import numpy as np
+
+    out = []
+    for key, value in params.items():
+        vals = np.ravel(np.asarray(value, dtype=float))
+        if key.rpartition(".")[2] == "rho_d" and not np.any(vals):
+            continue
+        out.append(f"{key.rpartition('.')[2]} " + "/".join(f"{v:.3g}" for v in vals))
+    return ", ".join(out)
