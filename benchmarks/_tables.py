@@ -46,6 +46,7 @@ BENCHMARKS = (
     "bench_rgl",
     "bench_gpu",
     "bench_zoo",
+    "bench_mcmc_agreement",
 )
 
 Row = dict[str, str]

@@ -14,6 +14,7 @@ import numpy as np
 from gonio.brdf.models import BRDFModel
 from gonio.errors import FitError, ParameterError
 from gonio.fit import presets
+from gonio.fit.bounds import at_bounds
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
 from gonio.fit.losses import LOSSES, evaluate_many, get_loss
 from gonio.fit.objective import Problem
@@ -291,16 +292,19 @@ def _fit_one(
         metrics = evaluate_many(LOSSES, f, fd) if not n_bad else {}
     if n_bad:
         raise FitError(f"{name}: the fitted model is not finite on the data")
-    chi2 = metrics["wls"]  # with the data's sigma, 1 where there is none
     dof = max(n_res - layout.size, 1)
-    statistical = lo.statistical and fd.sigma is not None
-    aic, bic = information_criteria(opt.cost, n_res, layout.size, statistical)
+    # chi-square, AIC and BIC only where the data carry a measured sigma: without one the
+    # "chi-square" is a sum of squares in sr^-2 and the criteria assume independent residuals
+    # of a common variance that a table's smooth, correlated model error is not
+    chi2 = metrics["wls"] if fd.sigma is not None else None
+    aic = bic = None
+    if fd.sigma is not None:
+        aic, bic = information_criteria(opt.cost, n_res, layout.size, lo.statistical)
+    at_bound = at_bounds(layout, opt.u, fd.channel_names)
     warnings_: list[str] = []
-    if opt.on_bounds:
-        flat = layout.flat_names(fd.channel_names)
-        idx = {n: i for i, n in enumerate(layout.flat_names())}
-        shown = [flat[idx[n]] for n in opt.on_bounds]
-        warnings_.append("parameters ended on their search bound: " + ", ".join(shown))
+    if at_bound:
+        shown = [f"{n} ({side})" for n, side in at_bound.items()]
+        warnings_.append("parameters at their search bound: " + ", ".join(shown))
     if restarted is False:
         opt.converged = False
         opt.message = "degenerate optimum: " + ", ".join(_degenerate(layout, opt.u))
@@ -315,12 +319,8 @@ def _fit_one(
         say(f"{name}: Laplace approximation")
         unc = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
     elif uncertainty == "mcmc":
-        say(f"{name}: Laplace approximation")
-        init = laplace(problem, opt.u, method=laplace_method, covariance=opts.covariance)
-        say(f"{name}: MCMC ({mcmc_steps} steps)")
-        unc = mcmc(
-            problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed, init=init
-        )
+        say(f"{name}: MCMC (burn-in from the prior box, then {mcmc_steps} steps)")
+        unc = mcmc(problem, opt.u, n_steps=mcmc_steps, max_samples=mcmc_samples, seed=seed)
     if unc is not None:
         warnings_ += unc.warnings
     params = {
@@ -340,7 +340,7 @@ def _fit_one(
         metrics=metrics,
         chi2=chi2,
         dof=dof,
-        reduced_chi2=chi2 / dof,
+        reduced_chi2=None if chi2 is None else chi2 / dof,
         aic=aic,
         bic=bic,
         data=fd.describe(),
@@ -359,6 +359,7 @@ def _fit_one(
             "refine": opts.refine,
         },
         warnings=warnings_,
+        at_bound=at_bound,
         channel=channel,
         wall_s=time.perf_counter() - t0,
         u=opt.u,

@@ -5,7 +5,12 @@ Layout of ``out_dir``::
     <material>/<model>.json         one fit result per model (written atomically)
     <material>/<model>-*.png        plots (unless disabled)
     <material>/summary.json         the comparison; written last, it marks the material done
+    <material>/log.txt              what the plotting libraries said (when they said anything)
     batch.jsonl                     one line per finished (or failed) material, appended
+    fits.csv                        one row per material and model: the table across materials
+
+Each material folder holds one run (:mod:`gonio.fit.run_folder`): written into a hidden sibling
+and swapped in whole, so a material fitted again leaves nothing of its earlier run behind.
 
 A rerun skips every material whose ``summary.json`` exists and records the same fit options
 (loss, theta_max, ...) and models, so an interrupted batch resumes where it stopped; a material
@@ -125,8 +130,9 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     ``error``). Runs in worker processes: imports happen here.
     """
     import gonio.brdf  # noqa: F401  (float64)
-    from gonio.fit.compare import summarize
+    from gonio.fit.compare import summarize, with_nested
     from gonio.fit.data import prepare
+    from gonio.fit.run_folder import check_target, publish, staging
     from gonio.io.strict_json import write_json
 
     src = Path(path)
@@ -142,34 +148,47 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     try:
         from gonio.fit.api import fit
 
+        check_target(folder)  # never replace a folder of other files
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
         results = fit(data, model=models, **opts)
         results = results if isinstance(results, list) else [results]
-        folder.mkdir(parents=True, exist_ok=True)
-        files = []
-        for r in results:
-            stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
-            files.append(str(r.save(folder / f"{stem}.json")))
-            if options.get("plots", True):
-                from gonio.fit.plots import plot_result
 
-                plot_result(r, data, folder, stem)
-        comp = summarize(results)
-        summary = {
-            "material": name,
-            "path": str(src),
-            "status": "ok",
-            "files": files,
-            "models": [m for m in models if isinstance(m, str)],
-            "fit_options": key,
-            **comp.to_json(),
-        }
-        write_json(summary, folder / "summary.json")
+        def fit_model(m: str) -> list[Any]:
+            r = fit(data, model=m, **opts)
+            return r if isinstance(r, list) else [r]
+
+        results = with_nested(results, fit_model)
+        skipped: list[str] = []
+        log: list[str] = []
+        with staging(folder) as tmp:  # one run per folder, swapped in whole (run_folder)
+            files = []
+            for r in results:
+                stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
+                r.save(tmp / f"{stem}.json")
+                files.append(str(folder / f"{stem}.json"))
+                if options.get("plots", True):
+                    from gonio.fit.plots import plot_result
+
+                    plot_result(r, data, tmp, stem, skipped=skipped, log=log)
+            comp = summarize(results)
+            summary = {
+                "material": name,
+                "path": str(src),
+                "status": "ok",
+                "files": files,
+                "models": [m for m in models if isinstance(m, str)],
+                "fit_options": key,
+                **comp.to_json(),
+            }
+            write_json(summary, tmp / "summary.json")
+            replaced = publish(tmp, folder, log)
         return {
             "material": name,
             "status": "ok",
             "recommended": comp.recommended,
             "table": comp.to_json()["table"],
+            "replaced": replaced,
+            "skipped": skipped,
         }
     except GonioError as exc:
         return {"material": name, "status": "error", "error": str(exc)}
@@ -299,3 +318,77 @@ def _run_dask(
             finish(fut.result())
     finally:
         client.close()
+
+
+def batch_rows(paths: Sequence[Path], out_dir: Path) -> list[dict[str, Any]]:
+    """One record per fitted (material, model) of ``out_dir`` for ``paths``, in order:
+    ``material``, ``model``, ``recommended``, ``n_params``, ``metric``, ``loss``, every metric
+    (``hdr_flip`` and ``rel_l1``, the appearance score, when the fits carry it), ``flags`` and
+    ``params`` (the fit's parameter values by key). Materials without a finished run are left out."""
+    rows = []
+    for p in paths:
+        folder = out_dir / material_name(p)
+        summary = _summary(folder)
+        for r in summary.get("table") or []:
+            if not isinstance(r, dict):
+                continue
+            try:
+                rec = json.loads((folder / f"{safe_stem(str(r['model']))}.json").read_text())
+            except (OSError, ValueError, KeyError):
+                rec = {}
+            rows.append({
+                "material": summary.get("material", material_name(p)),
+                "model": r.get("model"),
+                "recommended": r.get("model") == summary.get("recommended"),
+                "n_params": r.get("n_params"),
+                "metric": r.get("metric"),
+                "loss": r.get("loss"),
+                "metrics": {**(r.get("metrics") or {}), **_appearance_metrics(r)},
+                "flags": r.get("flags") or [],
+                "params": rec.get("params") or {},
+            })  # fmt: skip
+    return rows
+
+
+def _appearance_metrics(row: dict[str, Any]) -> dict[str, float]:
+    """The appearance score of a summary row (``gonio fit --score``) as batch metrics:
+    ``hdr_flip`` and ``rel_l1``, the means over the sphere images; empty without one."""
+    a = row.get("appearance")
+    if not isinstance(a, dict):
+        return {}
+    return {k: float(a[k]) for k in ("hdr_flip", "rel_l1") if isinstance(a.get(k), (int, float))}
+
+
+def write_batch_csv(rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    """``rows`` of :func:`batch_rows` as one CSV: fixed columns, one per metric, then one per
+    scalar parameter value (``param:lambert.albedo[1]``; empty where a family has none)."""
+    import csv
+    import io
+
+    import numpy as np
+
+    from gonio.io.atomic import atomic_output
+
+    metrics = sorted({k for r in rows for k in r["metrics"]})
+    flat_rows, params = [], []
+    for r in rows:
+        flat = {}
+        for key, value in r["params"].items():
+            vals = np.ravel(np.asarray(value, dtype=float))
+            for i, v in enumerate(vals):
+                col = f"param:{key}" if vals.size == 1 else f"param:{key}[{i}]"
+                flat[col] = float(v)
+                if col not in params:
+                    params.append(col)
+        flat_rows.append(flat)
+    head = ["material", "model", "recommended", "n_params", "metric", "loss", *metrics, "flags"]
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(head + params)
+    for r, flat in zip(rows, flat_rows, strict=True):
+        w.writerow([r["material"], r["model"], int(bool(r["recommended"])), r["n_params"],
+                    r["metric"], r["loss"], *(r["metrics"].get(m, "") for m in metrics),
+                    "; ".join(r["flags"]), *(flat.get(c, "") for c in params)])  # fmt: skip
+    with atomic_output(path, ".csv") as tmp:
+        tmp.write_text(buf.getvalue(), encoding="utf-8")
+    return path

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from gonio.errors import FitError, ParameterError, StorageError
+from gonio.errors import FitError, ParameterError
 from gonio.io.strict_json import dumps_json
 
 #: Names of :data:`gonio.fit.losses.LOSSES` (written out so that building the parser does not
@@ -234,17 +231,22 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     single = len(paths) == 1 and not Path(args.inputs[0]).is_dir() and len(args.inputs) == 1
     if single:
+        from gonio.fit.run_folder import check_target
+
+        check_target(out)
         return _run_single(paths[0], out, options, args.json)
     return _run_batch(paths, out, options, args)
 
 
 def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
+    from gonio.fit import run_folder
     from gonio.fit.api import fit
     from gonio.fit.batch import safe_stem
-    from gonio.fit.compare import summarize
+    from gonio.fit.compare import summarize, with_nested
     from gonio.fit.data import prepare
     from gonio.io.strict_json import write_json
 
@@ -268,23 +270,24 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
                 f"{path.name} has no sigma: fitting with {AUTO_LOSS_WITHOUT_SIGMA} (relative "
                 "errors; see --help of --loss), not an unweighted chi-square"
             )
-        for m in options["models"]:
+
+        def fit_model(m: str) -> list[Any]:
             r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
-            results += r if isinstance(r, list) else [r]
+            return r if isinstance(r, list) else [r]
+
+        for m in options["models"]:
+            results += fit_model(m)
+        results = with_nested(results, fit_model)
         if options.get("score"):
             bar.update(task, description="appearance score")
             _score_appearance(path, results, console, as_json)
         comp = summarize(results)
-        # Write into a hidden staging folder beside OUT and move the files in at the end, so
-        # that Ctrl-C (or an error) while writing leaves no half-written result behind.
-        out.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-        except OSError as exc:  # named after the folder asked for, not the staging one
-            from gonio.io.storage import storage_error
-
-            raise storage_error(exc, out) or OSError(exc.errno, exc.strerror, str(out)) from None
-        try:
+        # One run per folder: written into a hidden sibling, then swapped in as a whole
+        # (gonio.fit.run_folder), so a rerun leaves nothing stale and an interrupted one leaves
+        # the previous run as it was.
+        skipped: list[str] = []
+        log: list[str] = []
+        with run_folder.staging(out) as staging:
             files = []
             for r in results:
                 stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
@@ -293,7 +296,8 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
                 if options["plots"]:
                     from gonio.fit.plots import plot_result
 
-                    files += [str(out / p.name) for p in plot_result(r, data, staging, stem)]
+                    drawn = plot_result(r, data, staging, stem, skipped=skipped, log=log)
+                    files += [str(out / p.name) for p in drawn]
             summary = {
                 "material": data.source.get("name"),
                 "path": str(path),
@@ -301,19 +305,16 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
                 **comp.to_json(),
             }
             write_json(summary, staging / "summary.json")
-            out.mkdir(parents=True, exist_ok=True)
-            for f in sorted(staging.iterdir()):
-                os.replace(f, out / f.name)
-        except StorageError as exc:  # named after the folder asked for, not the staging one
-            err = StorageError(str(exc).replace(str(staging), str(out)))
-            err.errno = exc.errno
-            raise err from None
-        finally:
-            shutil.rmtree(staging, ignore_errors=True)
+            replaced = run_folder.publish(staging, out, log)
+    notes = ([replaced] if replaced else []) + skipped
+    if log:
+        notes.append(f"{len(log)} plotting library message(s) written to {out / run_folder.LOG}")
     if as_json:
         sys.stdout.write(dumps_json(summary, indent=2))
         sys.stdout.write("\n")
     else:
+        for line in notes:
+            console.print(escape(line), highlight=False, soft_wrap=True)
         out_console = Console()
         _print_table(out_console, summary, data.source.get("name") or path.name, results)
         if options.get("score"):
@@ -413,6 +414,7 @@ def _print_table(console: Any, summary: dict[str, Any], title: str, results: lis
     for line in fit_table_lines(summary["table"], console.width):
         console.print(escape(line), highlight=False, soft_wrap=True)
     for r in results:
+        _print_params(console, r)
         if r.warnings:
             console.print(f"[yellow]{escape(r.name)}:[/yellow] " + escape("; ".join(r.warnings)))
     console.print(
@@ -421,11 +423,34 @@ def _print_table(console: Any, summary: dict[str, Any], title: str, results: lis
     )
 
 
+def _print_params(console: Any, r: Any) -> None:
+    """One fit's parameters with their 95 % intervals and units (a rich table)."""
+    from rich import box
+    from rich.table import Table
+
+    from gonio.fit.table_text import PARAM_HEADERS, param_rows
+
+    method = "" if r.uncertainty is None else f", 95 % intervals ({r.uncertainty.method})"
+    label = r.name if r.channel is None else f"{r.name}[{r.channel}]"
+    table = Table(title=f"{label}: fitted parameters{method}", box=box.SIMPLE_HEAD,
+                  title_justify="left", pad_edge=False)  # fmt: skip
+    rows = param_rows(r)
+    for i, head in enumerate(PARAM_HEADERS):
+        if i >= 2 and not any(row[i] for row in rows):
+            continue  # no intervals (no --uncertainty), no bounds
+        table.add_column(head, justify="right" if head == "value" else "left", overflow="fold")
+    keep = [i for i in range(len(PARAM_HEADERS)) if i < 2 or any(row[i] for row in rows)]
+    for row in rows:
+        table.add_row(*(row[i] for i in keep))
+    console.print(table)
+
+
 def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-    from gonio.fit.batch import pending, run_batch
+    from gonio.fit.batch import batch_rows, pending, run_batch, write_batch_csv
 
     console = Console(stderr=True)
     separate = options["fit"].get("channels") == "separate"
@@ -462,6 +487,43 @@ def _run_batch(paths: list[Path], out: Path, options: dict[str, Any], args: Any)
         )
         sys.stdout.write("\n")
     else:
+        for s in summaries:
+            for line in s.get("skipped") or []:
+                console.print(escape(f"{s['material']}: {line}"), highlight=False)
+        replaced = [s["material"] for s in summaries if s.get("replaced")]
+        if replaced:
+            console.print(escape(f"replaced the previous runs of {len(replaced)} material(s) in "
+                                 f"{out}: {', '.join(replaced)}"), highlight=False)  # fmt: skip
+    rows = batch_rows(paths, out)
+    if rows:
+        csv_path = write_batch_csv(rows, out / "fits.csv")
+        if not args.json:
+            _print_batch_table(Console(), rows, csv_path)
+    if not args.json:
         ok = len(summaries) - len(failures)
         console.print(f"{ok} fitted, {len(failures)} failed, {len(done)} skipped; results in {out}")
     return 1 if failures else 0
+
+
+def _print_batch_table(console: Any, rows: list[dict[str, Any]], csv_path: Path) -> None:
+    """The table across materials: the recommended fit of each (every model is in the CSV)."""
+    from rich import box
+    from rich.table import Table
+
+    from gonio.fit.table_text import params_compact
+
+    best = [r for r in rows if r["recommended"]]
+    appearance = any("hdr_flip" in r["metrics"] for r in best)
+    table = Table(title=f"recommended fit per material (every model: {csv_path})",
+                  box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)  # fmt: skip
+    for head in ("material", "family", "loss", *(["HDR-FLIP"] if appearance else []),
+                 "parameters", "flags"):  # fmt: skip
+        table.add_column(head, overflow="fold", justify="right" if head == "loss" else "left")
+    for r in best:
+        cells = [str(r["material"]), str(r["model"]), f"{r['metric']} {r['loss']:.4g}"]
+        if appearance:
+            v = r["metrics"].get("hdr_flip")
+            cells.append("" if v is None else f"{v:.4g}")
+        cells += [params_compact(r["params"]), ", ".join(r["flags"]) or "-"]
+        table.add_row(*cells)
+    console.print(table)

@@ -20,6 +20,10 @@ write the PNG.
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +45,37 @@ DPI = 110
 MIN_FONT_PT = 9.0
 #: Colour of the true-value lines on corner plots (corner's own default).
 TRUTH_COLOR = "#4682b4"
+#: Most parameters a corner plot is drawn for (a spectral fit has one albedo per wavelength).
+MAX_CORNER_PARAMS = 12
+
+
+class _Collect(logging.Handler):
+    def __init__(self, out: list[str]) -> None:
+        super().__init__(logging.WARNING)
+        self.out = out
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.out.append(f"{record.levelname}:{record.name}: {record.getMessage()}")
+
+
+@contextlib.contextmanager
+def library_messages(out: list[str]) -> Iterator[None]:
+    """Collect the warnings (``warnings.warn``) and log records of warning level or above that
+    the plotting libraries emit while the body runs into ``out`` (one line each), instead of
+    letting them reach the terminal: e.g. corner's ``Too few points to create valid contours``
+    (a posterior concentrated on a few values), which says nothing about the fit. The caller
+    writes them to the run's log."""
+    root = logging.getLogger()
+    handler = _Collect(out)
+    saved = root.handlers[:]
+    root.handlers = [handler]  # also keeps logging's last-resort stderr handler out
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            yield
+        out += [f"{w.category.__name__}: {w.message}" for w in caught]
+    finally:
+        root.handlers = saved
 
 
 def _save(fig: Any, path: str | Path) -> Path:
@@ -248,27 +283,61 @@ def corner_figure(
 
 
 def plot_result(
-    result: Any, data: FitData, out_dir: str | Path, stem: str, truth: dict | None = None
+    result: Any,
+    data: FitData,
+    out_dir: str | Path,
+    stem: str,
+    truth: dict | None = None,
+    *,
+    skipped: list[str] | None = None,
+    log: list[str] | None = None,
 ) -> list[Path]:
     """Every plot of one result into ``out_dir`` as ``<stem>-*.png``; returns the paths.
 
     ``truth``: the true parameters (``{key: value}``, as the result's ``params``) when known,
-    marked on the corner plot."""
+    marked on the corner plot. ``skipped`` receives one line per plot not drawn and why;
+    ``log`` the plotting libraries' warnings (:func:`library_messages`), which never reach the
+    terminal (dropped when ``log`` is None: they concern the drawing, not the fit)."""
     out_dir = Path(out_dir)
+    messages: list[str] = []
+    with library_messages(messages):
+        paths = _plots(result, data, out_dir, stem, truth, skipped)
+    if log is not None:
+        log += [f"{stem}: {m}" for m in messages]
+    return paths
+
+
+def _plots(
+    result: Any,
+    data: FitData,
+    out_dir: Path,
+    stem: str,
+    truth: dict | None,
+    skipped: list[str] | None,
+) -> list[Path]:
     f = np.asarray(result.model.f(data.wi, data.wo))
     paths = [
         residual_map(data, f, out_dir / f"{stem}-residuals.png", title=result.name),
         polar_slices(data, result.model, out_dir / f"{stem}-slices.png", result.name, f=f),
     ]
     unc = result.uncertainty
-    if unc is not None and unc.samples is not None and 1 <= len(unc.names) <= 12:
-        paths.append(
-            corner_plot(
-                unc.samples,
-                unc.names,
-                out_dir / f"{stem}-corner.png",
-                truths=truth_values(unc.names, truth) if truth else None,
-                title=f"{result.name} ({unc.method})",
+    if unc is None or unc.samples is None:
+        return paths
+    if not 1 <= len(unc.names) <= MAX_CORNER_PARAMS:
+        if skipped is not None:
+            skipped.append(
+                f"{stem}-corner.png not drawn: {len(unc.names)} parameters, more than "
+                f"{MAX_CORNER_PARAMS} (one per channel of {data.channels}); the intervals are "
+                f"in {stem}.json"
             )
+        return paths
+    paths.append(
+        corner_plot(
+            unc.samples,
+            unc.names,
+            out_dir / f"{stem}-corner.png",
+            truths=truth_values(unc.names, truth) if truth else None,
+            title=f"{result.name} ({unc.method})",
         )
+    )
     return paths

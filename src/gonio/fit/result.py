@@ -33,11 +33,15 @@ class FitResult:
     uncertainty : Laplace or MCMC result, or None.
     metric, loss : the loss fitted and its reported value.
     metrics : the fitted model's value under every metric.
-    chi2, dof, reduced_chi2 : wls chi-square (with the data's sigma, or 1 when absent).
-    aic, bic : information criteria from the fitted metric (see :mod:`gonio.fit.compare`).
+    chi2, dof, reduced_chi2 : wls chi-square with the data's sigma; None (``null`` in the JSON)
+        when the data carry no measured sigma.
+    aic, bic : information criteria from the fitted metric (see :mod:`gonio.fit.compare`);
+        None without a measured sigma.
     data : description of the data (:meth:`FitData.describe`).
     optimizer : method, status, iterations, timings, parameters on bounds.
     warnings : caveats worth reading.
+    at_bound : ``{flat name: "lower" | "upper"}`` of the values at their search bound
+        (:func:`gonio.fit.bounds.at_bounds`).
     channel : channel name when fitted per channel, else None.
     appearance : the appearance score against the data's own sphere images
         (:func:`gonio.appearance.score` keys: HDR-FLIP and relative L1 per image and their
@@ -54,14 +58,15 @@ class FitResult:
     metric: str
     loss: float
     metrics: dict[str, float]
-    chi2: float
+    chi2: float | None
     dof: int
-    reduced_chi2: float
-    aic: float
-    bic: float
+    reduced_chi2: float | None
+    aic: float | None
+    bic: float | None
     data: dict[str, Any]
     optimizer: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
+    at_bound: dict[str, str] = field(default_factory=dict)
     channel: str | None = None
     wall_s: float = 0.0
     u: np.ndarray | None = None
@@ -95,11 +100,17 @@ class FitResult:
     def intervals(self, level: int = 95) -> dict[str, list[Any]]:
         """``{key: [lo, hi]}`` at 95 (or 68) percent of the fitted parameters (and of those tied
         to them). Fixed parameters have none: they are listed in ``fixed`` (shown as "fixed"),
-        not given a zero-width interval that would read as a measured certainty."""
+        not given a zero-width interval that would read as a measured certainty. Parameters the
+        data do not constrain (``uncertainty.unconstrained``) get NaN bounds: an interval that
+        spans the search box is no interval."""
         out: dict[str, list[Any]] = {}
         if self.uncertainty is None:
             return out
         arr = self.uncertainty.interval95 if level == 95 else self.uncertainty.interval68
+        loose = set(self.uncertainty.unconstrained)
+        if loose:  # never reported as an interval: null bounds (JSON), listed as unconstrained
+            arr = np.array(arr, dtype=float)
+            arr[[n in loose for n in self.flat_names]] = np.nan
         for key, v in self._by_key(arr).items():
             out[key] = [v[..., 0], v[..., 1]]
         for target, source in self.tied.items():
@@ -147,6 +158,8 @@ class FitResult:
                 "warnings": unc.warnings,
             },
             "warnings": self.warnings,
+            "at_bound": self.at_bound,
+            "unconstrained": [] if unc is None else list(unc.unconstrained),
             "wall_s": self.wall_s,
             "gonio_version": __version__,
         }

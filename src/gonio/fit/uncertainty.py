@@ -27,22 +27,33 @@ Laplace
     Standard deviations and correlations in physical units use the delta method.
 
 MCMC
-    emcee's ensemble sampler (differential-evolution moves) on ``u`` plus nuisance parameters
-    of the noise model, with a vectorized (``jit`` + ``vmap``) log-probability. Likelihood,
-    per value::
+    emcee's ensemble sampler (differential-evolution moves) on ``u``, with a vectorized
+    (``jit`` + ``vmap``) log-probability whose likelihood is the **fitted loss** ``L`` itself,
+    so that the optimizer's optimum is the posterior's mode and lies inside its own intervals:
 
-        y_nc ~ Normal(f_nc, sigma_nc^2 + (s f_nc)^2 + tau^2)
+    * with a measured sigma and a ``wls`` fit that reaches the noise (chi2/dof <= 1):
+      ``ln p(y | u) = -L(u) / 2``, the chi-square likelihood;
+    * otherwise the residual variance is unknown and integrated out (prior ``1/s``):
+      ``ln p(y | u) = -(M / 2) ln L(u)``, ``M`` the effective number of values (Kish's
+      ``C (sum w)^2 / sum w^2`` for weighted cells).
 
-    ``sigma`` is the measured standard deviation (0 when absent), ``s`` a relative model
-    discrepancy and ``tau`` an absolute floor (only when the data has no sigma); ``log s`` and
-    ``log tau`` are sampled with the model parameters and marginalized. Priors: uniform in the
-    physical value for "linear"/"logit" parameters, uniform in the logarithm for "log" ones and
-    for ``s`` and ``tau``, all inside the search box. Large data sets are subsampled (at most
-    ``max_samples`` samples, fixed seed): neighbouring cells of a table share the same model
-    error, so their residuals are not independent and the subsample is the more honest
-    likelihood. Diagnostics: integrated autocorrelation time (``get_autocorr_time(tol=0)``; a
-    warning when the chain is shorter than 50 times it), mean acceptance fraction, split-R-hat
-    over walker half-chains.
+    Large data sets are subsampled (at most ``max_samples`` samples, fixed seed): neighbouring
+    cells of a table share the same model error, so their residuals are not independent and
+    the subsample's ``M`` is the more honest count. The subsample's loss is corrected to first
+    order at the optimum ``u*``, ``L~(u) = L_sub(u) - (g_sub - g_all) . (u - u*)`` (``g`` the
+    gradients at ``u*``, ``g_all`` scaled to the subsample), so that its gradient at ``u*`` is
+    the whole data's: zero at an interior optimum, and the mode does not move with the draw of
+    the subsample. Priors: uniform in the physical value for "linear"/"logit" parameters,
+    uniform in the logarithm for "log" ones, inside the search box. The walkers start drawn from
+    that prior over the whole box (not in a ball at the optimum); the burn-in runs in blocks of
+    100 steps, moving walkers stranded far below the best known point onto copies of good
+    walkers (onto the optimum when none is good; counted in ``n_reseeded``), until the ensemble
+    sits in the optimum's typical set (median ``ln p* - ln p`` below the number of parameters),
+    then the main run of ``n_steps``. Diagnostics: integrated autocorrelation time
+    (``get_autocorr_time(tol=0)``; a warning when the chain is shorter than 50 times it), mean
+    acceptance fraction, split-R-hat over walker half-chains. Intervals are the marginals'
+    highest-posterior-density intervals (:func:`hpd_interval`); a parameter at its bound gets a
+    one-sided interval from the bound.
 """
 
 from __future__ import annotations
@@ -57,6 +68,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from gonio.errors import FitError
+from gonio.fit.bounds import at_bounds, unconstrained
 from gonio.fit.objective import Problem
 
 Array = jnp.ndarray
@@ -82,6 +94,8 @@ class Uncertainty:
     samples : (S, P) posterior samples in physical units (MCMC), or draws of the Laplace
         Gaussian taken in the fitted coordinates and mapped to physical units (so that they
         respect the parameter bounds exactly as the intervals do).
+    unconstrained : names whose 95 % interval spans the search box
+        (:func:`gonio.fit.bounds.unconstrained`): not reported as intervals.
     """
 
     method: str
@@ -94,6 +108,7 @@ class Uncertainty:
     diagnostics: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     samples: np.ndarray | None = None
+    unconstrained: list[str] = field(default_factory=list)
 
 
 def residual_scale(problem: Problem, cost: float) -> tuple[float, float]:
@@ -203,7 +218,9 @@ def laplace(
             "on the search-box edge (Laplace interval one-sided there): "
             + ", ".join(n for n, e in zip(names, on_edge, strict=True) if e)
         )
+    loose = unconstrained(u - Z95 * sd_u, u + Z95 * sd_u, (lo_box, hi_box), names)
     return Uncertainty(
+        unconstrained=loose,
         samples=_laplace_draws(layout, u, root, weak, (lo_box, hi_box)),
         method="laplace",
         names=names,
@@ -261,44 +278,52 @@ def _correlation(cov: np.ndarray) -> np.ndarray:
 
 
 # -- MCMC ----------------------------------------------------------------------------------------
-def _log_prob_fn(problem: Problem, has_sigma: bool) -> Any:
-    """``logp(x (ndim,), arrays, tmpl, lo, hi) -> scalar``, x = [u, log s, (log tau)]."""
-    layout = problem.layout
-    fns = problem.fns
-    p = layout.size
-    log_entries = [e for e in layout.entries if e.scale == "log"]
-    log_mask = np.zeros(p, dtype=bool)
-    for e in log_entries:
-        log_mask[e.offset : e.offset + e.size] = True
-    log_mask_j = jnp.asarray(log_mask)
+#: Steps per block of the burn-in; the burn-in ends when the walkers reached the optimum's mode
+#: (:func:`_burnt_in`), after at most ``max(4 n_steps, 2000)`` steps.
+_BURN_BLOCK = 100
 
-    def logp(x: Array, arrays: Any, tmpl: Any, lo: Array, hi: Array) -> Array:
-        u = x[:p]
-        inside = jnp.all((x >= lo) & (x <= hi))
-        xc = jnp.clip(x, lo, hi)
-        u = xc[:p]
-        s = jnp.exp(xc[p])
-        tau2 = jnp.exp(2.0 * xc[p + 1]) if not has_sigma else 0.0
+
+def _mcmc_loss_fn(problem: Problem, u_opt: np.ndarray, g_corr: np.ndarray) -> Any:
+    """``L~(u, arrays, tmpl)``: the fitted loss on the problem's data minus ``g_corr . (u - u*)``
+    (see :func:`mcmc`)."""
+    fns = problem.fns
+    loss = problem.loss
+    u0, g0 = jnp.asarray(u_opt), jnp.asarray(g_corr)
+
+    def value(u: Array, arrays: Any, tmpl: Any) -> Array:
         model = fns.to_model(u, tmpl)
 
         def chunk(c: dict[str, Any]) -> Array:
-            f = jnp.broadcast_to(model.f(c["wi"], c["wo"]), c["k"]["y"].shape)
-            inv_s = c["k"]["inv_sigma"]
-            sig2 = (1.0 / inv_s) ** 2 if has_sigma else 0.0
-            var = sig2 + (s * f) ** 2 + tau2
-            var = jnp.maximum(var, 1e-30)
-            r = c["k"]["y"] - f
-            ll = -0.5 * (r * r / var + jnp.log(2 * jnp.pi * var))
-            return jnp.sum(ll * c["mask"])
+            r = loss.residual(model.f(c["wi"], c["wo"]), c["k"]) * c["mask"]
+            return jnp.sum(r * r)
 
-        ll = jnp.sum(jax.vmap(chunk)(arrays))
-        # prior: uniform in theta for linear/logit (log |dtheta/du|), uniform in u for log ones
-        log_jac = jnp.log(jnp.maximum(layout.dtheta_du(u), 1e-300))
-        prior = jnp.sum(jnp.where(log_mask_j, 0.0, log_jac))
-        out = ll + prior
-        return jnp.where(inside & jnp.isfinite(out), out, -jnp.inf)
+        return jnp.sum(jax.vmap(chunk)(arrays)) - jnp.dot(g0, u - u0)
 
-    return logp
+    return value
+
+
+def _prior_draws(layout: Any, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, P) points of ``u`` drawn from the prior over the search box: uniform in the physical
+    value for "linear" and "logit" parameters, uniform in ``u`` (the logarithm) for "log" ones."""
+    lo, hi = layout.box()
+    out = np.empty((n, layout.size))
+    for e in layout.entries:
+        sl = slice(e.offset, e.offset + e.size)
+        if e.scale == "logit":  # uniform theta -> u = logit(t), inside the box
+            t = rng.uniform(0.0, 1.0, (n, e.size))
+            out[:, sl] = np.log(t) - np.log1p(-t)
+        else:
+            out[:, sl] = rng.uniform(lo[sl], hi[sl], (n, e.size))
+    margin = 1e-9 * (hi - lo)
+    return np.clip(out, lo + margin, hi - margin)
+
+
+def _burnt_in(lp: np.ndarray, lp_opt: float, ndim: int) -> bool:
+    """Whether an ensemble with log-probabilities ``lp`` sits in the typical set of a posterior
+    whose mode has ``lp_opt``: near a Gaussian mode ``lp_opt - lp`` is chi-square(ndim) / 2
+    (median about ndim / 2); accepted below ndim for the median, 5 ndim for the worst walker."""
+    gap = lp_opt - lp
+    return bool(np.median(gap) < max(ndim, 1) and np.max(gap) < 5 * max(ndim, 1) + 10)
 
 
 def mcmc(
@@ -311,91 +336,112 @@ def mcmc(
     seed: int = 0,
     init: Uncertainty | None = None,
 ) -> Uncertainty:
-    """Posterior sampling with emcee around the optimum ``u``; see the module docstring.
+    """Posterior sampling with emcee whose likelihood is the fitted loss; see the module
+    docstring.
 
     Parameters
     ----------
-    problem : the fit problem (its layout and data; the loss is not used: the likelihood is
-        the noise model above).
-    u : (P,) optimum, used to initialize the walkers.
-    n_walkers : ensemble size (default ``max(32, 2 * ndim + 2)``, even).
-    n_steps : steps per walker.
-    burn : steps of the main run discarded (default: ``min(3 tau, n_steps / 2)``), after a
-        separate burn-in of ``max(n_steps / 4, 100)`` steps.
+    problem : the fit problem (layout, loss, data).
+    u : (P,) the optimizer's optimum: the likelihood is centred on it (module docstring); the
+        walkers do not start there but over the prior box.
+    n_walkers : ensemble size (default ``max(32, 2 P + 2)``, even).
+    n_steps : steps per walker of the main run, after the burn-in.
+    burn : steps of the main run discarded (default ``min(3 tau, n_steps / 2)``).
     max_samples : subsample size of the data for the likelihood.
     seed : seeds the subsample, the initial ensemble and emcee's generator.
-    init : a Laplace result whose standard deviations set the initial spread.
+    init : unused (kept for callers of the earlier signature).
     """
     import emcee
 
-    from gonio.fit.losses import get_loss
-
     layout = problem.layout
     data = problem.data.random_subset(max_samples, seed)
-    # the likelihood needs y and sigma whatever loss the fit minimized ("wls" constants)
-    sub = Problem(layout, get_loss("wls"), data, problem.chunk)
-    has_sigma = data.sigma is not None
-    p = layout.size
-    ndim = p + (1 if has_sigma else 2)
+    sub = problem if data is problem.data else problem.with_data(data)
+    p = ndim = layout.size
     n_walkers = n_walkers or max(32, 2 * ndim + 2)
     n_walkers += n_walkers % 2
-    lo_u, hi_u = layout.box()
-    lo = np.concatenate([lo_u, [np.log(1e-6)], [] if has_sigma else [np.log(1e-12)]])
-    hi = np.concatenate([hi_u, [np.log(10.0)], [] if has_sigma else [np.log(1e3)]])
+    lo, hi = layout.box()
+    u = np.asarray(u, dtype=np.float64)
 
-    logp = _log_prob_fn(sub, has_sigma)
-    batched = jax.jit(jax.vmap(logp, in_axes=(0, None, None, None, None)))
+    # the subsample's loss, corrected to first order so that its gradient at u* is the whole
+    # data's (zero at an interior optimum): the likelihood's mode is the optimizer's optimum
+    g_corr = np.zeros(p)
+    if sub is not problem:
+        ratio = 1.0 if "scale" in problem.loss.needs else data.n / problem.data.n
+        g_corr = sub.value_and_grad(u)[1] - ratio * problem.value_and_grad(u)[1]
+    value = _mcmc_loss_fn(sub, u, g_corr)
+    loss_opt = float(sub.cost(u))
+    w = data.weights
+    m_eff = data.channels * float(w.sum() ** 2 / np.sum(w * w))  # Kish's effective size
+    dof = max(m_eff - p, 1.0)
+    chi_square = problem.loss.statistical and data.sigma is not None and loss_opt / dof <= 1.0
+    log_mask = np.zeros(p, dtype=bool)
+    for e in layout.entries:
+        log_mask[e.offset : e.offset + e.size] = e.scale == "log"
+    log_mask_j = jnp.asarray(log_mask)
     tmpl = layout.template
     lo_j, hi_j = jnp.asarray(lo), jnp.asarray(hi)
 
+    def logp(x: Array, arrays: Any) -> Array:
+        inside = jnp.all((x >= lo_j) & (x <= hi_j))
+        xc = jnp.clip(x, lo_j, hi_j)
+        lt = jnp.maximum(value(xc, arrays, tmpl), 1e-300)
+        # chi-square with measured sigma; otherwise the residual variance is unknown and
+        # integrated out (prior 1/s): L^(-M/2)
+        ll = -0.5 * lt if chi_square else -0.5 * m_eff * jnp.log(lt)
+        log_jac = jnp.log(jnp.maximum(layout.dtheta_du(xc), 1e-300))
+        out = ll + jnp.sum(jnp.where(log_mask_j, 0.0, log_jac))
+        return jnp.where(inside & jnp.isfinite(out), out, -jnp.inf)
+
+    batched = jax.jit(jax.vmap(logp, in_axes=(0, None)))
+
     def log_prob(xs: np.ndarray) -> np.ndarray:
-        return np.asarray(batched(jnp.asarray(xs), sub.arrays, tmpl, lo_j, hi_j))
+        return np.asarray(batched(jnp.asarray(xs), sub.arrays))
 
-    # initial ensemble: a Gaussian ball from the Laplace spread (or 1e-3) around the optimum
     rng = np.random.default_rng(seed)
-    resid = data.values - sub.predict(u)
-    rel = np.sqrt(np.mean(resid**2) / max(np.mean(sub.predict(u) ** 2), 1e-300))
-    x0 = np.concatenate(
-        [
-            u,
-            [np.log(np.clip(rel, 1e-4, 1.0))],
-            [] if has_sigma else [np.log(max(resid.std(), 1e-9))],
-        ]
-    )
-    spread = np.full(ndim, 1e-2)
-    if init is not None:
-        jac = np.asarray(layout.dtheta_du(jnp.asarray(u)))
-        sd_u = np.where(np.isfinite(init.std), init.std / np.maximum(jac, 1e-300), 1.0)
-        spread[:p] = np.clip(sd_u, 1e-6, 1.0)
-    spread[p:] = 0.1
-    walkers = x0 + spread * rng.standard_normal((n_walkers, ndim))
-    walkers = np.clip(walkers, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-
+    lp_opt = float(log_prob(u[None])[0])
+    walkers = _prior_draws(layout, n_walkers, rng)
     # differential-evolution proposals: about half the autocorrelation time of the default
     # stretch move on these posteriors (measured: tau 33 vs 72 steps, Lambert + Phong)
     moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, moves=moves)
     rstate = np.random.RandomState(int(seed) % (2**31)).get_state()
-    # burn-in from the Laplace ball; walkers stranded far below the best (a bad start in a
-    # multimodal or box-edge region) are moved onto copies of good ones before the main run
-    n_burn = max(n_steps // 4, 100)
-    start = emcee.State(walkers, random_state=rstate)
-    state = sampler.run_mcmc(start, n_burn, progress=False)
-    lp = state.log_prob
-    good = np.flatnonzero(lp > np.max(lp) - 10.0 * ndim)
-    coords = state.coords.copy()
-    bad = np.setdiff1d(np.arange(n_walkers), good)
-    if bad.size:
-        coords[bad] = coords[rng.choice(good, bad.size)] + 1e-3 * spread * rng.standard_normal(
-            (bad.size, ndim)
-        )
+    state = emcee.State(walkers, random_state=rstate)
+    # burn-in from the prior box, in blocks; walkers stranded far below the best known point (a
+    # local mode, a needle lobe, a box edge) are moved onto copies of good walkers between
+    # blocks, or onto the optimum when no walker is good
+    max_burn = max(4 * n_steps, 2000)
+    n_burn = n_reseeded = 0
+    reached = False
+    while n_burn < max_burn:
+        state = sampler.run_mcmc(state, _BURN_BLOCK, progress=False)
+        n_burn += _BURN_BLOCK
+        lp = state.log_prob
+        ref = max(lp_opt, float(lp.max()))
+        if n_burn >= 2 * _BURN_BLOCK and _burnt_in(lp, ref, ndim):
+            reached = True
+            break
+        good = np.flatnonzero(lp > ref - 5.0 * ndim - 10.0)
+        bad = np.setdiff1d(np.arange(n_walkers), good)
+        if bad.size:
+            coords = state.coords.copy()
+            jitter = 1e-4 * (hi - lo) * rng.standard_normal((bad.size, ndim))
+            source = coords[rng.choice(good, bad.size)] if good.size else u
+            coords[bad] = np.clip(source + jitter, lo, hi)
+            n_reseeded += int(bad.size)
+            state = emcee.State(coords, random_state=state.random_state)
+        sampler.reset()
     sampler.reset()
-    sampler.run_mcmc(emcee.State(coords, random_state=state.random_state), n_steps, progress=False)
+    sampler.run_mcmc(state, n_steps, progress=False)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tau = np.asarray(sampler.get_autocorr_time(tol=0), dtype=np.float64)
     notes: list[str] = []
+    if not reached:
+        notes.append(
+            f"burn-in of {n_burn} steps from the prior box did not settle at the optimum's "
+            "mode; treat the intervals as approximate"
+        )
     tau_max = float(np.nanmax(tau)) if np.isfinite(tau).any() else float("nan")
     if not np.isfinite(tau_max) or n_steps < 50 * tau_max:
         notes.append(
@@ -406,48 +452,59 @@ def mcmc(
         burn = int(min(3 * tau_max if np.isfinite(tau_max) else n_steps // 3, n_steps // 2))
     chain = sampler.get_chain(discard=burn)  # (steps, walkers, ndim)
     flat = chain.reshape(-1, ndim)
-    theta = np.asarray(jax.vmap(layout.theta)(jnp.asarray(flat[:, :p])))
+    theta = np.asarray(jax.vmap(layout.theta)(jnp.asarray(flat)))
     acc = float(np.mean(sampler.acceptance_fraction))
     if not 0.1 <= acc <= 0.8:
         notes.append(f"mean acceptance fraction {acc:.2f} outside [0.1, 0.8]")
     rhat = _split_rhat(chain)
     if np.nanmax(rhat) > 1.1:
         notes.append(f"split R-hat up to {np.nanmax(rhat):.2f} (> 1.1): not converged")
-    nuis = np.exp(flat[:, p:])
-    q = np.percentile(theta, [2.5, 16, 50, 84, 97.5], axis=0)
     names = layout.flat_names(problem.data.channel_names)
-    # The posterior mode (highest log-probability sample) must lie inside its own intervals: a
-    # marginal percentile interval of a skewed or bound-hugging posterior can miss it, and is
-    # then widened to include it (and says so).
+    # highest-posterior-density intervals of each marginal: an equal-tailed interval of a
+    # posterior piled up against a bound (an albedo of 1e-4) leaves out its most probable values
+    q = np.empty((5, p))
+    q[2] = np.median(theta, axis=0)
+    q[0], q[4] = hpd_interval(theta, 0.95)
+    q[1], q[3] = hpd_interval(theta, 0.68)
+    # a parameter at its bound: the interval is one-sided, from the bound
+    best = np.asarray(layout.theta(jnp.asarray(u)))
+    side = at_bounds(layout, u, problem.data.channel_names)
+    one_sided = []
+    for k, n in enumerate(names):
+        if side.get(n) == "lower":
+            q[0, k], q[1, k] = best[k], best[k]
+            q[3, k], q[4, k] = np.percentile(theta[:, k], [68, 95])
+        elif side.get(n) == "upper":
+            q[0, k], q[1, k] = np.percentile(theta[:, k], [5, 32])
+            q[3, k], q[4, k] = best[k], best[k]
+        else:
+            continue
+        one_sided.append(n)
+    if one_sided:
+        notes.append("one-sided intervals from the bound: " + ", ".join(one_sided))
     lp = sampler.get_log_prob(discard=burn).reshape(-1)
     mode = theta[int(np.argmax(lp))]
-    widened = [n for n, m, a, b in zip(names, mode, q[0], q[4], strict=True) if not a <= m <= b]
-    q[0], q[4] = np.minimum(q[0], mode), np.maximum(q[4], mode)
-    q[1], q[3] = np.minimum(q[1], mode), np.maximum(q[3], mode)
-    if widened:
-        notes.append("95% interval widened to contain the posterior mode: " + ", ".join(widened))
-    best = np.asarray(layout.theta(jnp.asarray(u)))
     outside = [n for n, b, a, c in zip(names, best, q[0], q[4], strict=True) if not a <= b <= c]
     if outside:
-        notes.append(
-            "the loss optimum lies outside the MCMC 95% interval for "
-            + ", ".join(outside)
-            + " (the likelihood's noise model, with its relative discrepancy term, weighs the "
-            "data differently from the fitted loss)"
-        )
+        notes.append("the loss optimum lies outside the MCMC 95% interval: " + ", ".join(outside))
+    uq = np.percentile(flat, [2.5, 97.5], axis=0)
     diag: dict[str, Any] = {
+        "likelihood": "chi-square" if chi_square else "loss, residual variance marginalized",
         "n_walkers": int(n_walkers),
         "n_steps": int(n_steps),
+        "n_burn": int(n_burn),
         "burn": int(burn),
-        "autocorr_time": dict(zip([*names, "log_s", "log_tau"][:ndim], tau.tolist(), strict=True)),
+        "burnt_in": bool(reached),
+        "n_reseeded": int(n_reseeded),
+        "autocorr_time": dict(zip(names, tau.tolist(), strict=True)),
         "acceptance_fraction": acc,
-        "split_rhat": dict(zip([*names, "log_s", "log_tau"][:ndim], rhat.tolist(), strict=True)),
+        "split_rhat": dict(zip(names, rhat.tolist(), strict=True)),
         "n_samples_likelihood": int(data.n),
-        "discrepancy_s": [float(v) for v in np.percentile(nuis[:, 0], [2.5, 50, 97.5])],
+        "effective_values": float(m_eff),
+        "residual_scale_sq": float(loss_opt / dof),
         "mode": dict(zip(names, mode.tolist(), strict=True)),
+        "optimum_outside": outside,
     }
-    if not has_sigma:
-        diag["noise_floor_tau"] = [float(v) for v in np.percentile(nuis[:, 1], [2.5, 50, 97.5])]
     return Uncertainty(
         method="mcmc",
         names=names,
@@ -459,7 +516,20 @@ def mcmc(
         diagnostics=diag,
         warnings=notes,
         samples=theta,
+        unconstrained=unconstrained(uq[0], uq[1], (lo, hi), names),
     )
+
+
+def hpd_interval(samples: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """The shortest interval holding ``mass`` of each column's samples: ``(lo, hi)``, (P,) each,
+    for samples (S, P)."""
+    x = np.sort(np.asarray(samples, dtype=float), axis=0)
+    n = x.shape[0]
+    k = min(max(int(np.ceil(mass * n)), 1), n)
+    width = x[k - 1 :] - x[: n - k + 1]  # (n - k + 1, P)
+    i = np.argmin(width, axis=0)
+    cols = np.arange(x.shape[1])
+    return x[i, cols], x[i + k - 1, cols]
 
 
 def _split_rhat(chain: np.ndarray) -> np.ndarray:

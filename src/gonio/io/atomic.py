@@ -10,7 +10,9 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import shutil
 import tempfile
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -101,3 +103,27 @@ def same_file(a: PathLike, b: PathLike) -> bool:
 
 
 __all__ = ["atomic_output", "current_umask", "same_file"]
+
+
+def replace_folder(staging: PathLike, target: PathLike) -> bool:
+    """Move the finished folder ``staging`` onto ``target`` as a whole; True when ``target``
+    existed and was replaced.
+
+    ``staging`` must be a sibling of ``target`` (same file system). An existing ``target`` is
+    first renamed aside (``.NAME.old-*``), ``staging`` renamed onto its name, then the old folder
+    removed: nothing of the old folder survives beside the new one, and until the second rename
+    the old folder is whole under its own name (if that rename fails, the old one is put back).
+    """
+    staging, target = Path(staging), Path(target)
+    if not target.exists():
+        os.rename(staging, target)
+        return False
+    aside = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:8]}"
+    os.rename(target, aside)
+    try:
+        os.rename(staging, target)
+    except BaseException:
+        os.rename(aside, target)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+    return True
