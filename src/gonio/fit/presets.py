@@ -43,6 +43,17 @@ def _ts(distribution: str, shadowing: str) -> Callable[[], BRDFModel] | None:
     return build
 
 
+def _gtr() -> Callable[[], BRDFModel] | None:
+    cls, schlick = getattr(models, "GTR", None), getattr(models, "Schlick", None)
+    if cls is None or schlick is None:
+        return None
+
+    def build() -> BRDFModel:
+        return cls(fresnel=schlick())
+
+    return build
+
+
 def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
     return {
         "lambert": _make("Lambert"),
@@ -70,6 +81,9 @@ def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
         "cook-torrance": _make("CookTorrance"),
         "ngan-blinn-phong": _make("NganBlinnPhong"),
         "low": _make("LowMicrofacet"),
+        # long-tailed microfacet lobe (free tail exponent) and a retro-reflective lobe
+        "gtr": _gtr(),
+        "retro": _make("Retroreflection"),
     }
 
 
@@ -84,6 +98,10 @@ _COMBOS = (
     "lambert+ward+ward",
     "lambert+low",
     "lambert+low+low",
+    "lambert+gtr",
+    "lambert+gtr+gtr",
+    "lambert+retro",
+    "lambert+retro+gtr",
 )
 
 #: The literature's model families, parameterized as published, by preset name. Each lobe's
