@@ -36,7 +36,7 @@ def test_ndf_normalized(alpha, gamma):
                      pytest.param(0.6, 8.0, marks=pytest.mark.slow)],
 )  # fmt: skip
 def test_properties(alpha, gamma):
-    m = models.GTR(alpha, gamma, models.Schlick([0.9, 0.5, 0.2]))
+    m = models.GTR([0.9, 0.5, 0.2], alpha, gamma, 0.3)
     j = mc.Jitted(m)  # one compile per program for every parameter set
     mc.check_reciprocity(j)
     mc.check_nonnegative_and_masked(j)
@@ -48,7 +48,7 @@ def test_properties(alpha, gamma):
 
 def test_param_gradients_finite():
     # what a fit needs of the model in the default run; test_properties checks the rest (slow)
-    mc.check_param_gradients(models.GTR(0.02, 1.3, models.Schlick([0.9, 0.5, 0.2])))
+    mc.check_param_gradients(models.GTR([0.9, 0.5, 0.2], 0.02, 1.3, 0.3))
 
 
 @pytest.mark.parametrize(
@@ -56,8 +56,8 @@ def test_param_gradients_finite():
                              pytest.param(0.1, 2.0, (0.0, 75.0), marks=pytest.mark.slow),
                              pytest.param(0.8, 1.5, (0.0, 40.0, 75.0), marks=pytest.mark.slow)],
 )  # fmt: skip
-def test_energy_at_most_fresnel(alpha, gamma, thetas):
-    m = models.GTR(alpha, gamma, models.Schlick(1.0))
+def test_energy_at_most_rho_s(alpha, gamma, thetas):
+    m = models.GTR(1.0, alpha, gamma, 1.0)
     for t in thetas:
         a = albedo_quadrature(m, direction(t, 0.0), res_theta=90, res_phi=90)
         assert a[0] <= 1.0 + 2e-3, (t, a)
@@ -66,11 +66,11 @@ def test_energy_at_most_fresnel(alpha, gamma, thetas):
 
 @pytest.mark.parametrize("alpha, gamma, thetas", CHI2)
 def test_chi2(alpha, gamma, thetas):
-    m = jitted(models.GTR(alpha, gamma))
+    m = jitted(models.GTR(0.7, alpha, gamma))
     mc.check_chi2(m, theta_o_deg=thetas, n_tests=N_CHI2, n_samples=200_000)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("alpha, gamma, thetas", SLOW_CHI2)
 def test_chi2_slow(alpha, gamma, thetas):
-    mc.check_chi2(jitted(models.GTR(alpha, gamma)), theta_o_deg=thetas, n_tests=N_CHI2)
+    mc.check_chi2(jitted(models.GTR(0.7, alpha, gamma)), theta_o_deg=thetas, n_tests=N_CHI2)

@@ -125,7 +125,6 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     ``error``). Runs in worker processes: imports happen here.
     """
     import gonio.brdf  # noqa: F401  (float64)
-    from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
     from gonio.io.fit_result import write_json
 
@@ -140,11 +139,10 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     plain = [m for m in models if isinstance(m, str)]
     models = [m for m in _previous_models(folder, key) if m not in plain] + models
     try:
-        from gonio.fit.api import fit
+        from gonio.fit.selection import fit_models
 
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
-        results = fit(data, model=models, **opts)
-        results = results if isinstance(results, list) else [results]
+        results, comp = fit_models(data, None if options.get("select") else models, opts)
         folder.mkdir(parents=True, exist_ok=True)
         files = []
         for r in results:
@@ -154,7 +152,6 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
                 from gonio.fit.plots import plot_result
 
                 plot_result(r, data, folder, stem)
-        comp = summarize(results)
         summary = {
             "material": name,
             "path": str(src),

@@ -15,7 +15,7 @@ from gonio.errors import FitError, ParameterError
 
 #: Names of :data:`gonio.fit.losses.LOSSES` (written out so that building the parser does not
 #: import JAX; a test checks that the two agree).
-LOSS_NAMES = ("cube-root", "low-e1", "low-e2", "ngan", "wls")
+LOSS_NAMES = ("cube-root", "low-e1", "low-e2", "ngan", "sqrt-cos", "wls")
 
 
 def register(subparsers: Any) -> None:
@@ -165,11 +165,9 @@ def register(subparsers: Any) -> None:
 
 
 def _default_models() -> list[str]:
-    from gonio.fit.presets import available
+    from gonio.fit.selection import DEFAULT_FAMILIES
 
-    names = available()
-    chosen = [m for m in ("lambert+ward", "lambert+ts") if m in names]
-    return chosen or ["lambert"]
+    return list(DEFAULT_FAMILIES)
 
 
 def _parse_fix(items: list[str]) -> dict[str, float]:
@@ -224,8 +222,10 @@ def run(args: argparse.Namespace) -> int:
     }
     if args.refine != 65536:  # recorded only when set, so earlier batch folders stay done
         fit_opts["refine"] = args.refine
+    # no --model: the default choice among the default families on held-out cells
+    select = not args.models and args.channels == "shared"
     options = {"models": models, "fit": fit_opts, "plots": not args.no_plots,
-               "score": args.score is not None}  # fmt: skip
+               "score": args.score is not None, "select": select}  # fmt: skip
     out = Path(args.out)
     single = len(paths) == 1 and not Path(args.inputs[0]).is_dir() and len(args.inputs) == 1
     if single:
@@ -237,10 +237,9 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     from rich.console import Console
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    from gonio.fit.api import fit
     from gonio.fit.batch import safe_stem
-    from gonio.fit.compare import summarize
     from gonio.fit.data import prepare
+    from gonio.fit.selection import fit_models
     from gonio.io.fit_result import write_json
 
     console = Console(stderr=True)
@@ -258,15 +257,16 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         data = prepare(path, opts["theta_max_deg"])
         if opts.get("loss") == "auto" and data.sigma is None and not as_json:
             from gonio.fit.api import AUTO_LOSS_WITHOUT_SIGMA
+            from gonio.fit.selection import DEFAULT_LOSS
 
+            loss = DEFAULT_LOSS if options.get("select") else AUTO_LOSS_WITHOUT_SIGMA
             console.print(
-                f"{path.name} has no sigma: fitting with {AUTO_LOSS_WITHOUT_SIGMA} (relative "
-                "errors; see --help of --loss), not an unweighted chi-square"
+                f"{path.name} has no sigma: fitting with {loss} (see --help of --loss), not an "
+                "unweighted chi-square"
             )
-        for m in options["models"]:
-            r = fit(data, model=m, progress=lambda s: bar.update(task, description=s), **opts)
-            results += r if isinstance(r, list) else [r]
-        comp = summarize(results)
+        say = {"progress": lambda s: bar.update(task, description=s)}
+        chosen = None if options.get("select") else options["models"]
+        results, comp = fit_models(data, chosen, {**opts, **say})
         # Write into a hidden staging folder beside OUT and move the files in at the end, so
         # that Ctrl-C (or an error) while writing leaves no half-written result behind.
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -43,17 +43,6 @@ def _ts(distribution: str, shadowing: str) -> Callable[[], BRDFModel] | None:
     return build
 
 
-def _gtr() -> Callable[[], BRDFModel] | None:
-    cls, schlick = getattr(models, "GTR", None), getattr(models, "Schlick", None)
-    if cls is None or schlick is None:
-        return None
-
-    def build() -> BRDFModel:
-        return cls(fresnel=schlick())
-
-    return build
-
-
 def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
     return {
         "lambert": _make("Lambert"),
@@ -82,7 +71,7 @@ def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
         "ngan-blinn-phong": _make("NganBlinnPhong"),
         "low": _make("LowMicrofacet"),
         # long-tailed microfacet lobe (free tail exponent) and a retro-reflective lobe
-        "gtr": _gtr(),
+        "gtr": _make("GTR"),
         "retro": _make("Retroreflection"),
     }
 

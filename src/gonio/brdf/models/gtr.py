@@ -6,9 +6,7 @@ import jax.numpy as jnp
 
 from gonio.brdf.frames import dot, normalize, reflect, safe_sqrt
 from gonio.brdf.models import microfacet as mf
-from gonio.brdf.models._base import BRDFModel, Param
-from gonio.brdf.models.fresnel import Fresnel, Schlick
-from gonio.errors import ParameterError
+from gonio.brdf.models._base import BRDFModel, Param, channel_mean
 
 Array = jnp.ndarray
 
@@ -53,7 +51,7 @@ def sample_gtr(u: Array, alpha: Array, gamma: Array) -> Array:
 
 
 class GTR(BRDFModel):
-    """Microfacet lobe ``f = D_GTR(h) G(wi, wo) F(wi.h) / (4 cos_i cos_o)`` (no diffuse term).
+    """Microfacet lobe ``f = rho_s D_GTR(h) G(wi, wo) F(wi.h) / (4 cos_i cos_o)`` (no diffuse).
 
     ``D_GTR`` is Burley's (2012) generalized Trowbridge-Reitz distribution
     ``c / (alpha^2 cos^2 theta_h + sin^2 theta_h)^gamma``, normalized so that
@@ -61,11 +59,13 @@ class GTR(BRDFModel):
     the lobe can hold the slowly falling, long tails of real highlights (metals, metallic paints)
     that a Beckmann or Ward lobe, whose tail falls like a Gaussian, puts into a diffuse floor.
     ``gamma = 2`` is GGX. ``G`` is the V-cavity shadowing of Torrance-Sparrow (independent of
-    ``alpha`` and ``gamma``, see :mod:`.microfacet`), ``F`` a :mod:`.fresnel` term.
+    ``alpha`` and ``gamma``, see :mod:`.microfacet`); ``F = f0 + (1 - f0)(1 - wi.h)^5``
+    (Schlick) with one ``f0`` for every channel; the colour of the lobe is the per-channel
+    ``rho_s``, which can take the lobe to 0 (a Schlick term alone cannot: its grazing rise
+    stays), so a family with this lobe nests the family without it.
 
     Energy: ``D`` is normalized, ``G <= 1`` and ``F <= 1``, so the directional albedo is at most
-    ``max F`` (the shadowed part and the part below the horizon are lost): the lobe never
-    reflects more than it receives.
+    ``rho_s <= 1`` (the shadowed part and the part below the horizon are lost).
 
     Sampling: half vectors from ``D cos theta_h`` (closed-form inversion, :func:`sample_gtr`),
     reflected about; ``pdf = D cos theta_h / (4 wo.h)`` over ``wi``. Samples below the horizon
@@ -73,38 +73,45 @@ class GTR(BRDFModel):
 
     Parameters
     ----------
+    rho_s : specular albedo factor per channel in [0, 1] (dimensionless).
     alpha : width in [1e-3, 0.95] (dimensionless; the GGX roughness at ``gamma = 2``). Fitted on
         a log scale.
-    gamma : tail exponent in [1.05, 10] (dimensionless): near 1 the heaviest tail, 2 GGX, larger
-        values a faster fall-off (and a narrower lobe at the same ``alpha``).
-    fresnel : a :mod:`.fresnel` term; default ``Schlick(0.04)``. Its parameters appear as
-        ``"fresnel.<name>"``; a per-channel Schlick ``f0`` is the lobe's colour.
+    gamma : tail exponent in [1.001, 10] (dimensionless): near 1 the heaviest tail, 2 GGX,
+        larger values a faster fall-off (and a narrower lobe at the same ``alpha``).
+    f0 : Schlick reflectance at normal incidence in [0, 1], shared by the channels
+        (dimensionless; 1: no Fresnel rise, as for a metal).
     """
 
     PARAMS = (
+        Param("rho_s", 0.5, 0.0, 1.0, "1", per_channel=True, scale="logit",
+              doc="specular albedo factor (the lobe's colour)"),
         Param("alpha", 0.2, 1e-3, 0.95, "1", scale="log", doc="GTR width (GGX alpha at gamma=2)"),
-        Param("gamma", 2.0, 1.05, 10.0, "1", scale="log", doc="GTR tail exponent, 2: GGX"),
+        Param("gamma", 2.0, 1.001, 10.0, "1", scale="log", doc="GTR tail exponent, 2: GGX"),
+        Param("f0", 0.5, 0.0, 1.0, "1", scale="logit", doc="Schlick reflectance at normal "
+              "incidence"),
     )  # fmt: skip
-    CHILDREN = ("fresnel",)
 
     def __init__(
         self,
+        rho_s: Array | float = 0.5,
         alpha: Array | float = 0.2,
         gamma: Array | float = 2.0,
-        fresnel: Fresnel | None = None,
+        f0: Array | float = 0.5,
     ) -> None:
-        self._set_params(alpha=alpha, gamma=gamma)
-        fresnel = Schlick(0.04) if fresnel is None else fresnel
-        if not isinstance(fresnel, Fresnel):
-            raise ParameterError(f"GTR: fresnel must be a Fresnel term, got {fresnel!r}")
-        object.__setattr__(self, "fresnel", fresnel)
-        _ = self.channels
+        self._set_params(rho_s=rho_s, alpha=alpha, gamma=gamma, f0=f0)
+
+    def _fresnel(self, c: Array) -> Array:
+        f0 = jnp.asarray(self.f0).astype(c.dtype)
+        m = 1.0 - jnp.clip(c, 0.0, 1.0)
+        m2 = m * m
+        return f0 + (1.0 - f0) * (m2 * m2 * m)
 
     def _f(self, wi: Array, wo: Array) -> Array:
         h = normalize(wi + wo)
         d = gtr_ndf(h, self.alpha, self.gamma)
         v = mf.visibility(wi, wo, h, self.alpha, "ggx", "vcavity")
-        return (d * v)[..., None] * self.fresnel.eval(dot(wi, h))
+        rho = jnp.atleast_1d(self.rho_s).astype(wi.dtype)
+        return rho * (d * v * self._fresnel(dot(wi, h)))[..., None]
 
     def _pdf(self, wi: Array, wo: Array) -> Array:
         h = normalize(wi + wo)
@@ -115,4 +122,5 @@ class GTR(BRDFModel):
         return reflect(wo, sample_gtr(u, self.alpha, self.gamma))
 
     def sampling_weight(self, wo: Array) -> Array:
-        return self.fresnel.mean(wo[..., 2]).astype(wo.dtype)
+        rho = channel_mean(self.rho_s).astype(wo.dtype)
+        return rho * self._fresnel(wo[..., 2])
