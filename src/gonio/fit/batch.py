@@ -142,7 +142,8 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
         from gonio.fit.selection import fit_models
 
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
-        results, comp = fit_models(data, None if options.get("select") else models, opts)
+        chosen = None if options.get("select") else models
+        results, comp, shown = fit_models(data, chosen, opts)
         folder.mkdir(parents=True, exist_ok=True)
         files = []
         for r in results:
@@ -151,7 +152,7 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
             if options.get("plots", True):
                 from gonio.fit.plots import plot_result
 
-                plot_result(r, data, folder, stem)
+                plot_result(r, shown, folder, stem)
         summary = {
             "material": name,
             "path": str(src),

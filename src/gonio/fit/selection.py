@@ -57,6 +57,8 @@ DEFAULT_LOSS = "sqrt-cos"
 TRAIN_CELLS = TEST_CELLS = 8192
 #: Share of the cells held out on data with fewer than ``TRAIN_CELLS + TEST_CELLS`` cells.
 HELD_OUT_FRACTION = 0.2
+#: Cells the default fit's plots show at most (see :func:`fit_models`).
+PLOT_CELLS = 32768
 #: A family with fewer parameters is chosen while its held-out error is within this fraction
 #: of the best family's.
 SIMPLER_WITHIN = 0.01
@@ -229,15 +231,19 @@ def _choose(results: list[FitResult], cv: dict[str, float]) -> tuple[str, str]:
 
 def fit_models(
     data: FitData, models: Sequence[str] | None, fit_opts: dict[str, Any]
-) -> tuple[list[FitResult], Comparison]:
+) -> tuple[list[FitResult], Comparison, FitData]:
     """What ``gonio fit`` runs on one material: the ``models`` given (compared by
     :func:`~gonio.fit.compare.summarize`), or with ``models=None`` the default choice
     (:func:`select`), whose held-out errors go into the table (``cv_error``) and whose choice
-    is the recommendation. ``fit_opts``: :class:`~gonio.fit.api.FitOptions` fields."""
+    is the recommendation. ``fit_opts``: :class:`~gonio.fit.api.FitOptions` fields.
+
+    Returns the results, the comparison and the cells to plot them on: the data, or for the
+    default choice at most :data:`PLOT_CELLS` of them (stratified along theta_h), which is
+    what the fits were made on and keeps four families' plots of a MERL table cheap."""
     if models is not None:
         res = fit(data, model=list(models), **fit_opts)
         results = res if isinstance(res, list) else [res]
-        return results, summarize(results)
+        return results, summarize(results), data
     sel = select(data, options=FitOptions(**fit_opts))
     comp = summarize(sel.results)
     for row in comp.table:
@@ -246,4 +252,4 @@ def fit_models(
     comp.reason = (
         f"{sel.reason} ({sel.loss} loss; fitted on {sel.n_train} cells, {sel.n_test} held out)"
     )
-    return sel.results, comp
+    return sel.results, comp, data.stratified_subset(PLOT_CELLS, fit_opts.get("seed", 0))
