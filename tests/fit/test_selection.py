@@ -16,6 +16,13 @@ def _directions(n, seed):
     return cosine_directions(n, rng), cosine_directions(n, rng)
 
 
+def _synthetic(model, seed):
+    # one size for every test here: the fits share their compiled programs
+    data, _ = synthetic(model, n=1000, seed=seed, with_sigma=False, rel_noise=0.02,
+                        abs_noise=0.0, theta_max_deg=90.0)  # fmt: skip
+    return data
+
+
 def test_split_is_disjoint_seeded_and_stratified_on_large_data():
     n = selection.TRAIN_CELLS + selection.TEST_CELLS + 3000
     wi, wo = _directions(n, 1)
@@ -37,17 +44,17 @@ def test_small_data_holds_out_a_fifth():
 
 def test_matte_data_gets_the_nested_lambert_family():
     # a white paint: Lambert alone; the lobe's parameters would only fit the noise
-    data, _ = synthetic(models.Lambert([0.8, 0.82, 0.85]), n=800, seed=4, with_sigma=False,
-                        rel_noise=0.02, abs_noise=0.0)  # fmt: skip
-    sel = selection.select(data, families=("lambert", "lambert+gtr"), n_starts=2)
+    data = _synthetic(models.Lambert([0.8, 0.82, 0.85]), seed=4)
+    sel = selection.select(data, families=("lambert", "lambert+gtr"), n_starts=4)
     assert sel.chosen == "lambert", sel.reason
     assert sel.loss == selection.DEFAULT_LOSS
 
 
+@pytest.mark.slow
 def test_long_tailed_highlight_gets_the_gtr_family():
     truth = models.Lambert(0.05) + models.GTR([0.6, 0.5, 0.4], alpha=0.08, gamma=1.3, f0=0.9)
-    data, _ = synthetic(truth, n=1500, seed=5, with_sigma=False, rel_noise=0.02, abs_noise=0.0)
-    sel = selection.select(data, families=("lambert", "lambert+gtr"), n_starts=4)
+    sel = selection.select(_synthetic(truth, seed=5), families=("lambert", "lambert+gtr"),
+                           n_starts=4)  # fmt: skip
     assert sel.chosen == "lambert+gtr", sel.reason
     assert sel.cv_errors["lambert+gtr"] < 0.5 * sel.cv_errors["lambert"]
     gamma = sel.result.params["gtr.gamma"]
