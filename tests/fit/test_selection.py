@@ -7,7 +7,7 @@ import pytest
 
 from gonio.brdf import models
 from gonio.fit import selection
-from gonio.fit.data import from_arrays
+from gonio.fit.data import from_arrays, prepare
 from tests.fit.synth import cosine_directions, synthetic
 
 
@@ -85,3 +85,21 @@ def test_default_cli_recommends_by_held_out_cells(tmp_path):
     assert all(np.isfinite(r["cv_error"]) for r in rows.values())
     assert summary["recommended"] in ("lambert+gtr", "lambert+gtr+gtr", "lambert+retro+gtr")
     assert "held-out" in summary["reason"]
+
+
+@pytest.mark.slow
+def test_retro_reflective_tape_gets_a_peak_at_the_light():
+    from tests.conftest import shared_file
+
+    data = prepare(shared_file("alta", "retro-gray-tape.dat"))
+    sel = selection.select(data)
+    assert sel.chosen == "lambert+retro+gtr", sel.reason
+    without = min(v for k, v in sel.cv_errors.items() if "retro" not in k)
+    assert sel.cv_errors["lambert+retro+gtr"] < 0.6 * without
+    assert sel.result.params["lambert.albedo"] < 0.9  # not on its bound of 1
+    # the fitted model's largest value over incident directions in the plane is at wi = wo
+    th = np.radians(np.arange(-80, 81, 2.0))
+    wi = np.stack([np.sin(th), 0 * th, np.cos(th)], -1)
+    wo = np.broadcast_to(np.array([np.sin(np.radians(30)), 0, np.cos(np.radians(30))]), wi.shape)
+    f = np.asarray(sel.result.model.f(wi, wo))[:, 0]
+    assert round(float(np.degrees(th[np.argmax(f)]))) == 30
