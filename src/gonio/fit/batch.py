@@ -130,7 +130,6 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     ``error``). Runs in worker processes: imports happen here.
     """
     import gonio.brdf  # noqa: F401  (float64)
-    from gonio.fit.compare import summarize, with_nested
     from gonio.fit.data import prepare
     from gonio.fit.run_folder import check_target, publish, staging
     from gonio.io.strict_json import write_json
@@ -146,18 +145,12 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
     plain = [m for m in models if isinstance(m, str)]
     models = [m for m in _previous_models(folder, key) if m not in plain] + models
     try:
-        from gonio.fit.api import fit
+        from gonio.fit.selection import fit_models
 
         check_target(folder)  # never replace a folder of other files
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
-        results = fit(data, model=models, **opts)
-        results = results if isinstance(results, list) else [results]
-
-        def fit_model(m: str) -> list[Any]:
-            r = fit(data, model=m, **opts)
-            return r if isinstance(r, list) else [r]
-
-        results = with_nested(results, fit_model)
+        chosen = None if options.get("select") else models
+        results, comp, shown = fit_models(data, chosen, opts)
         skipped: list[str] = []
         log: list[str] = []
         with staging(folder) as tmp:  # one run per folder, swapped in whole (run_folder)
@@ -169,8 +162,7 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
                 if options.get("plots", True):
                     from gonio.fit.plots import plot_result
 
-                    plot_result(r, data, tmp, stem, skipped=skipped, log=log)
-            comp = summarize(results)
+                    plot_result(r, shown, tmp, stem, skipped=skipped, log=log)
             summary = {
                 "material": name,
                 "path": str(src),
@@ -324,7 +316,8 @@ def batch_rows(paths: Sequence[Path], out_dir: Path) -> list[dict[str, Any]]:
     """One record per fitted (material, model) of ``out_dir`` for ``paths``, in order:
     ``material``, ``model``, ``recommended``, ``n_params``, ``metric``, ``loss``, every metric
     (``hdr_flip`` and ``rel_l1``, the appearance score, when the fits carry it), ``flags`` and
-    ``params`` (the fit's parameter values by key). Materials without a finished run are left out."""
+    ``params`` (the fit's parameter values by key). Materials without a finished run are left
+    out."""
     rows = []
     for p in paths:
         folder = out_dir / material_name(p)

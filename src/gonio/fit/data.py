@@ -109,13 +109,19 @@ class FitData:
         return _memo(self, ("stratified", max_samples, seed), self._stratified_subset)
 
     def _stratified_subset(self, max_samples: int, seed: int) -> FitData:
+        return self.subset(self.stratified_indices(max_samples, seed))
+
+    def stratified_indices(self, max_samples: int, seed: int = 0) -> np.ndarray:
+        """The sorted sample indices :meth:`stratified_subset` keeps (all when fewer)."""
+        if self.n <= max_samples:
+            return np.arange(self.n)
         h = self.wi + self.wo
         cos_h = h[:, 2] / np.linalg.norm(h, axis=1)
         order = np.argsort(-cos_h, kind="stable")  # theta_h ascending
         edges = np.linspace(0, self.n, max_samples + 1).astype(np.int64)
         rng = np.random.default_rng(seed)
         pick = edges[:-1] + (rng.random(max_samples) * np.diff(edges)).astype(np.int64)
-        return self.subset(np.sort(order[pick]))
+        return np.sort(order[pick])
 
     def half_diff(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rusinkiewicz ``(theta_h, theta_d, phi_d)`` in radians, each (N,), for plots."""

@@ -14,6 +14,13 @@ number reported for it (``value``) is stated next to the formula.
     ``r = sqrt(w / (C W)) [ln(1 + f cos_i) - ln(1 + y cos_i)]``; value ``sqrt(L)``.
 ``low-e2`` (the same without the cosine)
     ``r = sqrt(w / (C W)) [ln(1 + f) - ln(1 + y)]``; value ``sqrt(L)``.
+``sqrt-cos`` (tracks appearance: what a sphere image shows, square-rooted)
+    ``r = sqrt(w / (C W)) [sqrt(f cos_i + eps) - sqrt(y cos_i + eps)]`` with ``eps = 1e-4``
+    sr^-1; value ``sqrt(L)``. A pixel of a lit sphere is ``f cos_i``; for a relative error ``e``
+    of a cell whose pixel value is ``p = y cos_i``, ``r^2 ~ w e^2 p / 4``: errors weigh in
+    proportion to the brightness they are seen at, as in the relative L1 of a rendered image,
+    where ``low-e1`` weighs a dark grazing cell's relative error as much as the highlight's and
+    ``ngan`` (L2) lets the peak alone decide.
 ``cube-root`` (compresses the specular peak, as in later fitting studies)
     ``r = sqrt(w / (C W)) [cbrt(f + eps) - cbrt(y + eps)]`` with ``eps = 1e-6`` sr^-1, which
     keeps the derivative finite where the model is 0; value ``sqrt(L)``.
@@ -37,6 +44,7 @@ from gonio.fit.data import FitData
 Array = jnp.ndarray
 
 _EPS_CBRT = 1e-6
+_EPS_SQRT = 1e-4
 _LOG_FLOOR = 0.1
 
 
@@ -99,6 +107,8 @@ def _constants(
             out[key] = xp.log(xp.maximum(1.0 + y, _LOG_FLOOR))
         elif key == "cbrt_y":
             out[key] = xp.cbrt(y + _EPS_CBRT)
+        elif key == "sqrt_y_cos":
+            out[key] = xp.sqrt(xp.maximum(y * cos_i, 0.0) + _EPS_SQRT)
     return out
 
 
@@ -146,6 +156,10 @@ def _low_e2(f: Any, k: dict[str, Any], xp: Any) -> Any:
     return k["scale"] * (lf - k["log_y"])
 
 
+def _sqrt_cos(f: Any, k: dict[str, Any], xp: Any) -> Any:
+    return k["scale"] * (xp.sqrt(xp.maximum(f * k["cos_i"], 0.0) + _EPS_SQRT) - k["sqrt_y_cos"])
+
+
 def _cube_root(f: Any, k: dict[str, Any], xp: Any) -> Any:
     # exp(ln(x) / 3) for x > 0: equal to cbrt to 1e-15 and much cheaper than XLA's float64 cbrt
     return k["scale"] * (xp.exp(xp.log(xp.maximum(f, 0.0) + _EPS_CBRT) / 3.0) - k["cbrt_y"])
@@ -166,6 +180,10 @@ LOSSES: dict[str, Loss] = {
     "low-e2": Loss(
         "low-e2", "rms", False, "sqrt(sum w (ln(1+f) - ln(1+y))^2 / (C W))", _low_e2,
         ("scale", "log_y"),
+    ),
+    "sqrt-cos": Loss(
+        "sqrt-cos", "rms", False, "sqrt(sum w (sqrt(f cos_i+eps) - sqrt(y cos_i+eps))^2 / (C W))",
+        _sqrt_cos, ("scale", "cos_i", "sqrt_y_cos"),
     ),
     "cube-root": Loss(
         "cube-root", "rms", False, "sqrt(sum w (cbrt(f+eps) - cbrt(y+eps))^2 / (C W))",

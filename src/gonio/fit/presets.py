@@ -70,6 +70,9 @@ def _lobes() -> dict[str, Callable[[], BRDFModel] | None]:
         "cook-torrance": _make("CookTorrance"),
         "ngan-blinn-phong": _make("NganBlinnPhong"),
         "low": _make("LowMicrofacet"),
+        # long-tailed microfacet lobe (free tail exponent) and a retro-reflective lobe
+        "gtr": _make("GTR"),
+        "retro": _make("Retroreflection"),
     }
 
 
@@ -84,6 +87,10 @@ _COMBOS = (
     "lambert+ward+ward",
     "lambert+low",
     "lambert+low+low",
+    "lambert+gtr",
+    "lambert+gtr+gtr",
+    "lambert+retro",
+    "lambert+retro+gtr",
 )
 
 #: The literature's model families, parameterized as published, by preset name. Each lobe's

@@ -12,6 +12,7 @@ from gonio.brdf.models.bagher_sgd import BagherSGD
 from gonio.brdf.models.blinn_phong import BlinnPhong
 from gonio.brdf.models.cook_torrance import CookTorrance
 from gonio.brdf.models.fresnel import Conductor, Dielectric, Fresnel, NoFresnel, Schlick
+from gonio.brdf.models.gtr import GTR
 from gonio.brdf.models.htsg import HTSG
 from gonio.brdf.models.lafortune import Lafortune
 from gonio.brdf.models.lambert import Lambert
@@ -20,12 +21,14 @@ from gonio.brdf.models.low_smooth import LowSmooth
 from gonio.brdf.models.ngan_blinn_phong import NganBlinnPhong
 from gonio.brdf.models.oren_nayar import OrenNayar
 from gonio.brdf.models.phong import Phong
+from gonio.brdf.models.retro import Retroreflection
 from gonio.brdf.models.scaled import Scaled
 from gonio.brdf.models.specular import SpecularReflection, SpecularTransmission
 from gonio.brdf.models.torrance_sparrow import TorranceSparrow
 from gonio.brdf.models.ward import Ward
 
 __all__ = [
+    "GTR",
     "HTSG",
     "AshikhminShirley",
     "AshikhminShirleyLobe",
@@ -47,6 +50,7 @@ __all__ = [
     "OrenNayar",
     "Param",
     "Phong",
+    "Retroreflection",
     "Scaled",
     "Schlick",
     "SpecularReflection",
