@@ -42,7 +42,8 @@ class PlotInput:
     samples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
-def _channel(values: np.ndarray, channel: str) -> np.ndarray:
+def channel_values(values: np.ndarray, channel: str) -> np.ndarray:
+    """One channel of ``(..., C)`` values (C = 1 or 3): luminance ``Y``, or ``R``, ``G``, ``B``."""
     v = np.asarray(values, dtype=np.float64)
     if v.shape[-1] == 1:
         return v[..., 0]
@@ -55,7 +56,7 @@ def _channel(values: np.ndarray, channel: str) -> np.ndarray:
 
 def evaluate(material: Any, wi: np.ndarray, wo: np.ndarray, channel: str) -> np.ndarray:
     """``f`` (1/sr) of one channel at direction pairs ``(..., 3)``."""
-    return _channel(np.asarray(material.f(wi, wo)), channel)
+    return channel_values(np.asarray(material.f(wi, wo)), channel)
 
 
 def in_plane(theta_i_deg: float, theta_o_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -81,12 +82,12 @@ def half_diff_grid(n: int, phi_d_deg: float) -> tuple[np.ndarray, np.ndarray, np
     return deg, wi, wo
 
 
-def _samples_near_plane(
-    s: tuple[np.ndarray, np.ndarray, np.ndarray], theta_i_deg: float, tol_deg: float, channel: str
+def near_plane(
+    wi: np.ndarray, wo: np.ndarray, theta_i_deg: float, tol_deg: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Signed theta_o (deg) and f of measured samples within ``tol_deg`` of the in-plane slice
-    at ``theta_i`` (isotropic: only the relative azimuth matters)."""
-    wi, wo, v = s
+    """``(sel, signed)``: which direction pairs ``(N, 3)`` lie within ``tol_deg`` of the in-plane
+    slice at ``theta_i`` (isotropic: only the relative azimuth matters), ``(N,)`` bool, and
+    their signed theta_o in degrees (positive toward the mirror direction), ``(sel.sum(),)``."""
     ti = np.degrees(np.arccos(np.clip(wi[:, 2], -1, 1)))
     to = np.degrees(np.arccos(np.clip(wo[:, 2], -1, 1)))
     dphi = np.degrees(np.abs(np.angle(np.exp(1j * (np.arctan2(wo[:, 1], wo[:, 0]) -
@@ -96,8 +97,16 @@ def _samples_near_plane(
     back = dphi <= tol_deg
     near = np.abs(ti - theta_i_deg) <= tol_deg
     sel = near & (mirror | back)
-    signed = np.where(mirror, to, -to)[sel]
-    return signed, _channel(v[sel], channel)
+    return sel, np.where(mirror, to, -to)[sel]
+
+
+def _samples_near_plane(
+    s: tuple[np.ndarray, np.ndarray, np.ndarray], theta_i_deg: float, tol_deg: float, channel: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Signed theta_o (deg) and f of measured samples near the slice (:func:`near_plane`)."""
+    wi, wo, v = s
+    sel, signed = near_plane(wi, wo, theta_i_deg, tol_deg)
+    return signed, channel_values(v[sel], channel)
 
 
 def plot_materials(
