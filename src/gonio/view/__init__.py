@@ -2,7 +2,7 @@
 
 >>> import gonio.view
 >>> gonio.view("material.binary", "fit.json")      # in Jupyter: the page inline
->>> gonio.view.page(t, "fit.json").save("view.html")
+>>> gonio.view.build(t, "fit.json").save("view.html")
 
 The package itself is callable (``gonio.view(obj, ...)`` is :func:`view`). Inputs are paths
 (anything ``gonio view`` reads) or objects (anything :func:`gonio.io.load` returns, a model).
@@ -18,7 +18,7 @@ import types
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ViewPage", "page", "view"]
+__all__ = ["ViewPage", "build", "view"]
 
 
 class ViewPage:
@@ -44,7 +44,7 @@ class ViewPage:
         )
 
 
-def page(*inputs: Any, labels: list[str] | None = None) -> ViewPage:
+def build(*inputs: Any, labels: list[str] | None = None) -> ViewPage:
     """Build the page of ``inputs`` (paths or objects); ``labels`` name objects."""
     from gonio.view.page import build_page
     from gonio.view.sources import from_object, from_path, unique_labels
@@ -62,7 +62,7 @@ def page(*inputs: Any, labels: list[str] | None = None) -> ViewPage:
 
 def view(*inputs: Any, labels: list[str] | None = None) -> ViewPage:
     """The page of ``inputs``, shown inline when it is a notebook cell's value."""
-    return page(*inputs, labels=labels)
+    return build(*inputs, labels=labels)
 
 
 class _CallableModule(types.ModuleType):

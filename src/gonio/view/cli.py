@@ -33,6 +33,9 @@ def register(subparsers: Any) -> None:
         "--port", type=int, default=0, help="port to serve on (default: a free one); 127.0.0.1 only"
     )
     p.add_argument("--no-browser", action="store_true", help="serve without opening a browser")
+    from gonio import compile_cache
+
+    compile_cache.add_argument(p)
     p.set_defaults(func=run)
 
 

@@ -230,19 +230,22 @@ def maps_figure(source: Source, lo: float, hi: float, n: int = 90, active: int =
 
 
 def _masked(table: Any, phi_d: float, n: int) -> np.ndarray:
-    """Where the map's pixels fall on an invalid node of a gridded table (nearest node)."""
+    """Where the map's pixels ``(n, n)`` (rows theta_d, columns theta_h, as
+    :func:`gonio.render.plots.half_diff_grid`) fall on an invalid node of a gridded table
+    (nearest node, phi_d folded as the table folds it)."""
     if table.parameterization != "half_diff_iso" or bool(np.all(table.mask)):
         return np.zeros((n, n), bool)
-    _, wi, wo = half_diff_grid(n, phi_d)
-    from gonio.brdf.gridding import half_diff_iso
-
-    th, td, pd = half_diff_iso(wi.reshape(-1, 3), wo.reshape(-1, 3))
-    if fold_of(table.axes[2]) == 2:
-        pd = np.minimum(pd, math.pi - pd)
-    idx = tuple(
-        np.asarray(ax.nearest_index(a)) for ax, a in zip(table.axes, (th, td, pd), strict=True)
-    )
-    return ~np.asarray(table.mask)[idx].reshape(n, n)
+    deg = (np.arange(n) + 0.5) * 90.0 / n
+    pd = math.radians(phi_d) % (2 * math.pi)
+    fold = fold_of(table.axes[2])
+    if fold >= 1 and pd >= math.pi:
+        pd -= math.pi
+    if fold >= 2:
+        pd = min(pd, math.pi - pd)
+    ih = np.asarray(table.axes[0].nearest_index(np.radians(deg)))
+    id_ = np.asarray(table.axes[1].nearest_index(np.radians(deg)))
+    ip = int(np.asarray(table.axes[2].nearest_index(pd)))
+    return ~np.asarray(table.mask)[ih[None, :], id_[:, None], ip]
 
 
 def map_range(sources: list[Source], n: int = 90) -> tuple[float, float]:

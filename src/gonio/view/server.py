@@ -40,7 +40,7 @@ class _Handler(http.server.BaseHTTPRequestHandler):
         self.send_header("Cache-Control", "no-store")
         self.send_header("Referrer-Policy", "no-referrer")
         self.end_headers()
-        self.wfile.write(self.body)
+        self.wfile.write(self.server.body)
 
     def log_message(self, format: str, *args: object) -> None:  # quiet
         return
