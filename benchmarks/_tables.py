@@ -44,6 +44,7 @@ BENCHMARKS = (
     "bench_rgl",
     "bench_gpu",
     "bench_zoo",
+    "bench_view",
 )
 
 Row = dict[str, str]

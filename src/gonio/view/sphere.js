@@ -297,9 +297,12 @@ void main() {
       redraw();
     });
     setLight(state.light);
+    const px = new Uint8Array(4);
+    for (const s of state.spheres) s.gl.readPixels(0, 0, 1, 1, s.gl.RGBA, s.gl.UNSIGNED_BYTE, px);
     window.gonioView = {
       ready: true,
       webgl2: true,
+      firstFrameMs: performance.now(),  // since navigation start: every sphere drawn once
       setLight,
       state,
       // linear radiance of sphere k as a plain array (H * W * 4, rows top first)
