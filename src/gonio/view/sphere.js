@@ -111,7 +111,8 @@ void main() {
     vec3 t = tn <= 1e-12 ? vec3(1.0, 0.0, 0.0) : vec3(n.z / tn, 0.0, -n.x / tn);
     vec3 bt = cross(n, t);
     vec3 wo = vec3(t.z, bt.z, n.z);
-    vec3 wi = vec3(dot(uLight, t), dot(uLight, bt), dot(uLight, n));
+    vec3 Lw = normalize(uLight);
+    vec3 wi = vec3(dot(Lw, t), dot(Lw, bt), dot(Lw, n));
     if (wi.z > 0.0 && wo.z > 1e-6) L = lookup(wi, wo) * wi.z;
   }
   if (uLinear) { outColor = vec4(L, r2 < 1.0 ? 1.0 : 0.0); return; }
