@@ -78,7 +78,8 @@ def measure(folder: Path, frames: int = 30) -> list[dict]:
     ref = np.asarray(render_sphere(source.material.material, lights=[Directional(lv)],
                                    resolution=n), np.float64)  # fmt: skip
     rmse = float(np.sqrt(np.mean((got - ref) ** 2)) / np.sqrt(np.mean(ref**2)))
-    where = f"headless Chromium, {renderer}, {os.cpu_count()} CPUs"
+    load = os.getloadavg()[0]
+    where = f"headless Chromium, {renderer}, {os.cpu_count()} CPUs, load average {load:.0f}"
     return [
         {"metric": "page size, MERL table + Plotly (MB)", "value": size_mb, "target": 20,
          "note": f"built in {build_s:.1f} s"},

@@ -48,12 +48,15 @@ BOOT = """
 (function () {
   const data = JSON.parse(document.getElementById("gonio-data").textContent);
   const config = { displaylogo: false, responsive: true };
-  for (const [id, fig] of Object.entries(data.figures)) {
-    Plotly.newPlot(id, fig.data, fig.layout, config);
-  }
+  // the spheres first (their first frame is not held up by the plots), then the plots
   gonioSphere.start(data.spheres).catch((e) => {
     document.getElementById("sphere-status").textContent = "sphere: " + e.message;
-    window.gonioView = { ready: true, webgl2: false, error: String(e) };
+    window.gonioView = { webgl2: false, error: String(e) };
+  }).finally(() => {
+    for (const [id, fig] of Object.entries(data.figures)) {
+      Plotly.newPlot(id, fig.data, fig.layout, config);
+    }
+    window.gonioView.ready = true;
   });
 })();
 """

@@ -67,6 +67,9 @@ def from_object(obj: Any, label: str, notes: list[str] | None = None) -> Source:
 
     material, more = renderable(obj) if measured else (obj, [])
     material = compiled(material)
+    c = material.f(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]])).shape[-1]
+    if c not in (1, 3):
+        raise ParameterError(f"{label}: gonio view shows 1 or 3 channels, the data has {c}")
     samples = table = None
     if isinstance(obj, MeasuredSamples):
         rows = rgb_samples(obj, "D65") if obj.channel_info.kind == "spectral" else obj
@@ -89,7 +92,7 @@ def from_path(path: str | os.PathLike[str]) -> Source:
     if "::" in text:
         from gonio import io
 
-        return from_object(io.load(text), text.rsplit("::", 1)[1])
+        return from_object(io.load(text, color="rgb"), text.rsplit("::", 1)[1])
     p = _run_table(Path(text))
     if not p.exists():
         raise ParameterError(f"file not found: {p}")
@@ -105,7 +108,8 @@ def from_path(path: str | os.PathLike[str]) -> Source:
     from gonio import io
 
     label = p.parent.name if p.name == "table.brdf.h5" else p.name
-    return from_object(io.load(p), label)
+    # spectral data (Cornell, spectral RGL files) as linear sRGB under D65, as gonio render shows it
+    return from_object(io.load(p, color="rgb"), label)
 
 
 def unique_labels(sources: list[Source]) -> None:

@@ -270,7 +270,7 @@ void main() {
     if (!probe) {
       document.getElementById("sphere-status").textContent =
         "WebGL2 is not available in this browser: the spheres are not shown; the plots below work.";
-      window.gonioView = { ready: true, webgl2: false };
+      window.gonioView = { webgl2: false };
       return;
     }
     for (const t of tables) {
@@ -301,7 +301,7 @@ void main() {
     const px = new Uint8Array(4);
     for (const s of state.spheres) s.gl.readPixels(0, 0, 1, 1, s.gl.RGBA, s.gl.UNSIGNED_BYTE, px);
     window.gonioView = {
-      ready: true,
+      ready: false,  // set once the plots are drawn too
       webgl2: true,
       firstFrameMs: performance.now(),  // since navigation start: every sphere drawn once
       setLight,
