@@ -64,7 +64,7 @@ def serve(
             ready(server)
         try:
             server.serve_forever()
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:  # Ctrl-C: the CLI reports it as every command does
             pass
     finally:
         server.server_close()
