@@ -47,6 +47,7 @@ BENCHMARKS = (
     "bench_gpu",
     "bench_zoo",
     "bench_mcmc_agreement",
+    "bench_view",
 )
 
 Row = dict[str, str]

@@ -32,6 +32,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.fit.cli",
     "gonio.render.cli",
     "gonio.render.plot_cli",
+    "gonio.view.cli",
     "gonio.demo.cli",
     "gonio.export.cli",
 )
@@ -59,6 +60,10 @@ LAZY_COMMANDS: dict[str, tuple[str, str]] = {
     "plot": (
         "gonio.render.plot_cli",
         "plot BRDFs without fitting: polar, in-plane and theta_h-theta_d views",
+    ),
+    "view": (
+        "gonio.view.cli",
+        "look at measurements and fits interactively in the browser (one self-contained page)",
     ),
     "demo": (
         "gonio.demo.cli",

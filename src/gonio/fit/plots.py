@@ -89,7 +89,9 @@ def _save(fig: Any, path: str | Path) -> Path:
 
 
 def residual_map(data: FitData, f: np.ndarray, path: str | Path, title: str = "") -> Path:
-    """Plot the binned log-ratio residual over (theta_h, theta_d) in degrees; returns the path."""
+    """Plot the binned log-ratio residual over theta_h (horizontal) and theta_d (vertical), in
+    degrees, as every theta_h-theta_d map of gonio (``gonio plot``, ``gonio view``, the report);
+    returns the path."""
     return _save(residual_figure(data, f, title), path)
 
 
@@ -98,8 +100,8 @@ def residual_figure(data: FitData, f: np.ndarray, title: str = "") -> Any:
     th, td, _ = data.half_diff()
     ratio = np.mean(np.log((np.maximum(f, 0) + _EPS) / (np.maximum(data.values, 0) + _EPS)), -1)
     stat, xe, ye, _ = binned_statistic_2d(
-        np.degrees(td),
         np.degrees(th),
+        np.degrees(td),
         ratio,
         statistic="mean",
         bins=45,
@@ -110,8 +112,8 @@ def residual_figure(data: FitData, f: np.ndarray, title: str = "") -> Any:
     fig, ax = plt.subplots(figsize=(5.2, 4.4))
     im = ax.pcolormesh(xe, ye, stat.T, cmap="RdBu_r", vmin=-lim, vmax=lim)
     fig.colorbar(im, ax=ax, label="mean ln((f+e)/(y+e))")
-    ax.set_xlabel("theta_d (deg)")
-    ax.set_ylabel("theta_h (deg)")
+    ax.set_xlabel("θh (deg)")
+    ax.set_ylabel("θd (deg)")
     ax.set_title(title or "residuals (fitted vs measured)")
     return fig
 

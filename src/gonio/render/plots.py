@@ -42,7 +42,8 @@ class PlotInput:
     samples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
-def _channel(values: np.ndarray, channel: str) -> np.ndarray:
+def channel_values(values: np.ndarray, channel: str) -> np.ndarray:
+    """One channel of ``(..., C)`` values (C = 1 or 3): luminance ``Y``, or ``R``, ``G``, ``B``."""
     v = np.asarray(values, dtype=np.float64)
     if v.shape[-1] == 1:
         return v[..., 0]
@@ -55,7 +56,7 @@ def _channel(values: np.ndarray, channel: str) -> np.ndarray:
 
 def evaluate(material: Any, wi: np.ndarray, wo: np.ndarray, channel: str) -> np.ndarray:
     """``f`` (1/sr) of one channel at direction pairs ``(..., 3)``."""
-    return _channel(np.asarray(material.f(wi, wo)), channel)
+    return channel_values(np.asarray(material.f(wi, wo)), channel)
 
 
 def in_plane(theta_i_deg: float, theta_o_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -81,12 +82,12 @@ def half_diff_grid(n: int, phi_d_deg: float) -> tuple[np.ndarray, np.ndarray, np
     return deg, wi, wo
 
 
-def _samples_near_plane(
-    s: tuple[np.ndarray, np.ndarray, np.ndarray], theta_i_deg: float, tol_deg: float, channel: str
+def near_plane(
+    wi: np.ndarray, wo: np.ndarray, theta_i_deg: float, tol_deg: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Signed theta_o (deg) and f of measured samples within ``tol_deg`` of the in-plane slice
-    at ``theta_i`` (isotropic: only the relative azimuth matters)."""
-    wi, wo, v = s
+    """``(sel, signed)``: which direction pairs ``(N, 3)`` lie within ``tol_deg`` of the in-plane
+    slice at ``theta_i`` (isotropic: only the relative azimuth matters), ``(N,)`` bool, and
+    their signed theta_o in degrees (positive toward the mirror direction), ``(sel.sum(),)``."""
     ti = np.degrees(np.arccos(np.clip(wi[:, 2], -1, 1)))
     to = np.degrees(np.arccos(np.clip(wo[:, 2], -1, 1)))
     dphi = np.degrees(np.abs(np.angle(np.exp(1j * (np.arctan2(wo[:, 1], wo[:, 0]) -
@@ -96,8 +97,16 @@ def _samples_near_plane(
     back = dphi <= tol_deg
     near = np.abs(ti - theta_i_deg) <= tol_deg
     sel = near & (mirror | back)
-    signed = np.where(mirror, to, -to)[sel]
-    return signed, _channel(v[sel], channel)
+    return sel, np.where(mirror, to, -to)[sel]
+
+
+def _samples_near_plane(
+    s: tuple[np.ndarray, np.ndarray, np.ndarray], theta_i_deg: float, tol_deg: float, channel: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Signed theta_o (deg) and f of measured samples near the slice (:func:`near_plane`)."""
+    wi, wo, v = s
+    sel, signed = near_plane(wi, wo, theta_i_deg, tol_deg)
+    return signed, channel_values(v[sel], channel)
 
 
 def plot_materials(
@@ -110,24 +119,75 @@ def plot_materials(
     kinds: Sequence[str] = ("polar", "in-plane", "halfdiff"),
     n: int = 181,
 ) -> Path:
-    """Write the figure: polar and in-plane slices of every input on shared axes (colour per
-    ``theta_i``, line style per input), and one theta_h-theta_d map per input side by side with a
-    shared colour scale. ``out``'s extension picks the format (.png, .svg, .pdf)."""
+    """Write :func:`materials_figure`; ``out``'s extension picks the format (.png, .svg, .pdf)."""
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    fig = materials_figure(
+        inputs, theta_i_deg=theta_i_deg, phi_d_deg=phi_d_deg, channel=channel, kinds=kinds, n=n
+    )
+    from gonio.io.atomic import atomic_output
+
+    try:
+        with atomic_output(out, out.suffix, make_parents=True) as tmp:
+            fig.savefig(tmp, dpi=120, format=out.suffix.lstrip(".").lower())
+    finally:
+        plt.close(fig)
+    return out
+
+
+def _panel_axes(fig: Any, n_top: int, n_map: int) -> tuple[list[Any], list[Any]]:
+    """Grid slots for the slice panels and the maps, with no empty slot: one row when there are
+    at most four panels, else the slices on a first row and the maps on a second."""
+    if n_top + n_map <= 4:
+        grid = fig.add_gridspec(1, n_top + n_map)
+        slots = [grid[0, k] for k in range(n_top + n_map)]
+        return slots[:n_top], slots[n_top:]
+    rows = [r for r in (n_top, n_map) if r]
+    subs = fig.subfigures(len(rows), 1) if len(rows) > 1 else [fig]
+    out = []
+    for sub, count in zip(subs, rows, strict=True):
+        grid = sub.add_gridspec(1, count)
+        out.append([(sub, grid[0, k]) for k in range(count)])
+    top = out[0] if n_top else []
+    return top, (out[-1] if n_map else [])
+
+
+def _add(fig: Any, slot: Any, **kwargs: Any) -> Any:
+    if isinstance(slot, tuple):
+        return slot[0].add_subplot(slot[1], **kwargs)
+    return fig.add_subplot(slot, **kwargs)
+
+
+def materials_figure(
+    inputs: Sequence[PlotInput],
+    *,
+    theta_i_deg: Sequence[float] = (0.0, 30.0, 60.0),
+    phi_d_deg: float = 90.0,
+    channel: str = "Y",
+    kinds: Sequence[str] = ("polar", "in-plane", "halfdiff"),
+    n: int = 181,
+) -> Any:
+    """The figure: polar (logarithmic radius: glossy data spans decades) and in-plane slices of
+    every input on shared axes (colour per ``theta_i``, line style per input), and one
+    theta_h-theta_d map per input (theta_h horizontal) with a shared colour scale; every panel
+    holds data (no empty grid slot)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
-    out = Path(out)
     styles = ["-", "--", ":", "-."]
     slices = [k for k in kinds if k in ("polar", "in-plane")]
     maps = "halfdiff" in kinds
     n_top = len(slices)
     n_map = len(inputs) if maps else 0
-    cols = max(n_top, n_map, 1)
-    rows = int(n_top > 0) + int(n_map > 0)
-    fig = plt.figure(figsize=(5.6 * cols, 5.6 * rows), constrained_layout=True)
-    grid = fig.add_gridspec(rows, cols)
+    one_row = n_top + n_map <= 4
+    cols = n_top + n_map if one_row else max(n_top, n_map, 1)
+    rows = 1 if one_row else int(n_top > 0) + int(n_map > 0)
+    fig = plt.figure(figsize=(5.6 * max(cols, 1), 5.6 * rows), constrained_layout=True)
+    top_slots, map_slots = _panel_axes(fig, n_top, n_map)
     cmap = plt.get_cmap("viridis")
     ti_colors = {t: cmap(i / max(len(theta_i_deg) - 1, 1) * 0.85) for i, t in
                  enumerate(theta_i_deg)}  # fmt: skip
@@ -138,16 +198,20 @@ def plot_materials(
             wi, wo = in_plane(t, theta_o)
             curves[inp.label, t] = evaluate(inp.material, wi, wo, channel)
     unit = f"f, {'luminance Y' if channel == 'Y' else channel + ' channel'} (1/sr)"
+    positive = np.concatenate([c[c > 0] for c in curves.values()] or [np.ones(1)])
+    r_hi = float(positive.max()) * 1.5 if positive.size else 1.0
+    r_lo = max(float(positive.min()) / 1.5 if positive.size else 1e-3, r_hi * 1e-5)
     for col, kind in enumerate(slices):
         polar = kind == "polar"
-        ax = fig.add_subplot(grid[0, col], projection="polar" if polar else None)
+        ax = _add(fig, top_slots[col], projection="polar" if polar else None)
         for k, inp in enumerate(inputs):
             for t in theta_i_deg:
                 y = curves[inp.label, t]
                 label = f"{inp.label}, θi = {t:g}°"
                 ls = styles[k % len(styles)]
                 if polar:
-                    ax.plot(np.radians(theta_o), y, ls, color=ti_colors[t], label=label)
+                    ax.plot(np.radians(theta_o), np.where(y > 0, y, np.nan), ls,
+                            color=ti_colors[t], label=label)  # fmt: skip
                 else:
                     ax.semilogy(theta_o, np.maximum(y, 1e-6), ls, color=ti_colors[t],
                                 label=label)  # fmt: skip
@@ -161,7 +225,10 @@ def plot_materials(
             ax.set_theta_direction(-1)
             ax.set_thetamin(-90)
             ax.set_thetamax(90)
-            ax.set_title("polar, plane of incidence: radius " + unit + "\nangle θo (deg), "
+            ax.set_rscale("log")
+            ax.set_rlim(r_lo, r_hi)
+            ax.yaxis.set_minor_formatter(NullFormatter())
+            ax.set_title("polar, plane of incidence: radius " + unit + " (log)\nangle θo (deg), "
                          "+ toward the mirror direction; light at -θi", fontsize=9)  # fmt: skip
         else:
             ax.set_xlabel("θo (deg), + toward the mirror direction, − toward the light")
@@ -180,20 +247,12 @@ def plot_materials(
             images.append(np.where(ok & (v > 0), np.log10(np.maximum(v, 1e-12)), np.nan))
         finite = np.concatenate([im[np.isfinite(im)] for im in images])
         lo, hi = np.percentile(finite, [1, 99.9]) if finite.size else (-3, 1)
-        row = rows - 1
         for k, (inp, im) in enumerate(zip(inputs, images, strict=True)):
-            ax = fig.add_subplot(grid[row, k])
+            ax = _add(fig, map_slots[k])
             h = ax.imshow(im, origin="lower", extent=(0, 90, 0, 90), vmin=lo, vmax=hi,
                           cmap="magma", aspect="equal")  # fmt: skip
             ax.set_xlabel("θh (deg)")
             ax.set_ylabel("θd (deg)")
             ax.set_title(f"{inp.label}: θh–θd at φd = {phi_d_deg:g}°", fontsize=9)
             fig.colorbar(h, ax=ax, label=f"log10 {unit}", shrink=0.85)
-    from gonio.io.atomic import atomic_output
-
-    try:
-        with atomic_output(out, out.suffix, make_parents=True) as tmp:
-            fig.savefig(tmp, dpi=120, format=out.suffix.lstrip(".").lower())
-    finally:
-        plt.close(fig)
-    return out
+    return fig
