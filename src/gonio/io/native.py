@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from gonio import __version__
+from gonio.errors import GonioError, ParameterError
 from gonio.io._common import PathLike, atomic_output, check_input_file, fail
 from gonio.io._hdf5_guard import (
     ReadBudgetExceeded,
@@ -147,7 +148,6 @@ def _common_attrs(h5: Any, kind: str, meta: dict) -> None:
 
 
 def _check_finite(path: PathLike, name: str, arr: np.ndarray, valid: np.ndarray | None) -> None:
-    from gonio.errors import ParameterError
 
     bad = ~np.isfinite(arr)
     if valid is not None:
@@ -199,7 +199,6 @@ def write_native(
 
     from gonio.brdf.measured import MeasuredSamples
     from gonio.brdf.tabulated import TabulatedBRDF
-    from gonio.errors import ParameterError
 
     gridded = isinstance(obj, TabulatedBRDF)
     if not gridded and not isinstance(obj, MeasuredSamples):
@@ -369,7 +368,6 @@ class _Guard:
         return None
 
     def __exit__(self, etype: Any, exc: BaseException | None, tb: Any) -> bool:
-        from gonio.errors import GonioError
 
         if exc is None or isinstance(exc, GonioError) or not isinstance(exc, Exception):
             return False
@@ -624,7 +622,6 @@ def read_native(path: PathLike, group: str | None = None) -> Any:
     ``group`` reads a table stored in a group of the file (see ``write_native(groups=...)``)
     instead of the root one.
     """
-    from gonio.errors import GonioError
 
     h5 = _open(path)
     try:
