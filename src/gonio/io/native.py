@@ -148,7 +148,6 @@ def _common_attrs(h5: Any, kind: str, meta: dict) -> None:
 
 
 def _check_finite(path: PathLike, name: str, arr: np.ndarray, valid: np.ndarray | None) -> None:
-
     bad = ~np.isfinite(arr)
     if valid is not None:
         bad &= np.broadcast_to(
