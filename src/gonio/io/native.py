@@ -367,7 +367,6 @@ class _Guard:
         return None
 
     def __exit__(self, etype: Any, exc: BaseException | None, tb: Any) -> bool:
-
         if exc is None or isinstance(exc, GonioError) or not isinstance(exc, Exception):
             return False
         if isinstance(exc, ReadBudgetExceeded):
