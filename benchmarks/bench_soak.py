@@ -12,7 +12,8 @@ stop the run: docs/guide/rig.md).
 
 Every ``--window`` configurations the run's own process records its resident memory (VmRSS),
 the journal's size on disk (``journal.sqlite`` with its WAL), ``log.jsonl``'s size, the
-configurations per minute of the window and the bus counters. The emulator's in-memory lists
+configurations per minute of the window, the process's CPU time per configuration, the host's
+load average and the bus counters. The emulator's in-memory lists
 of every packet and goal it received (test instruments, absent on a real rig) are emptied at
 each window; everything else is the code path of a real run. The run table is not written
 (``write_table=False``): the soak measures the loop.
@@ -40,6 +41,8 @@ WINDOW_FIELDS = (
     "configs",
     "wall_s",
     "configs_per_min",
+    "cpu_ms_per_config",
+    "host_load",
     "rss_mb",
     "journal_mb",
     "log_mb",
@@ -111,7 +114,14 @@ def soak(
     faults = FaultConfig(drop=each, garble=each, crc=each, seed=seed)
     rows: list[dict] = []
     keys = ("transactions", "retries", "timeouts", "corrupt", "crc_errors")
-    state = {"t": time.perf_counter(), "n": 0, "done": 0, "last": {}, "before": {}}
+    state = {
+        "t": time.perf_counter(),
+        "cpu": time.process_time(),
+        "n": 0,
+        "done": 0,
+        "last": {},
+        "before": {},
+    }
     t0 = time.perf_counter()
 
     def bus_total(st: dict) -> dict:
@@ -130,7 +140,7 @@ def soak(
                 os.kill(os.getpid(), signal.SIGINT)  # finish this configuration, park, stop
         if done % window:
             return
-        now = time.perf_counter()
+        now, cpu = time.perf_counter(), time.process_time()
         emu = ses.emulator
         emu.goal_log.clear()  # test instruments of the emulator, not part of a run
         emu.packet_log.clear()
@@ -140,6 +150,10 @@ def soak(
                 "configs": done,
                 "wall_s": round(now - t0, 3),
                 "configs_per_min": round((done - state["n"]) * 60.0 / (now - state["t"]), 1),
+                # this process's CPU time (driver, emulator thread, journal): the run's own
+                # cost, less sensitive than the rate to the host's other load
+                "cpu_ms_per_config": round((cpu - state["cpu"]) * 1e3 / (done - state["n"]), 2),
+                "host_load": round(os.getloadavg()[0], 1),
                 "rss_mb": round(rss_mb(), 2),
                 "journal_mb": round(
                     _size_mb(run / "journal.sqlite", run / "journal.sqlite-wal"), 3
@@ -149,10 +163,11 @@ def soak(
                 "stops": len(stops),
             }
         )
-        state["t"], state["n"] = now, done
+        state["t"], state["cpu"], state["n"] = now, cpu, done
         r = rows[-1]
         print(
             f"{done:6d} configs  {r['wall_s']:8.1f} s  {r['configs_per_min']:7.1f}/min"
+            f"  CPU {r['cpu_ms_per_config']:6.2f} ms  load {r['host_load']:5.1f}"
             f"  RSS {r['rss_mb']:7.1f} MB  journal {r['journal_mb']:7.2f} MB",
             flush=True,
         )
@@ -212,6 +227,9 @@ def soak(
         "configs_per_min": round(done_total * 60.0 / wall, 1),
         "cpm_first_quarter": round(sum(cpm[:q]) / q, 1),
         "cpm_last_quarter": round(sum(cpm[-q:]) / q, 1),
+        "cpu_ms_first_quarter": round(sum(r["cpu_ms_per_config"] for r in after[:q]) / q, 2),
+        "cpu_ms_last_quarter": round(sum(r["cpu_ms_per_config"] for r in after[-q:]) / q, 2),
+        "host_load_mean": round(sum(r["host_load"] for r in rows) / len(rows), 1),
         "rss_warm_mb": rss_warm,
         "rss_max_mb": max(r["rss_mb"] for r in after) if after else rss_warm,
         "rss_growth_pct": round(
@@ -240,11 +258,16 @@ def plot(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     x = [r["configs"] for r in rows]
-    fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    fig, axes = plt.subplots(4, 1, figsize=(7, 9), sharex=True)
     for ax, key, label in zip(
         axes,
-        ("rss_mb", "journal_mb", "configs_per_min"),
-        ("resident memory (MB)", "journal on disk (MB)", "configurations / min"),
+        ("rss_mb", "journal_mb", "configs_per_min", "cpu_ms_per_config"),
+        (
+            "resident memory (MB)",
+            "journal on disk (MB)",
+            "configurations / min",
+            "CPU per configuration (ms)",
+        ),
         strict=True,
     ):
         ax.plot(x, [r[key] for r in rows], marker=".", lw=1)
@@ -252,6 +275,7 @@ def plot(rows: list[dict], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].set_ylim(bottom=0)
     axes[2].set_ylim(bottom=0)
+    axes[3].set_ylim(bottom=0)
     axes[-1].set_xlabel("configurations measured")
     axes[0].set_title("soak: sim_sample rig, packet faults on the bus")
     fig.tight_layout()
@@ -317,6 +341,11 @@ def write_tables() -> None:
             "first / last quarter (per min)",
             lambda r: f"{r['cpm_first_quarter']} / {r['cpm_last_quarter']}",
         ),
+        (
+            "CPU per config, first / last quarter (ms)",
+            lambda r: f"{r['cpu_ms_first_quarter']} / {r['cpu_ms_last_quarter']}",
+        ),
+        ("host load (mean)", "host_load_mean"),
         ("RSS after warm-up (MB)", "rss_warm_mb"),
         ("RSS growth (%)", "rss_growth_pct"),
         ("journal (MB)", "journal_mb"),
