@@ -81,6 +81,8 @@ def _manual(name, f, d):
         return np.sqrt(np.sum(w * (np.log1p(f * cos) - np.log1p(y * cos)) ** 2) / W)
     if name == "low-e2":
         return np.sqrt(np.sum(w * (np.log1p(f) - np.log1p(y)) ** 2) / W)
+    if name == "sqrt-cos":
+        return np.sqrt(np.sum(w * (np.sqrt(f * cos + 1e-4) - np.sqrt(y * cos + 1e-4)) ** 2) / W)
     if name == "cube-root":
         return np.sqrt(np.sum(w * (np.cbrt(f + 1e-6) - np.cbrt(y + 1e-6)) ** 2) / W)
     raise AssertionError(name)

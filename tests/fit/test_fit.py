@@ -187,11 +187,12 @@ def test_all_diffuse_data_puts_lobe_on_bound():
     res = gf.fit(data, model=models.Lambert() + TestLobe(), uncertainty="laplace")
     np.testing.assert_allclose(res.params["lambert.albedo"], [0.4, 0.5, 0.6], atol=0.02)
     # the lobe is either switched off or pushed to an unobservable exponent, and said so:
-    # its reflectance is then unconstrained (interval spanning [0, 1])
+    # its reflectance is then unconstrained: listed as such, with no interval (NaN bounds)
     assert res.reduced_chi2 == pytest.approx(1.0, abs=5 * np.sqrt(2 / res.dof))
     off = np.asarray(res.params["testlobe.rho_s"]) < 0.01
     lo, hi = (np.asarray(b) for b in res.intervals()["testlobe.rho_s"])
-    assert np.all(off | ((lo < 0.01) & (hi > 0.99)))
+    loose = [n for n in res.uncertainty.unconstrained if n.startswith("testlobe.rho_s")]
+    assert np.all(off | (np.isnan(lo) & np.isnan(hi))) and (np.all(off) or loose)
     assert res.warnings
     assert all(np.isfinite(v) for v in res.metrics.values())
 
