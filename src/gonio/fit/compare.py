@@ -224,7 +224,8 @@ def _summarize_bic(results: Sequence[FitResult]) -> Comparison:
     if choice.reduced_chi2 > 3.0 and choice.data.get("has_sigma"):
         reason += (
             f"; chi2/dof = {choice.reduced_chi2:.3g}: model error dominates the measurement "
-            "noise, so quote intervals from MCMC with the discrepancy term"
+            "noise, so quote intervals with the residual scale (Laplace's cluster sandwich or "
+            "MCMC, whose likelihood then marginalizes the residual variance)"
         )
     return Comparison(list(results), rows, choice.name, reason)
 

@@ -1,4 +1,4 @@
-"""Parameter uncertainty: Laplace approximation and MCMC (emcee) with a model-discrepancy term.
+"""Parameter uncertainty: Laplace approximation and MCMC (emcee) whose likelihood is the loss.
 
 Laplace
     The loss is ``L(u) = sum r^2``. Near the optimum ``u*`` the log-likelihood is quadratic with
