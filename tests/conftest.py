@@ -17,6 +17,16 @@ import pytest
 # tests/test_compile_cache.py checks the cache in child processes without this variable.
 os.environ.setdefault("GONIO_COMPILE_CACHE", "0")
 
+# ------------------------------------------------------------------ one BLAS thread per process
+# The suite runs one process per core (``-n 2`` on 2 cores), so BLAS threads only oversubscribe
+# the cores; and OpenBLAS wakes its thread pool for every tiny LAPACK call, which is what
+# scipy.spatial.Delaunay's barycentric transforms make, one per simplex (the scattered-data
+# interpolant of gonio.brdf.gridding): 37,305 simplices took 5.3 s of CPU (24 s wall at load 20)
+# with OpenBLAS's default threads and 0.07 s (0.5 s wall) with one. Set before NumPy is imported
+# (no plugin imports it earlier), so it also reaches xdist workers and the tests' child
+# processes; a caller's own value is kept.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 # ------------------------------------------------------------------ quicker XLA compilation
 # Most of the suite's time is XLA compiling small programs once each. The tests run XLA's CPU
 # code generation without LLVM's expensive optimization passes (the HLO optimizations, fusion
