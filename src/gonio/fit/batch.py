@@ -149,7 +149,9 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
         for r in results:
             stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
             files.append(str(r.save(folder / f"{stem}.json")))
-            if options.get("plots", True):
+            if options.get("plots", True) and (
+                r.name == comp.recommended or not options.get("select")
+            ):
                 from gonio.fit.plots import plot_result
 
                 plot_result(r, shown, folder, stem)
