@@ -159,7 +159,9 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
                 stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
                 r.save(tmp / f"{stem}.json")
                 files.append(str(folder / f"{stem}.json"))
-                if options.get("plots", True):
+                if options.get("plots", True) and (
+                    r.name == comp.recommended or not options.get("select")
+                ):
                     from gonio.fit.plots import plot_result
 
                     plot_result(r, shown, tmp, stem, skipped=skipped, log=log)

@@ -306,7 +306,8 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
                 stem = safe_stem(r.name if r.channel is None else f"{r.name}.{r.channel}")
                 bar.update(task, description=f"writing {stem}")
                 files.append(str(out / r.save(staging / f"{stem}.json").name))
-                if options["plots"]:
+                # the default choice plots its recommended family only
+                if options["plots"] and (r.name == comp.recommended or not options.get("select")):
                     from gonio.fit.plots import plot_result
 
                     drawn = plot_result(r, shown, staging, stem, skipped=skipped, log=log)

@@ -58,7 +58,7 @@ TRAIN_CELLS = TEST_CELLS = 8192
 #: Share of the cells held out on data with fewer than ``TRAIN_CELLS + TEST_CELLS`` cells.
 HELD_OUT_FRACTION = 0.2
 #: Cells the default fit's plots show at most (see :func:`fit_models`).
-PLOT_CELLS = 32768
+PLOT_CELLS = 16384
 #: A family with fewer parameters is chosen while its held-out error is within this fraction
 #: of the best family's.
 SIMPLER_WITHIN = 0.01
@@ -245,8 +245,9 @@ def fit_models(
     (``gonio fit --score`` sets their appearance).
 
     Returns the results, the comparison and the cells to plot them on: the data, or for the
-    default choice at most :data:`PLOT_CELLS` of them (stratified along theta_h), which is
-    what the fits were made on and keeps four families' plots of a MERL table cheap."""
+    default choice at most :data:`PLOT_CELLS` of them (stratified along theta_h), as many as
+    the fits were made on and held out, which keeps the plots of a MERL table cheap (the
+    command line plots the recommended family only)."""
     if models is not None:
 
         def one(m: str) -> list[FitResult]:
