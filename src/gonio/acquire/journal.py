@@ -353,7 +353,7 @@ class Journal:
             )
             self.db.execute(
                 "INSERT INTO events(t, kind, detail) VALUES (?, ?, ?)",
-                (time.time(), kind, json.dumps(detail, default=str)),
+                (time.time(), kind, dumps_json(detail, default=str)),
             )
 
     def events(self) -> list[tuple[float, str, dict]]:

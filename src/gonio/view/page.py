@@ -8,12 +8,12 @@ Security Policy forbids every network request, so opening it fetches nothing.
 from __future__ import annotations
 
 import html
-import json
 import math
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from gonio.io.strict_json import dumps_json
 from gonio.view.encode import sphere_table
 from gonio.view.figures import (
     coverage_figure,
@@ -64,7 +64,8 @@ BOOT = """
 
 def _json_script(obj: Any) -> str:
     """JSON safe inside a <script> element (no ``</`` to close it early)."""
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    text = dumps_json(obj, nonfinite="refuse", source="the page's data", separators=(",", ":"))
+    return text.replace("</", "<\\/")
 
 
 def _fmt(v: Any) -> str:
