@@ -12,8 +12,9 @@ tables evaluated from the neural fits), this benchmark
    light at 0, 30 and 60 degrees from the view and under the studio; HDR-FLIP and relative L1
    per image and their means) against the table's own images.
 
-The 88 materials are split once into a *tuning* half and a *held-out* half: sorted names,
-permuted by ``numpy.random.default_rng(40)``, first 44 tuning. Choices of the default fit
+The 88 materials are split once into a *tuning* half and a *held-out* half, the one split of
+``benchmarks/_nbrdf_split.py`` (sorted names, a seeded permutation, first 44 tuning) that the
+default fit was tuned on. Choices of the default fit
 (families, loss, thresholds) may look at the tuning half only; the table reports both halves and
 all. Materials are run in an order that alternates the halves, so that ``--materials N`` covers
 both.
@@ -60,35 +61,13 @@ ARCHIVE = SHARED / "nbrdf" / "merl_nbrdf.zip"
 FITS = SHARED / "fits"
 RESULTS = HERE / "results"
 
-#: Seed of the fixed tuning / held-out split.
-SPLIT_SEED = 40
 
-
-def all_materials() -> list[str]:
-    """The archive's complete materials, sorted."""
-    from gonio.io.nbrdf import NBRDFArchive
-
-    return sorted(NBRDFArchive(str(ARCHIVE)).names)
-
-
-def split(names: list[str]) -> dict[str, str]:
-    """``{name: "tuning" | "held-out"}``: sorted names, a seeded permutation, first half tuning."""
-    names = sorted(names)
-    perm = np.random.default_rng(SPLIT_SEED).permutation(len(names))
-    half = len(names) // 2
-    return {names[i]: ("tuning" if k < half else "held-out") for k, i in enumerate(perm)}
-
-
-def run_order(names: list[str]) -> list[str]:
+def run_order(tuning: list[str], held: list[str]) -> list[str]:
     """The materials alternating tuning and held-out (each half in its permuted order)."""
-    names = sorted(names)
-    perm = np.random.default_rng(SPLIT_SEED).permutation(len(names))
-    half = len(names) // 2
-    tune, held = [names[i] for i in perm[:half]], [names[i] for i in perm[half:]]
     out: list[str] = []
-    for a, b in zip(tune, held, strict=False):
+    for a, b in zip(tuning, held, strict=False):
         out += [a, b]
-    return out + tune[len(held) :] + held[len(tune) :]
+    return out + tuning[len(held) :] + held[len(tuning) :]
 
 
 def published_fits(material: str) -> tuple[dict[str, Any], dict[str, str]]:
@@ -425,14 +404,16 @@ def main() -> None:
     ap.add_argument("--no-timing", action="store_true", help="skip the cold-process timing")
     args = ap.parse_args()
     sys.path.insert(0, str(HERE))
-    names = all_materials()
-    where = split(names)
-    order = args.only or run_order(names)
+    import _nbrdf_split
+
+    tuning, held = _nbrdf_split.split(ARCHIVE)
+    where = {**dict.fromkeys(tuning, "tuning"), **dict.fromkeys(held, "held-out")}
+    order = args.only or run_order(tuning, held)
     if args.materials:
         order = order[: args.materials]
     rows: list[dict] = []
     noise: list[dict] = []
-    comment = f"gonio fit default vs published fits; split seed {SPLIT_SEED}"
+    comment = f"gonio fit default vs published fits; split seed {_nbrdf_split.SEED}"
     for k, name in enumerate(order):
         t0 = time.perf_counter()
         r, n = run_material(name, where[name], k < args.noise)
