@@ -16,8 +16,6 @@ import os
 import time
 from pathlib import Path
 
-import numpy as np
-
 from gonio.io.storage import append_whole, storage_error
 from gonio.io.strict_json import dumps_json
 
@@ -43,7 +41,7 @@ class RunLog:
             return
         rec = {"t": round(time.time(), 6), "event": event, **fields}
         try:
-            append_whole(self._fd, (dumps_json(rec, default=_jsonable) + "\n").encode("utf-8"))
+            append_whole(self._fd, (dumps_json(rec, default=str) + "\n").encode("utf-8"))
         except OSError as exc:
             self.error = storage_error(exc, self.path) or exc
 
@@ -57,11 +55,3 @@ class RunLog:
             with contextlib.suppress(OSError):
                 os.close(self._fd)
             self._fd = -1
-
-
-def _jsonable(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    return str(o)
