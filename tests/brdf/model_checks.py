@@ -95,6 +95,24 @@ def check_stress(model) -> None:
         assert np.all(np.asarray(s.weight)[ww[:, 2] <= 0] == 0), f"{model!r}: weight for wo below"
 
 
+def check_properties(model, evaluated=None, isotropic: bool = True) -> None:
+    """The property sequence every analytic model passes: reciprocity, non-negativity with the
+    lower hemisphere masked, isotropy (when ``isotropic``), stress input, finite parameter
+    gradients and sample weights that match f and pdf.
+
+    ``evaluated`` is what the direction checks call (e.g. a :class:`Jitted` wrapper of
+    ``model``, one compile per program); the gradient check always takes ``model`` itself.
+    """
+    e = model if evaluated is None else evaluated
+    check_reciprocity(e)
+    check_nonnegative_and_masked(e)
+    if isotropic:
+        check_isotropy(e)
+    check_stress(e)
+    check_param_gradients(model)
+    check_sample_weight_consistent(e)
+
+
 def check_param_gradients(model, names=None) -> None:
     """jax.grad of f, pdf and sample weight w.r.t. every parameter is finite on stress input.
 

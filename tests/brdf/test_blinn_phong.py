@@ -83,12 +83,7 @@ def test_peak_and_sharp_lobe_precision(dtype):
 def test_properties(rho_d, rho_s, n):
     m = models.BlinnPhong(rho_d, rho_s, n)
     j = mc.Jitted(m)  # one compile per program for every parameter set (op by op: 10-60 s each)
-    mc.check_reciprocity(j)
-    mc.check_nonnegative_and_masked(j)
-    mc.check_isotropy(j)
-    mc.check_stress(j)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(j)
+    mc.check_properties(m, j)
 
 
 @pytest.mark.parametrize("rho_d, n, thetas, kw", FAST_CHI2)

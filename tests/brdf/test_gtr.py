@@ -38,12 +38,7 @@ def test_ndf_normalized(alpha, gamma):
 def test_properties(alpha, gamma):
     m = models.GTR([0.9, 0.5, 0.2], alpha, gamma, 0.3)
     j = mc.Jitted(m)  # one compile per program for every parameter set
-    mc.check_reciprocity(j)
-    mc.check_nonnegative_and_masked(j)
-    mc.check_isotropy(j)
-    mc.check_stress(j)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(j)
+    mc.check_properties(m, j)
 
 
 def test_param_gradients_finite():

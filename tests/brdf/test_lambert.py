@@ -16,12 +16,7 @@ def test_value_and_channels():
 @pytest.mark.parametrize("albedo", [0.0, 0.5, 1.0, [0.9, 0.2, 0.05]])
 def test_properties(albedo):
     m = models.Lambert(albedo)
-    mc.check_reciprocity(m)
-    mc.check_nonnegative_and_masked(m)
-    mc.check_isotropy(m)
-    mc.check_stress(m)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(m)
+    mc.check_properties(m)
 
 
 def test_albedo_is_exact():

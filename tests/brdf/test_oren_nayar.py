@@ -74,12 +74,7 @@ def test_pole_and_grazing_are_finite():
 )
 def test_properties(albedo, sigma):
     m = models.OrenNayar(albedo, sigma)
-    mc.check_reciprocity(m)
-    mc.check_nonnegative_and_masked(m)
-    mc.check_isotropy(m)
-    mc.check_stress(m)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(m)
+    mc.check_properties(m)
 
 
 def test_gradient_matches_finite_difference():

@@ -66,12 +66,7 @@ def test_peak_and_sharp_lobe_precision(dtype):
 )  # fmt: skip
 def test_properties(rho_d, rho_s, n):
     m = models.Phong(rho_d, rho_s, n)
-    mc.check_reciprocity(m)
-    mc.check_nonnegative_and_masked(m)
-    mc.check_isotropy(m)
-    mc.check_stress(m)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(m)
+    mc.check_properties(m)
 
 
 @pytest.mark.parametrize("rho_d, n, thetas", FAST_CHI2)

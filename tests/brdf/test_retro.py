@@ -27,12 +27,7 @@ def test_peak_at_the_light():
 def test_properties(rho, n):
     m = models.Retroreflection(rho, n)
     j = mc.Jitted(m)  # one compile per program for every parameter set
-    mc.check_reciprocity(j)
-    mc.check_nonnegative_and_masked(j)
-    mc.check_isotropy(j)
-    mc.check_stress(j)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(j)
+    mc.check_properties(m, j)
 
 
 @pytest.mark.parametrize(

@@ -98,13 +98,7 @@ PROPERTY_SETS = [
 @pytest.mark.parametrize("variant, rho_d, rho_s, ax, ay", PROPERTY_SETS)
 def test_properties(variant, rho_d, rho_s, ax, ay):
     m = models.Ward(rho_d, rho_s, ax, ay, variant=variant)
-    mc.check_reciprocity(m)
-    mc.check_nonnegative_and_masked(m)
-    if ax == ay:
-        mc.check_isotropy(m)
-    mc.check_stress(m)
-    mc.check_param_gradients(m)
-    mc.check_sample_weight_consistent(m)
+    mc.check_properties(m, isotropic=ax == ay)
 
 
 @pytest.mark.parametrize("rho_d, ax, ay, variant, thetas, kw", FAST_CHI2)
