@@ -136,15 +136,17 @@ class Kernels:
             s = m.sample(wo, u)
             return s.wi, s.pdf, rgb(s.weight), s.delta
 
-        self._f = jax.jit(f)
-        self._pdf = jax.jit(lambda m, wi, wo: m.pdf(wi, wo))
-        self._sample = jax.jit(sample)
+        # the model is closed over (a constant of each program): no pytree to flatten per call
+        self._f = jax.jit(lambda wi, wo: f(model, wi, wo))
+        self._pdf = jax.jit(lambda wi, wo: model.pdf(wi, wo))
+        self._sample = jax.jit(lambda wo, u: sample(model, wo, u))
 
     def _run(self, fn: Callable[..., Any], *arrays: np.ndarray) -> list[np.ndarray]:
         n = arrays[0].shape[0]
         size = 1 << max(0, (n - 1).bit_length())
-        padded = [np.pad(a, ((0, size - n), (0, 0)), constant_values=0.5) for a in arrays]
-        out = fn(self.model, *padded)
+        if size > n:
+            arrays = tuple(np.pad(a, ((0, size - n), (0, 0)), constant_values=0.5) for a in arrays)
+        out = fn(*arrays)
         out = out if isinstance(out, tuple) else (out,)
         return [np.asarray(o)[:n] for o in out]
 
@@ -301,3 +303,73 @@ def register() -> None:
     cls = _plugin_class(mi, dr)
     mi.register_bsdf(PLUGIN, lambda props: cls(props))
     _REGISTERED.add(variant)
+
+
+def scene_fragment(name: str, model: Any, header: str) -> tuple[str, dict[str, Any]]:
+    """``(XML <bsdf> fragment, load_dict dictionary)`` using the plugin with ``model`` inline.
+
+    The XML begins with comments saying how to register the plugin and the Python-API
+    equivalent; the dictionary is ``{"type": "gonio", "model": <model JSON text>}``.
+    """
+    import xml.etree.ElementTree as ET
+
+    spec = json.dumps(model.to_dict(), separators=(",", ":"))
+    data = {"type": PLUGIN, "model": spec}
+    el = ET.Element("bsdf", {"type": PLUGIN, "id": name})
+    ET.SubElement(el, "string", {"name": "model", "value": spec})
+    ET.indent(el)
+    comments = [
+        header,
+        "needs gonio at render time: in the Python process that loads this scene, after "
+        f"mitsuba.set_variant(...): {REGISTER_HINT}",
+        "Python API: mi.load_dict({'type': 'gonio', 'model': <the value below>}) or "
+        "{'type': 'gonio', 'filename': 'FIT.json'}; wrap it in a 'twosided' BSDF for a "
+        "two-sided surface",
+    ]
+    text = "".join(f"<!-- {c.replace('--', '- -')} -->\n" for c in comments)
+    return text + ET.tostring(el, encoding="unicode") + "\n", data
+
+
+def export(fit: Any) -> Any:
+    """The plugin export of a fit (``gonio export FIT --to mitsuba --plugin``): an
+    :class:`~gonio.export.Export` with ``mapping == "plugin"``, files ``.xml`` (the fragment)
+    and ``.json`` (its ``load_dict`` dictionary).
+
+    Parameters
+    ----------
+    fit : a fit-result JSON path, a :class:`gonio.fit.FitResult` or its ``to_json()`` dict.
+
+    Raises
+    ------
+    ParameterError
+        For a fit the plugin cannot render (:func:`supports`: a spectral fit, a table).
+    """
+    from gonio.export._common import Export
+    from gonio.export._lobes import describe
+    from gonio.export._source import load
+    from gonio.io.strict_json import dumps_json
+
+    src = load(fit)
+    if not supports(src.model):
+        raise ParameterError(
+            f"the gonio Mitsuba plugin renders RGB (or one-channel) fits; this fit has "
+            f"{len(src.channels)} channels ({', '.join(src.channels[:4])}...): export it "
+            "without --plugin"
+        )
+    family = describe(src.model)
+    header = f"gonio export: {src.name} for Mitsuba 3 through the gonio BSDF plugin ({family})"
+    xml, data = scene_fragment(src.name, src.model, header)
+    files = {
+        ".xml": xml,
+        ".json": dumps_json(data, indent=2, nonfinite="refuse", source=f"{src.name}.json") + "\n",
+    }
+    notes = [
+        f"the scene needs gonio at render time: {REGISTER_HINT}",
+        "one-sided like gonio's models; evaluates and samples gonio's own model (exact)",
+    ]
+    out = Export(
+        "mitsuba", src.name, files, "plugin", family, {"model": src.model.to_dict()},
+        notes=notes, data=data,
+    )  # fmt: skip
+    out.source = None if src.path is None else str(src.path)
+    return out
