@@ -64,10 +64,12 @@ def gonio_sphere(model, size: int = SIZE, ss: int = SS) -> np.ndarray:
     return img.reshape(size, ss, size, ss, -1).astype(np.float64).mean(axis=(1, 3))
 
 
-def mitsuba_scene(mi, bsdf: dict, light: np.ndarray = LIGHT, size: int = SIZE) -> dict:
+def mitsuba_scene(
+    mi, bsdf: dict, light: np.ndarray = LIGHT, size: int = SIZE, spp: int = 64, seed: int = 0
+) -> dict:
     """Mitsuba's ``load_dict`` form of the render tests' scene: the unit sphere made of
     ``bsdf``, an orthographic camera on +z covering [-1, 1]^2 (``size`` pixels, box filter,
-    64 stratified samples), one directional light of irradiance 1 toward ``light``, and the
+    ``spp`` stratified samples), one directional light of irradiance 1 toward ``light``, and the
     ``direct`` integrator sampling the emitter only (exact for a delta light)."""
     return {
         "type": "scene",
@@ -84,7 +86,7 @@ def mitsuba_scene(mi, bsdf: dict, light: np.ndarray = LIGHT, size: int = SIZE) -
                 "rfilter": {"type": "box"},
                 "pixel_format": "rgb",
             },
-            "sampler": {"type": "stratified", "sample_count": 64, "seed": 0},
+            "sampler": {"type": "stratified", "sample_count": spp, "seed": seed},
         },
         "sphere": {"type": "sphere", "bsdf": bsdf},
         "light": {

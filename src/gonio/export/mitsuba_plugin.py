@@ -142,7 +142,8 @@ class Kernels:
         self._sample = jax.jit(lambda wo, u: sample(model, wo, u))
 
     def _run(self, fn: Callable[..., Any], *arrays: np.ndarray) -> list[np.ndarray]:
-        n = arrays[0].shape[0]
+        n = max(a.shape[0] for a in arrays)  # a Dr.Jit width of 1 broadcasts
+        arrays = tuple(np.broadcast_to(a, (n, a.shape[1])) for a in arrays)
         size = 1 << max(0, (n - 1).bit_length())
         if size > n:
             arrays = tuple(np.pad(a, ((0, size - n), (0, 0)), constant_values=0.5) for a in arrays)
