@@ -296,6 +296,11 @@ def test_bad_parameters_are_one_line_errors(mi, tmp_path):
 
     with pytest.raises(GonioError, match="1 or 3 channels"):
         read_model(model=json.dumps(models.Lambert(albedo=[0.1, 0.2, 0.3, 0.4]).to_dict()))
+    from tests.export.conftest import fit_record, write_record
+
+    three = fit_record(models.Lambert(albedo=[0.1, 0.2, 0.3]), channels=("450nm", "550nm", "650nm"))
+    with pytest.raises(GonioError, match="a spectral fit"):
+        read_model(str(write_record(tmp_path / "spectral.json", three)))
 
 
 def test_cli_plugin_fragment_loads_and_evaluates(mi, tmp_path, capsys):

@@ -94,16 +94,22 @@ def read_model(filename: str | None = None, model: str | None = None) -> Any:
         Not a fit result or model description.
     """
     from gonio.io.fit_result import load_fit, load_fit_text
+    from gonio.io.spectral import wavelengths_from_names
 
     if (filename is None) == (model is None):
         raise ParameterError("the gonio BSDF takes one of 'filename' (a fit JSON) or 'model'")
     if filename is not None:
-        _, m = load_fit(Path(filename), descriptions=True)
+        record, m = load_fit(Path(filename), descriptions=True)
         where = filename
     else:
         assert model is not None
-        _, m = load_fit_text(model, "gonio BSDF 'model'", descriptions=True)
+        record, m = load_fit_text(model, "gonio BSDF 'model'", descriptions=True)
         where = "the inline model"
+    if wavelengths_from_names(record.get("data", {}).get("channels", [])) is not None:
+        raise ParameterError(
+            f"{where}: a spectral fit; the gonio Mitsuba plugin renders RGB fits (export it "
+            "without --plugin, which converts it to linear sRGB)"
+        )
     if not supports(m):
         raise ParameterError(
             f"{where}: the gonio Mitsuba plugin renders analytic models with 1 or 3 channels "
@@ -351,7 +357,7 @@ def export(fit: Any) -> Any:
     from gonio.io.strict_json import dumps_json
 
     src = load(fit)
-    if not supports(src.model):
+    if src.spectral or not supports(src.model):
         raise ParameterError(
             f"the gonio Mitsuba plugin renders RGB (or one-channel) fits; this fit has "
             f"{len(src.channels)} channels ({', '.join(src.channels[:4])}...): export it "
