@@ -97,6 +97,25 @@ def mitsuba_scene(
     }
 
 
+def path_scene(mi, bsdf: dict, size: int, spp: int, depth: int) -> dict:
+    """A sphere made of ``bsdf`` under a white constant environment, seen by a perspective
+    camera at z = 4 (``size`` pixels, ``spp`` independent samples), path-traced to ``depth``."""
+    return {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": depth},
+        "sensor": {
+            "type": "perspective",
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]
+            ),
+            "film": {"type": "hdrfilm", "width": size, "height": size},
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+        "sphere": {"type": "sphere", "bsdf": bsdf},
+        "light": {"type": "constant"},
+    }
+
+
 @pytest.fixture
 def record_file(tmp_path):
     def make(model, name="fit.json", **kw):

@@ -250,25 +250,10 @@ def test_sample_weight_is_eval_over_pdf(mi):
 
 def test_render_a_sphere(mi):
     """``mi.render`` of a small sphere scene (path tracer, environment light) with the plugin."""
-    scene = mi.load_dict(
-        {
-            "type": "scene",
-            "integrator": {"type": "path", "max_depth": 2},
-            "sensor": {
-                "type": "perspective",
-                "to_world": mi.ScalarTransform4f().look_at(
-                    origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]
-                ),
-                "film": {"type": "hdrfilm", "width": 8, "height": 8},
-                "sampler": {"type": "independent", "sample_count": 2},
-            },
-            "sphere": {
-                "type": "sphere",
-                "bsdf": {"type": "gonio", "filename": str(FITS / "red-plastic.json")},
-            },
-            "light": {"type": "constant"},
-        }
-    )
+    from tests.export.conftest import path_scene
+
+    bsdf = {"type": "gonio", "filename": str(FITS / "red-plastic.json")}
+    scene = mi.load_dict(path_scene(mi, bsdf, 8, 2, 2))
     img = np.array(mi.render(scene, seed=0))
     assert img.shape == (8, 8, 3) and np.all(np.isfinite(img))
     centre = img[3:5, 3:5].mean(axis=(0, 1))
