@@ -236,9 +236,11 @@ def test_sample_weight_is_eval_over_pdf(mi):
 
     model = family_model("lambert+retro+gtr")
     bsdf = plugin(mi, model)
-    ctx = mi.BSDFContext()
     si = dr.zeros(mi.SurfaceInteraction3f)
-    for view, u in zip(hemisphere(8, 5), np.random.default_rng(6).random((8, 2)), strict=True):
+    pairs = zip(hemisphere(8, 5), np.random.default_rng(6).random((8, 2)), strict=True)
+    for k, (view, u) in enumerate(pairs):
+        # radiance and importance transport (the adjoint: f's arguments swapped)
+        ctx = mi.BSDFContext(mi.TransportMode.Importance if k % 2 else mi.TransportMode.Radiance)
         si.wi = mi.Vector3f(*view.tolist())
         bs, w = bsdf.sample(ctx, si, 0.5, mi.Point2f(*u.tolist()))
         if float(bs.pdf) == 0:
@@ -246,6 +248,10 @@ def test_sample_weight_is_eval_over_pdf(mi):
         value, p = bsdf.eval_pdf(ctx, si, bs.wo)
         assert float(p) == pytest.approx(float(bs.pdf), rel=1e-4)
         np.testing.assert_allclose(np.array(w), np.array(value) / float(p), rtol=1e-4)
+        light = np.array(bs.wo, np.float64)
+        gonio_wi, gonio_wo = (view, light) if k % 2 else (light, view)
+        want = rgb3(np.asarray(model.f(gonio_wi, gonio_wo))) * light[2]
+        np.testing.assert_allclose(np.array(value), want, rtol=1e-5)
 
 
 def test_render_a_sphere(mi):
