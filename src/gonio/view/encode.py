@@ -274,3 +274,21 @@ def sphere_table(label: str, material: Any) -> SphereTable:
         resampling=how,
         resampling_error=err,
     )
+
+
+def environment_map() -> dict[str, Any]:
+    """The spheres' environment for the page: gonio's studio lat-long map
+    (:func:`gonio.render.lights.studio_environment`, the default light of ``gonio render``),
+    ``(H, W, 3)`` linear RGB radiance in float32, gzip + base64, rows from straight up (+y)
+    down, the centre column facing -z (:func:`gonio.render.lights.latlong_to_direction`)."""
+    from gonio.render.lights import studio_environment
+
+    img = np.ascontiguousarray(studio_environment(), dtype="<f4")
+    h, w = img.shape[:2]
+    return {
+        "shape": [h, w],
+        "radiance": _pack(img),
+        "description": (
+            f"gonio's studio environment ({h}x{w} lat-long map, the default light of gonio render)"
+        ),
+    }

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.io.strict_json import dumps_json
-from gonio.view.encode import sphere_table
+from gonio.view.encode import environment_map, sphere_table
 from gonio.view.figures import (
     coverage_figure,
     map_range,
@@ -49,13 +49,19 @@ BOOT = """
   const data = JSON.parse(document.getElementById("gonio-data").textContent);
   const config = { displaylogo: false, responsive: true };
   // the spheres first (their first frame is not held up by the plots), then the plots
-  gonioSphere.start(data.spheres).catch((e) => {
+  gonioSphere.start(data.spheres, data.environment).catch((e) => {
     document.getElementById("sphere-status").textContent = "sphere: " + e.message;
     window.gonioView = { webgl2: false, error: String(e) };
   }).finally(() => {
+    // Plotly's bundle is run only now: parsing it does not hold up the spheres' first frame
+    const lib = document.createElement("script");
+    lib.textContent = document.getElementById("plotly-src").textContent;
+    document.head.append(lib);
+    performance.mark("gonio:plotly-loaded");
     for (const [id, fig] of Object.entries(data.figures)) {
       Plotly.newPlot(id, fig.data, fig.layout, config);
     }
+    performance.mark("gonio:plots");
     window.gonioView.ready = true;
   });
 })();
@@ -126,6 +132,8 @@ def build_page(sources: list[Source]) -> str:
     import plotly.offline
 
     figures, spheres = page_data(sources)
+    environment = environment_map()
+    env_note = environment["description"]
     labels = ", ".join(s.label for s in sources)
     notes = []
     for s, t in zip(sources, spheres, strict=True):
@@ -150,14 +158,24 @@ def build_page(sources: list[Source]) -> str:
 <h1>gonio view: {html.escape(labels)}</h1>
 <h2>Spheres</h2>
 <p class=note>Unit spheres seen from above (orthographic), lit by a directional light of
-irradiance 1: pixel = f · cos θi in linear units, times 2<sup>exposure</sup>, shown in sRGB.
-Drag on a sphere to move the light.</p>
+irradiance 1 (pixel = f · cos θi in linear units) and/or by {html.escape(env_note)}; the sum,
+times 2<sup>exposure</sup>, shown in sRGB. Drag on a sphere to move the light. The environment
+is refined progressively (the sample count is shown) and converges to the sphere that
+<code>gonio render</code> draws under the same map.</p>
+<div class=controls>
+<label><input type="radio" name="light-mode" value="point"> point light</label>
+<label><input type="radio" name="light-mode" value="environment"> environment</label>
+<label><input type="radio" name="light-mode" value="both" checked> both</label>
+<span id="env-label"></span>
+</div>
 <div class=controls>
 <label>light θ <input id="light-theta" type="range" min="0" max="89" step="0.5" value="0"></label>
 <label>φ <input id="light-phi" type="range" min="-180" max="180" step="1" value="0"></label>
 <span id="light-label"></span>
 <label>exposure <input id="exposure" type="range" min="-10" max="10" step="0.1" value="0"></label>
 <span id="exposure-label">exposure: 0.0 EV</span>
+<label>environment <input id="env-ev" type="range" min="-8" max="4" step="0.1" value="0"></label>
+<span id="env-ev-label">environment: 0.0 EV</span>
 </div>
 <p id="sphere-status" class=note></p>
 <div id="spheres"></div>
@@ -169,11 +187,11 @@ Drag on a sphere to move the light.</p>
 <h2>θh–θd maps</h2>
 {maps}
 {"<h2>Coverage</h2>" + covs if covs else ""}
-<script>{plotly.offline.get_plotlyjs()}</script>
 <script type="application/json" id="gonio-data">{
-        _json_script({"figures": figures, "spheres": spheres})
+        _json_script({"figures": figures, "spheres": spheres, "environment": environment})
     }</script>
 <script>{sphere_js}</script>
+<script type="text/plain" id="plotly-src">{plotly.offline.get_plotlyjs()}</script>
 <script>{BOOT}</script>
 </body></html>
 """
