@@ -1,12 +1,14 @@
 """The one self-contained page of ``gonio view``: spheres (WebGL2), plots (Plotly), fit panels.
 
 Everything the page needs is inside it: Plotly's offline bundle (from the ``plotly`` Python
-package), the sphere script (``sphere.js``, package data), and the data as JSON. Its Content
+package, gzip + base64, run once the spheres have drawn their first frame), the sphere script
+(``sphere.js``, package data), gonio's studio environment map and the data as JSON. Its Content
 Security Policy forbids every network request, so opening it fetches nothing.
 """
 
 from __future__ import annotations
 
+import functools
 import html
 import math
 from importlib import resources
@@ -14,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.io.strict_json import dumps_json
-from gonio.view.encode import environment_map, sphere_table
+from gonio.view.encode import environment_map, pack, sphere_table
 from gonio.view.figures import (
     coverage_figure,
     map_range,
@@ -52,10 +54,13 @@ BOOT = """
   gonioSphere.start(data.spheres, data.environment).catch((e) => {
     document.getElementById("sphere-status").textContent = "sphere: " + e.message;
     window.gonioView = { webgl2: false, error: String(e) };
-  }).finally(() => {
-    // Plotly's bundle is run only now: parsing it does not hold up the spheres' first frame
+  }).then(() => {
+    // Plotly's bundle (gzip, base64) is inflated and run only now: it does not hold up the
+    // spheres' first frame
+    return gonioSphere.inflate(document.getElementById("plotly-src").textContent.trim());
+  }).then((bytes) => {
     const lib = document.createElement("script");
-    lib.textContent = document.getElementById("plotly-src").textContent;
+    lib.textContent = new TextDecoder().decode(bytes);
     document.head.append(lib);
     performance.mark("gonio:plotly-loaded");
     for (const [id, fig] of Object.entries(data.figures)) {
@@ -66,6 +71,15 @@ BOOT = """
   });
 })();
 """
+
+
+@functools.cache
+def plotly_packed() -> str:
+    """Plotly's offline bundle (from the ``plotly`` package), gzip-compressed and base64-encoded
+    (a third of its size); the page inflates it with the browser's ``DecompressionStream``."""
+    import plotly.offline
+
+    return pack(plotly.offline.get_plotlyjs().encode("utf-8"))
 
 
 def _json_script(obj: Any) -> str:
@@ -129,8 +143,6 @@ def page_data(sources: list[Source]) -> tuple[dict[str, Any], list[dict[str, Any
 
 def build_page(sources: list[Source]) -> str:
     """The page's HTML text (see the module docstring)."""
-    import plotly.offline
-
     figures, spheres = page_data(sources)
     environment = environment_map()
     env_note = environment["description"]
@@ -191,7 +203,7 @@ is refined progressively (the sample count is shown) and converges to the sphere
         _json_script({"figures": figures, "spheres": spheres, "environment": environment})
     }</script>
 <script>{sphere_js}</script>
-<script type="text/plain" id="plotly-src">{plotly.offline.get_plotlyjs()}</script>
+<script type="text/plain" id="plotly-src">{plotly_packed()}</script>
 <script>{BOOT}</script>
 </body></html>
 """

@@ -358,10 +358,12 @@ void main() {
       this.acc = null;
     }
     // the table's texture: (f * mask, mask) per node, RG16F (grey) or RGBA16F (RGB)
-    async load(envImage, env) {
+    // `bytes`: the promise of the table's inflated (values, mask)
+    async load(bytes, envImage, env) {
       const gl = this.gl, t = this.table;
       const [nth, ntd, npd] = t.shape;
-      const [vals, mask] = await Promise.all([inflate(t.values), t.mask ? inflate(t.mask) : null]);
+      const [vals, mask] = await bytes;
+      mark("inflated");
       const v16 = new Uint16Array(vals.buffer);
       const c = t.channels, nodes = nth * ntd * npd, k = c === 3 ? 4 : 2;
       const tex = new Uint16Array(nodes * k);
@@ -390,38 +392,45 @@ void main() {
         gl.activeTexture(gl.TEXTURE3);
         gl.bindTexture(gl.TEXTURE_2D, e.alias);
       }
-      check(gl, this.show);
-      const progs = this.envOk ? [this.show, this.envProg] : [this.show];
-      if (this.envOk) check(gl, this.envProg);
-      for (const prog of progs) {
-        gl.useProgram(prog);
-        const u = (name) => gl.getUniformLocation(prog, name);
-        gl.uniform1i(u("uTab"), 0);
-        gl.uniform1i(u("uMasked"), t.mask ? 1 : 0);
-        gl.uniform1i(u("uNearest"), t.nearest ? 1 : 0);
-        gl.uniform1i(u("uFold"), t.fold);
-        gl.uniform1f(u("uScale"), t.scale);
-        gl.uniform1i(u("uChannels"), c);
-        gl.uniform3f(u("uLo"), ax[0].lo, ax[1].lo, ax[2].lo);
-        gl.uniform3f(u("uHi"), ax[0].hi, ax[1].hi, ax[2].hi);
-        gl.uniform3f(u("uOffset"), ax[0].node_offset, ax[1].node_offset, ax[2].node_offset);
-        gl.uniform3i(u("uSize"), ax[0].size, ax[1].size, ax[2].size);
-        gl.uniform3i(u("uSqrt"), ...ax.map((a) => (a.warp === "sqrt" ? 1 : 0)));
-        gl.uniform3i(u("uPeriodic"), ...ax.map((a) => (a.periodic ? 1 : 0)));
-      }
+      mark("uploaded");
+      check(gl, this.show);  // the environment's program is checked when first used
+      this.tableUniforms(this.show);
       this.su = (name) => gl.getUniformLocation(this.show, name);
-      gl.useProgram(this.show);
       gl.uniform1i(this.su("uAccum"), 1);
-      if (this.envOk) {
-        gl.useProgram(this.envProg);
+      this.env = env;
+      gl.activeTexture(gl.TEXTURE1);
+    }
+    tableUniforms(prog) {
+      const gl = this.gl, t = this.table, ax = t.axes;
+      gl.useProgram(prog);
+      const u = (name) => gl.getUniformLocation(prog, name);
+      gl.uniform1i(u("uTab"), 0);
+      gl.uniform1i(u("uMasked"), t.mask ? 1 : 0);
+      gl.uniform1i(u("uNearest"), t.nearest ? 1 : 0);
+      gl.uniform1i(u("uFold"), t.fold);
+      gl.uniform1f(u("uScale"), t.scale);
+      gl.uniform1i(u("uChannels"), t.channels);
+      gl.uniform3f(u("uLo"), ax[0].lo, ax[1].lo, ax[2].lo);
+      gl.uniform3f(u("uHi"), ax[0].hi, ax[1].hi, ax[2].hi);
+      gl.uniform3f(u("uOffset"), ax[0].node_offset, ax[1].node_offset, ax[2].node_offset);
+      gl.uniform3i(u("uSize"), ax[0].size, ax[1].size, ax[2].size);
+      gl.uniform3i(u("uSqrt"), ...ax.map((a) => (a.warp === "sqrt" ? 1 : 0)));
+      gl.uniform3i(u("uPeriodic"), ...ax.map((a) => (a.periodic ? 1 : 0)));
+    }
+    // the environment's program, linked in the background since the constructor
+    envProgram() {
+      const gl = this.gl;
+      if (!this.eu) {
+        check(gl, this.envProg);
+        this.tableUniforms(this.envProg);
         const u = (name) => gl.getUniformLocation(this.envProg, name);
         gl.uniform1i(u("uPrev"), 1);
         gl.uniform1i(u("uEnv"), 2);
         gl.uniform1i(u("uAlias"), 3);
-        gl.uniform1i(u("uCellBits"), Math.round(Math.log2(env.shape[0] * env.shape[1])));
+        gl.uniform1i(u("uCellBits"), Math.round(Math.log2(this.env.shape[0] * this.env.shape[1])));
         this.eu = u;
       }
-      gl.activeTexture(gl.TEXTURE1);
+      gl.useProgram(this.envProg);
     }
     // (re)start the environment's accumulation at size x size pixels
     resetEnv(size) {
@@ -442,7 +451,7 @@ void main() {
     // add one frame of environment samples (sequence `seed`) to the accumulation
     accumulate(seed) {
       const gl = this.gl, [prev, next] = this.acc;
-      gl.useProgram(this.envProg);
+      this.envProgram();
       gl.bindFramebuffer(gl.FRAMEBUFFER, next.fb);
       gl.viewport(0, 0, next.size, next.size);
       gl.bindTexture(gl.TEXTURE_2D, prev.tex);
@@ -584,9 +593,11 @@ void main() {
       window.gonioView = { webgl2: false };
       return;
     }
+    // every inflate started at once (the browser runs them off the main thread)
+    const bytes = tables.map((t) => Promise.all([inflate(t.values), t.mask ? inflate(t.mask) : null]));
     const envImage = env ? new Float32Array((await inflate(env.radiance)).buffer) : null;
     mark("env-inflated");
-    for (const t of tables) {
+    for (const [k, t] of tables.entries()) {
       const fig = document.createElement("figure");
       const c = document.createElement("canvas");
       c.width = c.height = 384;
@@ -596,7 +607,7 @@ void main() {
       fig.append(c, cap);
       box.append(fig);
       const s = new Sphere(c, t, env);
-      await s.load(envImage, env);
+      await s.load(bytes[k], envImage, env);
       s.resetEnv(c.width);
       dragOn(c);
       state.spheres.push(s);
@@ -666,5 +677,5 @@ void main() {
     };
     refine();
   }
-  window.gonioSphere = { start };
+  window.gonioSphere = { start, inflate };
 })();
