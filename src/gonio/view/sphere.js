@@ -12,11 +12,12 @@
 // the shading frame of gonio/render/scene.py.
 // Environment: pixel = integral of L(wi) f(wi, wo) cos theta_i over the upper hemisphere, L the
 // lat-long map shipped in the page (gonio.render.lights.Environment, nearest texel), estimated
-// progressively: each frame adds, per pixel, one sample importance-sampled from the map (its
-// channel mean times sin theta, O(1) alias table), one cosine-weighted and one from gonio's
-// material-independent cosine-power half-vector lobes (gonio/appearance/environment.py),
-// weighted by the balance heuristic (unbiased at every frame). Random numbers: frame i's point of Roberts' R3 / R2 low-discrepancy
-// sequences, rotated per pixel by a PCG hash of (pixel, seed): a fixed sequence. The mean of N frames converges to the integral as 1/sqrt(N).
+// progressively: each frame adds one sample per pixel, frames cycling through three strategies:
+// importance-sampled from the map (its channel mean times sin theta, O(1) alias table),
+// cosine-weighted, and gonio's material-independent cosine-power half-vector lobes
+// (gonio/appearance/environment.py), weighted by the balance heuristic (each cycle of three
+// frames an unbiased estimate). Random numbers: frame i's point of Roberts' R3 / R2 low-discrepancy
+// sequences, rotated per pixel by a PCG hash of (pixel, seed): a fixed sequence. The mean of N cycles converges to the integral.
 "use strict";
 (function () {
   const VS = `#version 300 es
@@ -155,7 +156,8 @@ uniform sampler2D uPrev;
 uniform sampler2D uEnv;    // (H, W): rgb radiance, a = cell probability * H * W / (2 pi^2)
 uniform sampler2D uAlias;  // (H, W): (probability of keeping the cell, alias cell index)
 uniform int uCellBits;
-uniform int uFrame;
+uniform int uFrame;     // the cycle: frame / 3
+uniform int uStrategy;  // frame % 3: 0 the map, 1 cosine, 2 the lobes
 uniform uint uSeed;
 const float LOBES[6] = float[6](10.0, 100.0, 1e3, 1e4, 1e5, 1e6);
 
@@ -209,7 +211,8 @@ void main() {
   uvec2 ul = uvec2(pcg(rngState + 5u), pcg(rngState + 6u)) + i * R2;
   ivec2 esz = textureSize(uEnv, 0);
   vec3 sum = vec3(0.0);
-  for (int s = 0; s < 3; s++) {
+  {
+    int s = uStrategy;
     vec3 wi, world;
     vec4 texel;
     if (s == 0) {  // from the map: alias table, then uniform within the cell
@@ -239,17 +242,16 @@ void main() {
       world = wi.x * t + wi.y * bt + wi.z * n;
       texel = envTexel(latlong(world));
     }
-    if (wi.z <= 0.0) continue;
-    // the balance heuristic over the three (one sample each): f L cos / (p_env + p_cos + p_lobes)
-    float p = envPdf(texel, world) + wi.z / PI + lobePdf(wi, wo);
-    if (p > 0.0) sum += lookup(wi, wo) * texel.rgb * wi.z / p;
+    // the balance heuristic over the three (one sample each per cycle of three frames):
+    // f L cos / (p_env + p_cos + p_lobes)
+    float p = wi.z > 0.0 ? envPdf(texel, world) + wi.z / PI + lobePdf(wi, wo) : 0.0;
+    if (p > 0.0) sum = lookup(wi, wo) * texel.rgb * wi.z / p;
   }
   outColor = vec4(acc + sum, 1.0);
 }`;
 
-  // environment samples per pixel and frame (FS_ENV: one from the map, one cosine, one lobe)
-  const SPP_PER_FRAME = 3;
-  const MAX_FRAMES = 256;
+  // frames (one sample per pixel each) until the environment's refinement stops
+  const MAX_FRAMES = 768;
 
   function b64bytes(s) {
     const bin = atob(s);
@@ -456,7 +458,8 @@ void main() {
       gl.viewport(0, 0, next.size, next.size);
       gl.bindTexture(gl.TEXTURE_2D, prev.tex);
       gl.uniform2f(this.eu("uRes"), next.size, next.size);
-      gl.uniform1i(this.eu("uFrame"), this.frames);
+      gl.uniform1i(this.eu("uFrame"), Math.floor(this.frames / 3));
+      gl.uniform1i(this.eu("uStrategy"), this.frames % 3);
       gl.uniform1ui(this.eu("uSeed"), seed >>> 0);
       gl.drawArrays(gl.TRIANGLES, 0, 3);
       gl.bindFramebuffer(gl.FRAMEBUFFER, null);
@@ -471,7 +474,8 @@ void main() {
       gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
       gl.viewport(0, 0, size, size);
       gl.bindTexture(gl.TEXTURE_2D, env ? this.acc[0].tex : null);
-      gl.uniform1f(this.su("uAccumScale"), env ? 1 / this.frames : 0);  // one estimate per frame
+      // one estimate per cycle of 3 frames (a partial cycle weighs its samples as full ones)
+      gl.uniform1f(this.su("uAccumScale"), env ? 3 / this.frames : 0);
       gl.uniform1f(this.su("uEnvScale"), Math.pow(2, view.envEV));
       gl.uniform1i(this.su("uPoint"), view.mode !== "environment" ? 1 : 0);
       gl.uniform3f(this.su("uLight"), view.light[0], view.light[1], view.light[2]);
@@ -504,7 +508,8 @@ void main() {
   }
 
   // The page: spheres side by side, one light, one mode and one exposure for all.
-  const state = { light: [0, 0, 1], exposure: 0, envEV: 0, mode: "both", spheres: [], seed: 1, held: false };
+  const state = { light: [0, 0, 1], exposure: 0, envEV: 0, mode: "both", spheres: [], seed: 1, held: false,
+                  touched: -1e9 };
   const mark = (name) => performance.mark("gonio:" + name);
   function fromAngles(thetaDeg, phiDeg) {
     const t = (thetaDeg * Math.PI) / 180, p = (phiDeg * Math.PI) / 180;
@@ -513,9 +518,10 @@ void main() {
   function status() {
     const el = document.getElementById("env-label");
     const s = state.spheres[0];
-    if (el && s) el.textContent = s.envOk ? `environment: ${s.frames * SPP_PER_FRAME} samples per pixel` : "environment: not available (no float render targets)";
+    if (el && s) el.textContent = s.envOk ? `environment: ${s.frames} samples per pixel` : "environment: not available (no float render targets)";
   }
   function redraw() { for (const s of state.spheres) s.draw(state, null, s.canvas.width, false); status(); }
+  function touch() { state.touched = performance.now(); redraw(); }
   let looping = false;
   function refine() {  // progressive environment: one frame per animation frame until MAX_FRAMES
     if (looping) return;
@@ -523,7 +529,9 @@ void main() {
       const todo = state.mode !== "point" && !state.held &&
         state.spheres.some((s) => s.envOk && s.frames < MAX_FRAMES);
       if (!todo) { looping = false; return; }
-      for (const s of state.spheres) if (s.envOk && s.frames < MAX_FRAMES) s.accumulate(state.seed);
+      // while the light or the exposure moves, the frames go to the point light alone
+      const busy = performance.now() - state.touched < 250;
+      if (!busy) for (const s of state.spheres) if (s.envOk && s.frames < MAX_FRAMES) s.accumulate(state.seed);
       redraw();
       requestAnimationFrame(step);
     };
@@ -540,7 +548,7 @@ void main() {
     if (pi) pi.value = ph.toFixed(1);
     const lab = document.getElementById("light-label");
     if (lab) lab.textContent = `light: θ = ${th.toFixed(1)}°, φ = ${ph.toFixed(1)}°`;
-    redraw();
+    touch();
   }
   function setMode(mode) {
     state.mode = mode;
@@ -572,7 +580,7 @@ void main() {
       el.addEventListener("input", () => {
         state[key] = parseFloat(el.value);
         document.getElementById(id + "-label").textContent = `${label}: ${state[key].toFixed(1)} EV`;
-        redraw();
+        touch();
       });
     };
     slider("exposure", "exposure", "exposure");
