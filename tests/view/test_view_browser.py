@@ -20,21 +20,27 @@ SIZE = 48  # sphere readback size (pixels); the reference is rendered at the sam
 LIGHTS = ((0.3, 0.2, 0.93), (-0.6, 0.3, 0.74))
 
 
-def _small_table():
-    from gonio.brdf import models
+def _grid_table(model, n_th, n_td, n_pd):
+    """``model`` tabulated on a small MERL-like half/diff grid (sqrt theta_h, periodic phi_d)."""
     from gonio.brdf.grid import Axis
     from gonio.brdf.tabulated import TabulatedBRDF
 
     half = math.pi / 2
     axes = (
-        Axis("theta_h", 24, 0.0, half, "sqrt"),
-        Axis("theta_d", 10, 0.0, half),
-        Axis("phi_d", 12, 0.0, math.pi, "linear", True),
+        Axis("theta_h", n_th, 0.0, half, "sqrt"),
+        Axis("theta_d", n_td, 0.0, half),
+        Axis("phi_d", n_pd, 0.0, math.pi, "linear", True),
     )
+    return TabulatedBRDF.from_model(model, axes=axes)
+
+
+def _small_table():
+    from gonio.brdf import models
+
     m = models.Lambert(albedo=[0.4, 0.3, 0.2]) + models.TorranceSparrow(
         alpha=0.25, distribution="ggx", rho_d=0.0
     )
-    return TabulatedBRDF.from_model(m, axes=axes)
+    return _grid_table(m, 24, 10, 12)
 
 
 LAMBERT_ALBEDO = (0.5, 0.4, 0.3)
@@ -42,16 +48,8 @@ LAMBERT_ALBEDO = (0.5, 0.4, 0.3)
 
 def _lambert_table():
     from gonio.brdf import models
-    from gonio.brdf.grid import Axis
-    from gonio.brdf.tabulated import TabulatedBRDF
 
-    half = math.pi / 2
-    axes = (
-        Axis("theta_h", 6, 0.0, half, "sqrt"),
-        Axis("theta_d", 4, 0.0, half),
-        Axis("phi_d", 4, 0.0, math.pi, "linear", True),
-    )
-    return TabulatedBRDF.from_model(models.Lambert(albedo=list(LAMBERT_ALBEDO)), axes=axes)
+    return _grid_table(models.Lambert(albedo=list(LAMBERT_ALBEDO)), 6, 4, 4)
 
 
 def _fit_file(path):
@@ -187,11 +185,12 @@ ENV_SIZE, ENV_FRAMES = 16, 192  # frames: one sample per pixel each, 64 cycles o
 
 
 def test_environment_converges_to_gonio_studio_render(session):
-    """Two fixed sample sequences (seeds 1 and 2, 192 samples per pixel each) measure the estimate's own noise: ``noise =
-    rmse(A - B) / sqrt(2) / rms(ref)`` per image. Their mean must be within ``0.5 % + 2 noise /
-    sqrt(2)`` relative RMSE of the exact value (0.5 % for the quadrature and float16; an
-    unbiased mean's expected error is ``noise / sqrt(2)``), its image mean within 1 % of the
-    exact one (a bias test the noise cannot hide), and the noise itself below 5 %."""
+    """Two fixed sample sequences (seeds 1 and 2, 192 samples per pixel each) measure the
+    estimate's own noise: ``noise = rmse(A - B) / sqrt(2) / rms(ref)`` per image. Their mean must
+    be within ``0.5 % + 2 noise / sqrt(2)`` relative RMSE of the exact value (0.5 % for the
+    quadrature and float16; an unbiased mean's expected error is ``noise / sqrt(2)``), its image
+    mean within 1 % of the exact one (a bias test the noise cannot hide), and the noise itself
+    below 5 %."""
     driver = session[0]
     ref = _lambert_under_studio(ENV_SIZE)
     a, b = (_webgl_env(driver, 3, ENV_SIZE, ENV_FRAMES, seed) for seed in (1, 2))
