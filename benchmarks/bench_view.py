@@ -12,7 +12,10 @@ machine's CPUs, with the load average (1 min) before and after each browser meas
   inflate + texture upload + shader compile (``loaded``), the first draw waited for;
 * one 512 x 512 frame under the directional light (<= 16 ms) and one environment frame (1
   sample per pixel, progressive; <= 100 ms), each the median of many frames, each frame
-  waited for by a 1-pixel readback;
+  waited for by a 1-pixel readback, with the CPU time the browser's processes spent per frame
+  (user + system, all of them: SwiftShader's threads share the machine's 2 cores, so wall time
+  grows with the load while CPU time much less), and the same frame with the light below every
+  pixel's horizon (no table lookup: what a frame costs before the shader's own work);
 * the sphere against ``render_sphere``: point light (relative RMSE at 128 x 128, <= 1 %), and
   the environment after 768 frames (768 samples per pixel) against ``render_sphere`` with
   ``Environment("studio")`` at 1024 samples per pixel (64 x 64).
@@ -41,6 +44,28 @@ sys.path.insert(0, str(HERE.parent))
 
 def _load() -> float:
     return os.getloadavg()[0]
+
+
+def _cpu_s(root: int) -> float:
+    """CPU time (user + system, s) so far of process ``root`` and all its descendants (Linux
+    /proc): what the browser spent, whatever the machine's load."""
+    parent: dict[int, int] = {}
+    ticks: dict[int, int] = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parent[int(d.name)] = int(fields[1])
+        ticks[int(d.name)] = int(fields[11]) + int(fields[12])
+    tree, todo = set(), [root]
+    while todo:
+        p = todo.pop()
+        tree.add(p)
+        todo += [c for c, pp in parent.items() if pp == p and c not in tree]
+    return sum(ticks.get(p, 0) for p in tree) / os.sysconf("SC_CLK_TCK")
 
 
 def _rel_rmse(a: np.ndarray, b: np.ndarray) -> float:
@@ -89,13 +114,25 @@ def measure(folder: Path, frames: int = 50, env_frames: int = 20) -> list[dict]:
         load1 = _load()
         driver.execute_script("gonioView.hold(true)")
         load2 = _load()
+        pid = driver.service.process.pid
+        c0 = _cpu_s(pid)
         frame_ms = driver.execute_script(
             "return gonioView.timeFrames(0, 512, arguments[0], 'point')", frames
         )
+        c1 = _cpu_s(pid)
         env_ms = driver.execute_script(
             "return gonioView.timeFrames(0, 512, arguments[0], 'environment')", env_frames
         )
+        c2 = _cpu_s(pid)
+        # the floor: the light below every pixel's horizon, so no pixel looks the table up
+        floor_ms = driver.execute_script(
+            "return gonioView.timeFrames(0, 512, arguments[0], 'point', [0, 0, -1])", frames
+        )
+        c3 = _cpu_s(pid)
         load3 = _load()
+        # timeFrames draws 2 untimed frames first
+        frame_cpu, env_cpu = 1e3 * (c1 - c0) / (frames + 2), 1e3 * (c2 - c1) / (env_frames + 2)
+        floor_cpu = 1e3 * (c3 - c2) / (frames + 2)
         got = np.asarray(
             driver.execute_script("return gonioView.readLinear(0, arguments[0], arguments[1])",
                                   light, n), np.float64
@@ -135,10 +172,15 @@ def measure(folder: Path, frames: int = 50, env_frames: int = 20) -> list[dict]:
         {"metric": "first sphere frame after navigation (s)", "value": first_ms / 1000,
          "target": 2, "note": f"{where}, load {load0:.1f} -> {load1:.1f}; {breakdown}"},
         {"metric": "frame at 512x512, point light (ms)", "value": frame_ms, "target": 16,
-         "note": f"{where}, load {load2:.1f} -> {load3:.1f}; median of {frames}"},
+         "note": f"{where}, load {load2:.1f} -> {load3:.1f}; median of {frames}; browser CPU "
+         f"time {frame_cpu:.0f} ms per frame"},
+        {"metric": "frame at 512x512, no table lookup (ms)", "value": floor_ms, "target": "",
+         "note": f"the floor of a frame (sphere geometry, sRGB, compositing, readback): the "
+         f"light below every pixel's horizon; load {load3:.1f}; median of {frames}; browser CPU "
+         f"time {floor_cpu:.0f} ms per frame"},
         {"metric": "frame at 512x512, environment, 1 sample/px (ms)", "value": env_ms,
          "target": 100, "note": f"{where}, load {load2:.1f} -> {load3:.1f}; median of "
-         f"{env_frames}; progressive"},
+         f"{env_frames}; progressive; browser CPU time {env_cpu:.0f} ms per frame"},
         {"metric": "sphere vs render_sphere, point light, relative RMSE (%)",
          "value": 100 * _rel_rmse(got, ref), "target": 1, "note": f"{n}x{n}, same light"},
         {"metric": "sphere vs render_sphere, environment, relative RMSE (%)",

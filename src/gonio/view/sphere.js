@@ -344,7 +344,7 @@ void main() {
     constructor(canvas, table, env) {
       this.canvas = canvas;
       this.table = table;
-      const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
+      const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: false, antialias: false });
       if (!gl) throw new Error("no WebGL2");
       this.gl = gl;
       gl.getExtension("KHR_parallel_shader_compile");
@@ -663,8 +663,9 @@ void main() {
         s.resetEnv(s.canvas.width);
         return out;
       },
-      // median time (ms) of n frames at size x size in `mode`, each waited for (1-pixel read)
-      timeFrames: (k, size, n, mode) => {
+      // median time (ms) of n frames at size x size in `mode`, each waited for (1-pixel read);
+      // the light moves from frame to frame unless `light` is given
+      timeFrames: (k, size, n, mode, light) => {
         state.mode = "point";  // stops the background refinement
         const s = state.spheres[k];
         s.canvas.width = s.canvas.height = size;
@@ -672,7 +673,7 @@ void main() {
         const view = { ...state, mode: mode || "point" };
         const times = [];
         for (let i = -2; i < n; i++) {
-          view.light = fromAngles(10 + (i + 2) % 60, 5 * i);
+          view.light = light || fromAngles(10 + (i + 2) % 60, 5 * i);
           const t0 = performance.now();
           if (view.mode !== "point") s.accumulate(state.seed);
           s.draw(view, null, size, false);
