@@ -14,8 +14,7 @@ machine's CPUs, with the load average (1 min) before and after each browser meas
   sample per pixel, progressive; <= 100 ms), each the median of many frames, each frame
   waited for by a 1-pixel readback, with the CPU time the browser's processes spent per frame
   (user + system, all of them: SwiftShader's threads share the machine's 2 cores, so wall time
-  grows with the load while CPU time much less), and the same frame with the light below every
-  pixel's horizon (no table lookup: what a frame costs before the shader's own work);
+  grows with the load while CPU time much less));
 * the sphere against ``render_sphere``: point light (relative RMSE at 128 x 128, <= 1 %), and
   the environment after 768 frames (768 samples per pixel) against ``render_sphere`` with
   ``Environment("studio")`` at 1024 samples per pixel (64 x 64).
@@ -124,15 +123,9 @@ def measure(folder: Path, frames: int = 50, env_frames: int = 20) -> list[dict]:
             "return gonioView.timeFrames(0, 512, arguments[0], 'environment')", env_frames
         )
         c2 = _cpu_s(pid)
-        # the floor: the light below every pixel's horizon, so no pixel looks the table up
-        floor_ms = driver.execute_script(
-            "return gonioView.timeFrames(0, 512, arguments[0], 'point', [0, 0, -1])", frames
-        )
-        c3 = _cpu_s(pid)
         load3 = _load()
         # timeFrames draws 2 untimed frames first
         frame_cpu, env_cpu = 1e3 * (c1 - c0) / (frames + 2), 1e3 * (c2 - c1) / (env_frames + 2)
-        floor_cpu = 1e3 * (c3 - c2) / (frames + 2)
         got = np.asarray(
             driver.execute_script("return gonioView.readLinear(0, arguments[0], arguments[1])",
                                   light, n), np.float64
@@ -174,10 +167,6 @@ def measure(folder: Path, frames: int = 50, env_frames: int = 20) -> list[dict]:
         {"metric": "frame at 512x512, point light (ms)", "value": frame_ms, "target": 16,
          "note": f"{where}, load {load2:.1f} -> {load3:.1f}; median of {frames}; browser CPU "
          f"time {frame_cpu:.0f} ms per frame"},
-        {"metric": "frame at 512x512, no table lookup (ms)", "value": floor_ms, "target": "",
-         "note": f"the floor of a frame (sphere geometry, sRGB, compositing, readback): the "
-         f"light below every pixel's horizon; load {load3:.1f}; median of {frames}; browser CPU "
-         f"time {floor_cpu:.0f} ms per frame"},
         {"metric": "frame at 512x512, environment, 1 sample/px (ms)", "value": env_ms,
          "target": 100, "note": f"{where}, load {load2:.1f} -> {load3:.1f}; median of "
          f"{env_frames}; progressive; browser CPU time {env_cpu:.0f} ms per frame"},

@@ -43,6 +43,17 @@ def _small_table():
     return _grid_table(m, 24, 10, 12)
 
 
+def _nearest_masked_table():
+    """The small table with nearest lookup and a seeded fifth of its nodes masked out (the
+    lookup rule of MERL files, which mark unmeasured nodes)."""
+    from gonio.brdf.tabulated import TabulatedBRDF
+
+    t = _small_table()
+    mask = np.random.default_rng(3).random(np.shape(t.values)[:3]) > 0.2
+    values = np.where(mask[..., None], np.asarray(t.values), 0.0)
+    return TabulatedBRDF(values, t.axes, mask=mask, interpolation="nearest")
+
+
 LAMBERT_ALBEDO = (0.5, 0.4, 0.3)
 
 
@@ -101,7 +112,8 @@ def session(tmp_path_factory):
         _fit_file(d / "fit.json")
         n = _run_file(d / "run.brdf.h5")
         io.save(_lambert_table(), d / "lambert.brdf.h5")
-        names = ("table.brdf.h5", "fit.json", "run.brdf.h5", "lambert.brdf.h5")
+        io.save(_nearest_masked_table(), d / "nearest.brdf.h5")
+        names = ("table.brdf.h5", "fit.json", "run.brdf.h5", "lambert.brdf.h5", "nearest.brdf.h5")
         sources = [from_path(d / name) for name in names]
         page = write_page(sources, d / "view.html")
         errors = browser.open_page(driver, page)
@@ -135,7 +147,7 @@ def test_page_opens_without_console_errors(session):
     assert driver.title.startswith("gonio view")
 
 
-@pytest.mark.parametrize("k", [0, 1], ids=["table", "fit"])
+@pytest.mark.parametrize("k", [0, 1, 4], ids=["table", "fit", "nearest-masked"])
 def test_sphere_equals_gonio_render_and_follows_the_light(session, k):
     driver, _, sources, _, _ = session
     material = sources[k].material.material  # what gonio renders (the adapted table / model)

@@ -29,8 +29,6 @@ precision highp float;
 precision highp int;
 precision highp sampler3D;
 uniform sampler3D uTab;
-uniform bool uMasked;
-uniform bool uNearest;
 uniform int uFold;
 uniform float uScale;
 uniform int uChannels;
@@ -68,6 +66,7 @@ vec4 node(ivec3 c) {  // (f * mask, mask) of node (theta_h, theta_d, phi_d)
   vec4 v = texelFetch(uTab, c.zyx, 0);
   return uChannels == 1 ? vec4(v.rrr, v.g) : v;
 }
+#ifdef NEAREST_MASKED
 vec3 nearestMasked(vec3 a, vec3 b, vec3 e) {  // gonio's nearest valid corner
   float best = -1.0;
   vec4 bestv = vec4(0.0);
@@ -81,6 +80,7 @@ vec3 nearestMasked(vec3 a, vec3 b, vec3 e) {  // gonio's nearest valid corner
   }
   return best > 0.0 ? bestv.rgb * uScale : vec3(0.0);
 }
+#endif
 
 vec3 lookup(vec3 wi, vec3 wo) {
   // Rusinkiewicz angles as lookup._half_diff_fast computes them
@@ -98,9 +98,14 @@ vec3 lookup(vec3 wi, vec3 wo) {
   if (uFold >= 1 && pd >= PI) pd -= PI;
   if (uFold >= 2) pd = min(pd, PI - pd);
   vec3 t = vec3(idx(th, 0), idx(td, 1), idx(pd, 2));
-  if (uNearest && uMasked) {
-    return nearestMasked(corners(t.x, 0), corners(t.y, 1), corners(t.z, 2));
-  }
+#ifdef NEAREST_MASKED
+  // the nearest node (per axis the corner of larger weight, i1 on a tie: the corner of largest
+  // weight, which gonio's rule picks whenever it is valid), else gonio's loop over the corners
+  vec3 a = corners(t.x, 0), b = corners(t.y, 1), e = corners(t.z, 2);
+  vec4 nv = node(ivec3(a.z >= 0.5 ? a.y : a.x, b.z >= 0.5 ? b.y : b.x, e.z >= 0.5 ? e.y : e.x));
+  if (nv.a > 0.0) return nv.rgb * uScale;
+  return nearestMasked(a, b, e);
+#endif
   // texel i's centre is at (i + 0.5) / n: the filtered fetch at index t is gonio's multilinear
   // (or nearest) value at t, with the texture's wrap modes doing the clamping / wrapping
   vec4 v = texture(uTab, (t.zyx + 0.5) / vec3(uSize.zyx));
@@ -263,7 +268,10 @@ void main() {
     const stream = new Blob([b64bytes(s)]).stream().pipeThrough(new DecompressionStream("gzip"));
     return new Uint8Array(await new Response(stream).arrayBuffer());
   }
-  function program(gl, fs) {
+  // `defines`: lines inserted after #version (a software renderer runs skipped branches too, so
+  // code a table does not need is left out of its program, not branched around)
+  function program(gl, fs, defines) {
+    fs = fs.replace("#version 300 es\n", "#version 300 es\n" + defines);
     const prog = gl.createProgram();
     for (const [kind, src] of [[gl.VERTEX_SHADER, VS], [gl.FRAGMENT_SHADER, fs]]) {
       const sh = gl.createShader(kind);
@@ -349,8 +357,9 @@ void main() {
       this.gl = gl;
       gl.getExtension("KHR_parallel_shader_compile");
       this.envOk = !!gl.getExtension("EXT_color_buffer_float") && !!env;
-      this.show = program(gl, FS_SHOW);
-      this.envProg = this.envOk ? program(gl, FS_ENV) : null;
+      const defines = table.nearest && table.mask ? "#define NEAREST_MASKED 1\n" : "";
+      this.show = program(gl, FS_SHOW, defines);
+      this.envProg = this.envOk ? program(gl, FS_ENV, defines) : null;
       const buf = gl.createBuffer();
       gl.bindBuffer(gl.ARRAY_BUFFER, buf);
       gl.bufferData(gl.ARRAY_BUFFER, new Float32Array([-1, -1, 3, -1, -1, 3]), gl.STATIC_DRAW);
@@ -407,8 +416,6 @@ void main() {
       gl.useProgram(prog);
       const u = (name) => gl.getUniformLocation(prog, name);
       gl.uniform1i(u("uTab"), 0);
-      gl.uniform1i(u("uMasked"), t.mask ? 1 : 0);
-      gl.uniform1i(u("uNearest"), t.nearest ? 1 : 0);
       gl.uniform1i(u("uFold"), t.fold);
       gl.uniform1f(u("uScale"), t.scale);
       gl.uniform1i(u("uChannels"), t.channels);
