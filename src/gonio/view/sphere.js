@@ -6,7 +6,8 @@
 // coordinate, periodic axes wrapped (REPEAT), others clamped (CLAMP_TO_EDGE); multilinear over the
 // valid nodes with the weights renormalized over them. The texture holds (f * mask, mask) per
 // node, so one filtered fetch gives sum(w m f) and sum(w m): their ratio is gonio's renormalized
-// multilinear value. Nearest lookup with a mask keeps gonio's loop over the 8 corners.
+// multilinear value. Nearest lookup with a mask reads the nearest node, and where it is invalid
+// takes gonio's nearest valid one of the 8 corners.
 //
 // Point light: pixel = f(wi, wo) * E * max(cos theta_i, 0), E = 1, camera orthographic on +z,
 // the shading frame of gonio/render/scene.py.
