@@ -140,6 +140,26 @@ def test_report_is_valid_html_and_every_image_and_link_resolves(demo):
         assert f"{m.reduced_chi2:.4g}" in text
 
 
+def test_report_links_the_runs_view_page(demo):
+    """index.html links view.html: a self-contained gonio view page (its CSP blocks every
+    request, nothing outside it is referenced) of the run and every fit."""
+    import html5lib
+
+    out, _, summary = demo
+    assert ("a", "view.html") in _local_refs(out / "index.html")
+    text = (out / "view.html").read_text(encoding="utf-8")
+    doc = html5lib.parse(text, namespaceHTMLElements=False)
+    csp = [e.get("content") for e in doc.iter("meta") if e.get("http-equiv")]
+    assert csp and csp[0].startswith("default-src 'none'"), csp
+    for e in doc.iter():
+        for attr in ("src", "href"):
+            assert not e.get(attr) or not urlparse(e.get(attr)).scheme, (e.tag, e.get(attr))
+    data = json.loads(text.split('id="gonio-data">', 1)[1].split("</script>", 1)[0])
+    labels = [s["label"] for s in data["spheres"]]
+    assert labels == ["run"] + [Path(m.files["fit"]).stem for m in summary.models], labels
+    assert "coverage-0" in data["figures"]  # the run's sampled pairs
+
+
 def test_report_survives_a_move(demo, tmp_path):
     out, _, _ = demo
     moved = tmp_path / "copy"

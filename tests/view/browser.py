@@ -51,11 +51,13 @@ def start(profile: Path):
     return webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=options)
 
 
-def open_page(driver, path: Path, timeout: float = 60.0) -> list[dict]:
-    """Open a page, wait for its spheres, return the console's errors since the last call."""
+def open_page(driver, path: Path, timeout: float = 60.0, mode: str = "point") -> list[dict]:
+    """Open a page with its spheres in light ``mode`` (``point``, the default, leaves the
+    environment's background refinement off), wait for its spheres and plots, return the
+    console's errors since the last call."""
     from selenium.webdriver.support.ui import WebDriverWait
 
-    driver.get(path.resolve().as_uri())
+    driver.get(path.resolve().as_uri() + "#" + mode)
     WebDriverWait(driver, timeout).until(
         lambda d: d.execute_script("return !!(window.gonioView && window.gonioView.ready)")
     )

@@ -10,7 +10,9 @@ Stages, each with its own progress display:
    least squares with Laplace (or MCMC) intervals; ``fits/<model>.json`` and plots.
 4. **Render.** Render the measured material (the ground-truth table, or the built-in model) and
    every fit as spheres in the studio environment; EXR + PNG per sphere and ``compare.png``.
-5. **Report.** ``index.html`` (see :mod:`gonio.demo.report`) and ``demo-summary.json``.
+5. **Report.** ``index.html`` (see :mod:`gonio.demo.report`), ``view.html`` (the run and every
+   fit as one interactive ``gonio view`` page, linked from the report) and
+   ``demo-summary.json``.
 
 Images of the acquisition (raw brackets and merged HDR frames, about 4 MB per configuration) are
 pruned to the first :data:`KEPT_FRAMES` configurations unless ``keep_images`` is set: the table
@@ -306,13 +308,17 @@ def run_demo(
     render = _render_all(out, material, results, models_summary, settings, progress)
     timings["render"] = time.monotonic() - t
 
-    console.rule("[bold]5/5 report[/]")
+    console.rule("[bold]5/5 report[/]: index.html, and view.html (gonio view of the run and fits)")
+    t = time.monotonic()
+    view = _view_page(out, models_summary)
+    timings["view"] = time.monotonic() - t
     files = {
         "rig": "rig.toml",
         "table": "run/table.brdf.h5",
         "compare": render.pop("compare"),
         "camera_view": acquisition.pop("camera_view", None),
         "report": "index.html",
+        "view": view,
         "summary": SUMMARY,
     }
     summary = DemoSummary(
@@ -338,6 +344,16 @@ def run_demo(
     write_report(out / "index.html", summary)
     write_json(summary.to_json(), out / SUMMARY)
     return summary
+
+
+def _view_page(out: Path, summaries: list[ModelSummary]) -> str:
+    """``view.html`` beside the report: the run and every fit as one ``gonio view`` page (one
+    self-contained file); returns its path relative to ``out``."""
+    from gonio.view import build
+
+    fits = [out / s.files["fit"] for s in summaries]
+    build(out / "run", *fits).save(out / "view.html")
+    return "view.html"
 
 
 def _acquire(

@@ -1,4 +1,5 @@
-"""The demo's ``index.html``: one self-contained page (no scripts, no network) with the numbers.
+"""The demo's ``index.html``: one self-contained page (no scripts, no network) with the numbers,
+linking the run's interactive ``view.html`` (:mod:`gonio.view`).
 
 Every image and link is a relative path inside the demo folder, so the folder can be copied or
 served as it is. Text from data (material descriptions, warnings) is HTML-escaped.
@@ -138,6 +139,13 @@ def render_html(summary: Any) -> str:
         f' samples and gridded table: <a href="{_e(files["table"])}">table.brdf.h5</a>'
         f' (<a href="run/log.jsonl">run log</a>).</p>',
     ]
+    if files.get("view"):
+        parts.append(
+            f'<p>Interactive view of the run and every fit: <a href="{_e(files["view"])}">'
+            f"{_e(files['view'])}</a> (<code>gonio view</code>: spheres under a light you drag"
+            " and the studio environment, slices, maps, the run's coverage, the fits'"
+            " parameters; one self-contained file).</p>"
+        )
     if files.get("camera_view"):
         parts.append(
             "<figure>"

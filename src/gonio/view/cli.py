@@ -17,7 +17,8 @@ def register(subparsers: Any) -> None:
         help="look at measurements and fits interactively in the browser (one self-contained page)",
         description=(
             "Open measured files and fits as one interactive page: spheres rendered in the "
-            "browser (WebGL2) from the data itself under a light you drag, with exposure; "
+            "browser (WebGL2) from the data itself under a light you drag and/or gonio's studio "
+            "environment (refined progressively), with exposure; "
             "in-plane slices at a chosen theta_i (measured samples with sigma error bars, fit "
             "curves; log or linear f in 1/sr); polar plots with a logarithmic radius; "
             "theta_h-theta_d maps at a chosen phi_d; a run's coverage; each fit's parameters, "

@@ -123,8 +123,11 @@ def encoding_error(values: np.ndarray, encoded: np.ndarray, scale_log2: int) -> 
     return float(np.max(np.abs(d[nz] - v[nz]) / np.abs(v[nz])))
 
 
-def _pack(a: np.ndarray) -> str:
-    return base64.b64encode(gzip.compress(np.ascontiguousarray(a).tobytes(), 6, mtime=0)).decode()
+def pack(data: np.ndarray | bytes) -> str:
+    """base64 of the gzip of ``data`` (an array's bytes in C order, or bytes), as the page
+    ships its binary data."""
+    raw = data if isinstance(data, bytes) else np.ascontiguousarray(data).tobytes()
+    return base64.b64encode(gzip.compress(raw, 6, mtime=0)).decode()
 
 
 def _iso_axes_ok(table: Any) -> bool:
@@ -268,9 +271,27 @@ def sphere_table(label: str, material: Any) -> SphereTable:
         fold=fold_of(table.axes[2]),
         nearest=table.interpolation == "nearest",
         scale_log2=k,
-        values_b64=_pack(enc),
-        mask_b64=None if mask is None or mask.all() else _pack(mask.astype(np.uint8)),
+        values_b64=pack(enc),
+        mask_b64=None if mask is None or mask.all() else pack(mask.astype(np.uint8)),
         encoding_error=encoding_error(values, enc, k),
         resampling=how,
         resampling_error=err,
     )
+
+
+def environment_map() -> dict[str, Any]:
+    """The spheres' environment for the page: gonio's studio lat-long map
+    (:func:`gonio.render.lights.studio_environment`, the default light of ``gonio render``),
+    ``(H, W, 3)`` linear RGB radiance in float32, gzip + base64, rows from straight up (+y)
+    down, the centre column facing -z (:func:`gonio.render.lights.latlong_to_direction`)."""
+    from gonio.render.lights import studio_environment
+
+    img = np.ascontiguousarray(studio_environment(), dtype="<f4")
+    h, w = img.shape[:2]
+    return {
+        "shape": [h, w],
+        "radiance": pack(img),
+        "description": (
+            f"gonio's studio environment ({h}x{w} lat-long map, the default light of gonio render)"
+        ),
+    }

@@ -1,12 +1,14 @@
 """The one self-contained page of ``gonio view``: spheres (WebGL2), plots (Plotly), fit panels.
 
 Everything the page needs is inside it: Plotly's offline bundle (from the ``plotly`` Python
-package), the sphere script (``sphere.js``, package data), and the data as JSON. Its Content
+package, gzip + base64, run once the spheres have drawn their first frame), the sphere script
+(``sphere.js``, package data), gonio's studio environment map and the data as JSON. Its Content
 Security Policy forbids every network request, so opening it fetches nothing.
 """
 
 from __future__ import annotations
 
+import functools
 import html
 import math
 from importlib import resources
@@ -14,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.io.strict_json import dumps_json
-from gonio.view.encode import sphere_table
+from gonio.view.encode import environment_map, pack, sphere_table
 from gonio.view.figures import (
     coverage_figure,
     map_range,
@@ -49,17 +51,35 @@ BOOT = """
   const data = JSON.parse(document.getElementById("gonio-data").textContent);
   const config = { displaylogo: false, responsive: true };
   // the spheres first (their first frame is not held up by the plots), then the plots
-  gonioSphere.start(data.spheres).catch((e) => {
+  gonioSphere.start(data.spheres, data.environment).catch((e) => {
     document.getElementById("sphere-status").textContent = "sphere: " + e.message;
     window.gonioView = { webgl2: false, error: String(e) };
-  }).finally(() => {
+  }).then(() => {
+    // Plotly's bundle (gzip, base64) is inflated and run only now: it does not hold up the
+    // spheres' first frame
+    return gonioSphere.inflate(document.getElementById("plotly-src").textContent.trim());
+  }).then((bytes) => {
+    const lib = document.createElement("script");
+    lib.textContent = new TextDecoder().decode(bytes);
+    document.head.append(lib);
+    performance.mark("gonio:plotly-loaded");
     for (const [id, fig] of Object.entries(data.figures)) {
       Plotly.newPlot(id, fig.data, fig.layout, config);
     }
+    performance.mark("gonio:plots");
     window.gonioView.ready = true;
   });
 })();
 """
+
+
+@functools.cache
+def plotly_packed() -> str:
+    """Plotly's offline bundle (from the ``plotly`` package), gzip-compressed and base64-encoded
+    (a third of its size); the page inflates it with the browser's ``DecompressionStream``."""
+    import plotly.offline
+
+    return pack(plotly.offline.get_plotlyjs().encode("utf-8"))
 
 
 def _json_script(obj: Any) -> str:
@@ -123,9 +143,9 @@ def page_data(sources: list[Source]) -> tuple[dict[str, Any], list[dict[str, Any
 
 def build_page(sources: list[Source]) -> str:
     """The page's HTML text (see the module docstring)."""
-    import plotly.offline
-
     figures, spheres = page_data(sources)
+    environment = environment_map()
+    env_note = environment["description"]
     labels = ", ".join(s.label for s in sources)
     notes = []
     for s, t in zip(sources, spheres, strict=True):
@@ -150,14 +170,24 @@ def build_page(sources: list[Source]) -> str:
 <h1>gonio view: {html.escape(labels)}</h1>
 <h2>Spheres</h2>
 <p class=note>Unit spheres seen from above (orthographic), lit by a directional light of
-irradiance 1: pixel = f · cos θi in linear units, times 2<sup>exposure</sup>, shown in sRGB.
-Drag on a sphere to move the light.</p>
+irradiance 1 (pixel = f · cos θi in linear units) and/or by {html.escape(env_note)}; the sum,
+times 2<sup>exposure</sup>, shown in sRGB. Drag on a sphere to move the light. The environment
+is refined progressively (the sample count is shown) and converges to the sphere that
+<code>gonio render</code> draws under the same map.</p>
+<div class=controls>
+<label><input type="radio" name="light-mode" value="point"> point light</label>
+<label><input type="radio" name="light-mode" value="environment"> environment</label>
+<label><input type="radio" name="light-mode" value="both" checked> both</label>
+<span id="env-label"></span>
+</div>
 <div class=controls>
 <label>light θ <input id="light-theta" type="range" min="0" max="89" step="0.5" value="0"></label>
 <label>φ <input id="light-phi" type="range" min="-180" max="180" step="1" value="0"></label>
 <span id="light-label"></span>
 <label>exposure <input id="exposure" type="range" min="-10" max="10" step="0.1" value="0"></label>
 <span id="exposure-label">exposure: 0.0 EV</span>
+<label>environment <input id="env-ev" type="range" min="-8" max="4" step="0.1" value="0"></label>
+<span id="env-ev-label">environment: 0.0 EV</span>
 </div>
 <p id="sphere-status" class=note></p>
 <div id="spheres"></div>
@@ -169,11 +199,11 @@ Drag on a sphere to move the light.</p>
 <h2>θh–θd maps</h2>
 {maps}
 {"<h2>Coverage</h2>" + covs if covs else ""}
-<script>{plotly.offline.get_plotlyjs()}</script>
 <script type="application/json" id="gonio-data">{
-        _json_script({"figures": figures, "spheres": spheres})
+        _json_script({"figures": figures, "spheres": spheres, "environment": environment})
     }</script>
 <script>{sphere_js}</script>
+<script type="text/plain" id="plotly-src">{plotly_packed()}</script>
 <script>{BOOT}</script>
 </body></html>
 """
