@@ -30,7 +30,7 @@ EXACT = {
     "lambert+ggx/conductor": (L + ts(fresnel=C), {"mitsuba"}),
     "lambert+beckmann/conductor": (L + ts("beckmann", fresnel=C), {"mitsuba"}),
     "ggx/conductor": (ts(fresnel=C), {"mitsuba", "pbrt"}),
-    "ggx/schlick": (ts(), {"blender", "openpbr", "usd"}),
+    "ggx/schlick": (ts(), {"mitsuba", "blender", "openpbr", "usd"}),  # principled metal
     "lambert+ts (preset: beckmann, vcavity, schlick)": (L + ts("beckmann", "vcavity"), set()),
     "blinn": (L + ts("blinn", fresnel=C), set()),
     "mix 0.5/0.5 conductor": (HALF[0] + models.Scaled(ts(fresnel=C), 0.5), {"mitsuba", "pbrt"}),

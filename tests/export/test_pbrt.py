@@ -146,4 +146,4 @@ def test_unscaled_sum_is_refitted():
     assert mats[e.name]["amount"] == ("float", [0.5])
     assert e.refit["original_loss_on_refit_data"] == pytest.approx(0.0, abs=1e-12)
     assert e.refit["refit_loss"] > 0
-    assert any(n.startswith("refitted: pbrt cannot express") for n in e.notes)
+    assert any(n.startswith("REFIT, not the fit: pbrt cannot express") for n in e.notes)

@@ -10,6 +10,7 @@ the original's: parameters are never approximated silently.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -19,7 +20,8 @@ from gonio.errors import ParameterError
 from gonio.export import registry
 from gonio.export._common import Export
 from gonio.export._lobes import Lobes, NotRepresentable, Specular, describe, split
-from gonio.export._refit import refit, refit_data
+from gonio.export._price import Pricer, comment, lines
+from gonio.export._refit import EXTRA_LOSSES, refit, refit_data
 from gonio.export._source import FitSource, load, rgb_matrix
 
 REFIT_FROM = ("auto", "measurement", "model")
@@ -110,8 +112,10 @@ def export(
     if cache is not None and source is not None and key in cache:
         r = cache[key]
     else:
+        start = time.perf_counter()
         rd = _data_for(src, refit_from, target, reason)
-        r = refit(src, tmpl, fixed, family, rd)
+        r = _best_refit(src, tmpl, fixed, family, rd)
+        r["total_seconds"] = time.perf_counter() - start
         if cache is not None and source is not None:
             cache[key] = r
     new = split(r["model"])
@@ -127,9 +131,50 @@ def export(
     out.mapping = "refit"
     out.refit = r
     out.source = source
-    why = f"refitted: {target} cannot express {describe(src.model)} ({reason})"
-    out.notes = [why, *notes, *out.notes]
+    price = lines(target, describe(src.model), str(reason), r)
+    out.files = {k: comment(k, "gonio export: " + "\n".join(price), v)
+                 for k, v in out.files.items()}  # fmt: skip
+    out.notes = [*price, *notes, *out.notes]
     return out
+
+
+def _best_refit(
+    src: FitSource, tmpl: Any, fixed: dict[str, Any], family: str, rd: Any
+) -> dict[str, Any]:
+    """The refit under the fit's metric and under each of :data:`._refit.EXTRA_LOSSES`, each
+    priced (:class:`._price.Pricer`); the one whose export has the lowest HDR-FLIP against the
+    measurement (against the fit without one) is returned, all of them listed in its
+    ``candidates``; ``seconds`` is the chosen refit's own time (data read separately). A
+    spectral fit (no appearance images) is refitted under the fit's metric alone."""
+    fit_metric = str(src.record.get("metric") or "wls")
+    if src.spectral:
+        r = refit(src, tmpl, fixed, family, rd)
+        r["appearance"] = None
+        return r
+    tried = []
+    pricer = Pricer(src.model, rd.path)
+    for loss in dict.fromkeys((fit_metric, *EXTRA_LOSSES)):
+        start = time.perf_counter()
+        r = refit(src, tmpl, fixed, family, rd, loss=loss)
+        r["seconds"] = time.perf_counter() - start
+        r["appearance"] = pricer.price(r["model"])
+        tried.append(r)
+    best = min(tried, key=_flip)
+    best["candidates"] = [
+        {"refit_metric": r["refit_metric"], "refit_loss": r["refit_loss"], "seconds": r["seconds"],
+         **(_score(r) or {})} for r in tried
+    ]  # fmt: skip
+    return best
+
+
+def _score(r: dict[str, Any]) -> dict[str, float] | None:
+    a = r["appearance"]
+    return a["export_vs_measurement"] or a["export_vs_fit"]
+
+
+def _flip(r: dict[str, Any]) -> float:
+    s = _score(r)
+    return float("inf") if s is None else s["hdr_flip"]
 
 
 def _data_for(src: FitSource, refit_from: str, target: str, reason: str) -> Any:

@@ -36,15 +36,29 @@ summary (mapping, target parameters, refit losses, notes) is printed as JSON on 
 """
 
 
+TABLE_HEAD = """\
+family x target (gonio.export.table): exact = the target's stock BSDF evaluates the fitted f;
+plugin = exact through the gonio Mitsuba plugin; refit N = the target's family is refitted to
+the fit's data, for reason N below, and the export states its price (both losses and the
+appearance score of export and fit against the measurement) on the terminal, in --json and as a
+comment in the written file:
+"""
+
+
 def epilog(targets: dict[str, Any]) -> str:
-    """``gonio export --help``'s text below the options: each target's ``HELP`` entry, then
-    what is refitted and how."""
+    """``gonio export --help``'s text below the options: each target's ``HELP`` entry, the
+    family x target table, then what is refitted and how."""
+    from gonio.export import table
+
     rows = []
     for name, mod in targets.items():
         first, *rest = mod.HELP.strip("\n").split("\n")
         rows.append(f"  {name:<9} {first}")
         rows += [f"{'':12}{line}" for line in rest]
-    return EPILOG_HEAD + "\n" + "\n".join(rows) + "\n\n" + EPILOG_TAIL
+    return (
+        EPILOG_HEAD + "\n" + "\n".join(rows) + "\n\n" + TABLE_HEAD + "\n" + table.text()
+        + "\n\n" + EPILOG_TAIL
+    )  # fmt: skip
 
 
 def register(subparsers: Any) -> None:
@@ -89,24 +103,8 @@ def register(subparsers: Any) -> None:
 
 
 def _summary_lines(e: Any) -> list[str]:
-    lines = [f"{e.target}: {e.mapping} mapping of {e.family}"]
-    r = e.refit
-    if r is not None:
-        d = r["data"]
-        where = d["path"] if d["kind"] == "measurement" else "the fitted model, densely sampled"
-        orig = r["original_loss"]
-        orig_txt = "unknown" if orig is None else format(orig, ".6g")
-        if d["kind"] != "measurement":
-            orig_txt += " on its measurement, not comparable"
-        on_data = r["original_loss_on_refit_data"]
-        lines.append(
-            f"refit {r['family']} on {d['n_samples']} samples of {where}: {r['metric']} loss "
-            f"{r['refit_loss']:.6g} (original fit: {orig_txt}"
-            + ("" if on_data is None else f"; original model on these data: {on_data:.6g}")
-            + ")"
-        )
-    lines += [f"note: {n}" for n in e.notes]
-    return lines
+    """The summary: mapping, then the notes (a refit's price first)."""
+    return [f"{e.target}: {e.mapping} mapping of {e.family}", *(f"note: {n}" for n in e.notes)]
 
 
 def run(args: argparse.Namespace) -> int:
