@@ -48,6 +48,7 @@ BENCHMARKS = (
     "bench_zoo",
     "bench_mcmc_agreement",
     "bench_view",
+    "bench_mitsuba_plugin",
 )
 
 Row = dict[str, str]
@@ -59,6 +60,17 @@ def read(name: str) -> list[Row]:
     """The rows of ``results/NAME`` (lines starting with ``#`` are comments)."""
     with open(RESULTS / name, newline="") as fh:
         return list(csv.DictReader(line for line in fh if not line.startswith("#")))
+
+
+def write_csv(name: str, rows: Sequence[dict]) -> Path:
+    """Write ``rows`` (dictionaries with the same keys, in column order) to ``results/NAME``."""
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / name
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return path
 
 
 def num(value: object, digits: int = 3) -> str:

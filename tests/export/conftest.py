@@ -64,6 +64,58 @@ def gonio_sphere(model, size: int = SIZE, ss: int = SS) -> np.ndarray:
     return img.reshape(size, ss, size, ss, -1).astype(np.float64).mean(axis=(1, 3))
 
 
+def mitsuba_scene(
+    mi, bsdf: dict, light: np.ndarray = LIGHT, size: int = SIZE, spp: int = 64, seed: int = 0
+) -> dict:
+    """Mitsuba's ``load_dict`` form of the render tests' scene: the unit sphere made of
+    ``bsdf``, an orthographic camera on +z covering [-1, 1]^2 (``size`` pixels, box filter,
+    ``spp`` stratified samples), one directional light of irradiance 1 toward ``light``, and the
+    ``direct`` integrator sampling the emitter only (exact for a delta light)."""
+    return {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+        "sensor": {
+            "type": "orthographic",
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0, 0, 2], target=[0, 0, 0], up=[0, 1, 0]
+            ),
+            "film": {
+                "type": "hdrfilm",
+                "width": size,
+                "height": size,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+            },
+            "sampler": {"type": "stratified", "sample_count": spp, "seed": seed},
+        },
+        "sphere": {"type": "sphere", "bsdf": bsdf},
+        "light": {
+            "type": "directional",
+            "direction": (-np.asarray(light)).tolist(),
+            "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+        },
+    }
+
+
+def path_scene(mi, bsdf: dict, size: int, spp: int, depth: int) -> dict:
+    """A sphere made of ``bsdf`` under a white constant environment, seen by a perspective
+    camera at z = 4 (``size`` pixels, ``spp`` independent samples), path-traced to ``depth``."""
+    return {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": depth},
+        "sensor": {
+            "type": "perspective",
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]
+            ),
+            "film": {"type": "hdrfilm", "width": size, "height": size},
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+        "sphere": {"type": "sphere", "bsdf": bsdf},
+        "light": {"type": "constant"},
+    }
+
+
 @pytest.fixture
 def record_file(tmp_path):
     def make(model, name="fit.json", **kw):

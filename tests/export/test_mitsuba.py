@@ -16,7 +16,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.export.conftest import LIGHT, SIZE, fit_record, gonio_sphere, rel_rmse
+from tests.export.conftest import (
+    LIGHT,
+    SIZE,
+    fit_record,
+    gonio_sphere,
+    mitsuba_scene,
+    rel_rmse,
+)
 
 mi = pytest.importorskip("mitsuba", reason="mitsuba not installed (pip install -e '.[interop]')")
 
@@ -32,30 +39,7 @@ def variant():
 
 
 def _scene(bsdf):
-    return {
-        "type": "scene",
-        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
-        "sensor": {
-            "type": "orthographic",
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=[0, 0, 2], target=[0, 0, 0], up=[0, 1, 0]
-            ),
-            "film": {
-                "type": "hdrfilm",
-                "width": SIZE,
-                "height": SIZE,
-                "rfilter": {"type": "box"},
-                "pixel_format": "rgb",
-            },
-            "sampler": {"type": "stratified", "sample_count": 64, "seed": 0},
-        },
-        "sphere": {"type": "sphere", "bsdf": bsdf},
-        "light": {
-            "type": "directional",
-            "direction": (-LIGHT).tolist(),
-            "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
-        },
-    }
+    return mitsuba_scene(mi, bsdf)
 
 
 def render_dict(bsdf: dict) -> np.ndarray:

@@ -31,7 +31,8 @@ class Export:
     files : ``{suffix: text}``; the first entry is the main file (e.g. ``".xml"``; Mitsuba also
         gives ``".json"``, its ``load_dict`` dictionary).
     mapping : ``"exact"`` (the target expresses the fitted model) or ``"refit"`` (the target's
-        family was refitted to the fit's data; see ``refit``).
+        family was refitted to the fit's data; see ``refit``); ``"plugin"`` for the fragment
+        of gonio's Mitsuba BSDF plugin (:mod:`gonio.export.mitsuba_plugin`).
     family : the gonio model the exported parameters describe exactly, e.g. ``"Lambert +
         TorranceSparrow(ggx, smith, Schlick)"``.
     params : the target-side values written, by target parameter name.

@@ -98,6 +98,13 @@ def register(subparsers: Any) -> None:
         help="data of a refit: the recorded measurement file, else the sampled model (auto, "
         "default); only the measurement (an error when it is gone); only the sampled model",
     )
+    p.add_argument(
+        "--plugin",
+        action="store_true",
+        help="with --to mitsuba: write a fragment for gonio's Mitsuba BSDF plugin, exact for "
+        "every RGB fit (the renderer's process must import gonio and call "
+        "gonio.export.mitsuba_plugin.register()); default: Mitsuba's stock BSDFs",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
@@ -114,9 +121,16 @@ def run(args: argparse.Namespace) -> int:
     registry.target(args.to)  # an unknown target is refused before the fit is read
     if not Path(args.fit).is_file():
         raise ParameterError(f"fit file not found: {args.fit}")
-    from gonio.export import export
+    if getattr(args, "plugin", False):
+        if args.to != "mitsuba":
+            raise ParameterError(f"--plugin is for --to mitsuba, not {args.to}")
+        from gonio.export import mitsuba_plugin
 
-    e = export(args.fit, args.to, refit_from=args.refit_from)
+        e = mitsuba_plugin.export(args.fit)
+    else:
+        from gonio.export import export
+
+        e = export(args.fit, args.to, refit_from=args.refit_from)
     report = e.to_json()
     if args.out:
         inputs = [args.fit, *([args.refit_from] if args.refit_from else [])]

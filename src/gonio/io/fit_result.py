@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from gonio._bounded import read_json
+from gonio._bounded import loads_json, read_json
 from gonio.errors import FormatError
 from gonio.io.schemas import default_dir, register_schema, render
 from gonio.io.strict_json import write_json
@@ -262,8 +262,23 @@ def load_fit(path: str | Path, *, descriptions: bool = False) -> tuple[dict[str,
     a fit's, ``data`` against the schema's; ``record`` is then the document itself (a bare
     description: an empty dictionary).
     """
-    source = str(path)
-    doc = read_json(path)
+    return fit_from_document(read_json(path), str(path), descriptions=descriptions)
+
+
+def load_fit_text(
+    text: str, source: str = "fit text", *, descriptions: bool = False
+) -> tuple[dict[str, Any], Any]:
+    """``(record, model)`` of a fit result (or, with ``descriptions``, a model description)
+    given as JSON text, read within the same limits and checks as :func:`load_fit`."""
+    return fit_from_document(
+        loads_json(text.encode("utf-8"), source), source, descriptions=descriptions
+    )
+
+
+def fit_from_document(
+    doc: Any, source: str, *, descriptions: bool = False
+) -> tuple[dict[str, Any], Any]:
+    """``(record, model)`` of a parsed JSON document: the checks of :func:`load_fit`."""
     if not descriptions or not isinstance(doc, dict) or "schema" in doc or "version" in doc:
         record = validate(doc, source)
         return record, model_of(record["model_spec"], source)
