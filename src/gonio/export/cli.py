@@ -38,10 +38,10 @@ summary (mapping, target parameters, refit losses, notes) is printed as JSON on 
 
 TABLE_HEAD = """\
 family x target (gonio.export.table): exact = the target's stock BSDF evaluates the fitted f;
-plugin = exact through the gonio Mitsuba plugin; refit N = the target's family is refitted to
-the fit's data, for reason N below, and the export states its price (both losses and the
-appearance score of export and fit against the measurement) on the terminal, in --json and as a
-comment in the written file:
+plugin (refit N) = exact through the gonio Mitsuba plugin (--plugin), refit N without it;
+refit N = the target's family is refitted to the fit's data, for reason N below, and the export
+states its price (both losses and the appearance score of export and fit against the
+measurement) on the terminal, in --json and as a comment in the written file:
 """
 
 

@@ -9,7 +9,10 @@ target's own ``check`` (:mod:`gonio.export.registry`) about the family's lobes a
     renames such as ``roughness = sqrt(alpha)``);
 ``plugin``
     not a stock BSDF, but exact through the gonio Mitsuba plugin (Mitsuba only, when the plugin
-    module :data:`PLUGIN_MODULE` is installed and its ``supports(model)`` says so);
+    module :data:`PLUGIN_MODULE` is installed: ``gonio export --to mitsuba --plugin``). The
+    plugin holds every analytic model of 1 or 3 channels (its ``supports(model)``), so every
+    family here in an RGB fit; a test asks ``supports`` about each family's model, which this
+    module cannot build without JAX;
 ``refit``
     the target's family is refitted to the fit's data and the price is reported (the reason is
     the target's ``check`` message).
@@ -23,7 +26,6 @@ fall outside it (e.g. a diffuse albedo above 1 in pbrt) is refitted, and says so
 
 from __future__ import annotations
 
-import importlib
 import importlib.util
 from dataclasses import dataclass
 
@@ -102,8 +104,9 @@ _ALBEDO, _F0, _ALPHA = 0.5, 0.04, 0.2
 
 @dataclass(frozen=True)
 class Cell:
-    """One family in one target: ``kind`` (``exact``, ``plugin`` or ``refit``) and, for a
-    refit, why (the target's ``check`` message)."""
+    """One family in one target: ``kind`` (``exact``, ``plugin`` or ``refit``) and, unless
+    exact, why the stock export refits (the target's ``check`` message; a ``plugin`` cell's
+    stock export, without ``--plugin``, is that refit)."""
 
     kind: str
     reason: str | None = None
@@ -125,19 +128,13 @@ def family_lobes(family: str) -> Lobes | str:
             dist, shadowing, fresnel = what
             spec = Specular(_ALPHA, dist, shadowing, fresnel, f0=np.full(3, _F0))
         else:
-            return f"a {what} lobe (no target's stock BSDF evaluates gonio's form)"
+            return f"{what} lobe (no target's stock BSDF evaluates gonio's form)"
     return Lobes(3, diffuse, spec)
 
 
-def _plugin_supports(family: str) -> bool:
-    """Whether the gonio Mitsuba plugin (:data:`PLUGIN_MODULE`) renders ``family`` exactly;
-    False while it is not installed. Builds the family's model (imports JAX) only then."""
-    if importlib.util.find_spec(PLUGIN_MODULE) is None:
-        return False
-    from gonio.fit import presets
-
-    model = presets.build(family)[0]
-    return bool(importlib.import_module(PLUGIN_MODULE).supports(model))
+def plugin_installed() -> bool:
+    """Whether the gonio Mitsuba plugin module (:data:`PLUGIN_MODULE`) is part of this gonio."""
+    return importlib.util.find_spec(PLUGIN_MODULE) is not None
 
 
 def cell(family: str, target: str) -> Cell:
@@ -147,8 +144,8 @@ def cell(family: str, target: str) -> Cell:
     reason = lobes if isinstance(lobes, str) else mod.check(lobes)
     if reason is None:
         return Cell("exact")
-    if target == PLUGIN_TARGET and _plugin_supports(family):
-        return Cell("plugin")
+    if target == PLUGIN_TARGET and plugin_installed():
+        return Cell("plugin", reason)
     return Cell("refit", reason)
 
 
@@ -167,7 +164,10 @@ def _numbered(table: dict[str, dict[str, Cell]]) -> tuple[dict[str, int], list[s
 
 
 def _label(c: Cell, numbers: dict[str, int]) -> str:
-    return c.kind if c.reason is None else f"refit {numbers[c.reason]}"
+    if c.reason is None:
+        return c.kind
+    refit = f"refit {numbers[c.reason]}"
+    return refit if c.kind == "refit" else f"plugin ({refit})"
 
 
 def text() -> str:
@@ -177,9 +177,12 @@ def text() -> str:
     names = registry.names()
     numbers, reasons = _numbered(table)
     width = max(len(f) for f in FAMILIES) + 2
-    rows = ["  " + "family".ljust(width) + "".join(n.ljust(10) for n in names).rstrip()]
+    cols = {
+        n: max(len(n), *(len(_label(r[n], numbers)) for r in table.values())) + 2 for n in names
+    }
+    rows = ["  " + "family".ljust(width) + "".join(n.ljust(cols[n]) for n in names).rstrip()]
     for fam, row in table.items():
-        line = "".join(_label(row[n], numbers).ljust(10) for n in names)
+        line = "".join(_label(row[n], numbers).ljust(cols[n]) for n in names)
         rows.append("  " + fam.ljust(width) + line.rstrip())
     rows.append("")
     rows += [f"  refit {i}: {r}" for i, r in enumerate(reasons, 1)]
