@@ -106,10 +106,11 @@ def refit_data(src: FitSource, measurement: bool = True) -> RefitData:
     return RefitData(fd, kind, None if path is None else str(path))
 
 
-#: Losses a refit is tried under besides the fit's own metric: the candidate whose exported
-#: material looks closest to the measurement (HDR-FLIP, :mod:`._price`) is exported. The fit's
-#: metric can favour a lobe that matches the sampled cells but not the look (a single GGX lobe
-#: in place of a chrome's two narrow lobes); the cube-root loss weights the dim tails more.
+#: Losses a refit is tried under when the refit under the fit's own metric looks worse than the
+#: fit (HDR-FLIP against the measurement, :mod:`._price`); the candidate that looks closest to
+#: the measurement is exported. The fit's metric can favour a lobe that matches the sampled
+#: cells but not the look (a single GGX lobe in place of a chrome's two narrow lobes); the
+#: cube-root loss weights the dim tails more.
 EXTRA_LOSSES = ("cube-root",)
 
 
