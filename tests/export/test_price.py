@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,3 +91,22 @@ def test_refit_of_a_measured_metal_looks_as_good_as_the_fit(tmp_path):
     assert "appearance against the measurement: fit HDR-FLIP" in text
     json.dumps(e.to_json())
     assert np.isfinite(e.refit["on_refit_metric"]["export"])
+
+
+SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+
+
+def test_a_refit_of_an_archive_member_reads_the_measurement():
+    """The chrome case: a fit of ``merl_nbrdf.zip::chrome-steel`` records that path; the refit
+    reads that measurement (8192 stratified cells of its 9e5: ``_refit.MAX_CELLS``), not the
+    sampled model."""
+    from gonio.export._refit import refit_data
+    from gonio.export._source import load
+
+    archive = SHARED / "nbrdf" / "merl_nbrdf.zip"
+    if not archive.exists():
+        pytest.skip(f"shared data missing: {archive}")
+    rec = fit_record(models.Lambert(albedo=[0.01, 0.01, 0.01]), path=f"{archive}::chrome-steel")
+    rd = refit_data(load(rec))
+    assert rd.kind == "measurement" and rd.path == f"{archive}::chrome-steel"
+    assert rd.data.n == 8192
