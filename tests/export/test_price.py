@@ -13,7 +13,6 @@ the fit's. The same on four shared-data materials is ``-m slow``
 from __future__ import annotations
 
 import json
-import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -22,9 +21,10 @@ import pytest
 
 from gonio import io
 from gonio.brdf import models
-from gonio.brdf.tabulated import Axis, TabulatedBRDF
+from gonio.brdf.tabulated import TabulatedBRDF
 from gonio.export import export
 from tests.export.conftest import fit_record, write_record
+from tests.export.test_refit import AXES
 
 SATIN = models.Lambert(albedo=[6.1e-6, 0.0105, 0.0196]) + models.TorranceSparrow(
     alpha=0.109, distribution="ggx", shadowing="smith", fresnel=models.Schlick([0.45, 0.26, 0.0085])
@@ -57,12 +57,6 @@ def test_satin_to_mitsuba_is_exact_or_states_its_price(satin_export):
     assert report["refit_loss"] >= 0 and report["seconds"] > 0
 
 
-HALF = math.pi / 2
-AXES = (
-    Axis("theta_h", 24, 0.0, HALF, "sqrt", False, 0.0),
-    Axis("theta_d", 12, 0.0, HALF, "linear", False, 0.0),
-    Axis("phi_d", 12, 0.0, math.pi, "linear", True, 0.0),
-)
 #: A metal with a long-tailed highlight, measured as a small table, and a Ward fit of it.
 METAL = models.Lambert(albedo=[0.01, 0.01, 0.012]) + models.GTR(
     rho_s=[0.5, 0.45, 0.4], alpha=0.06, gamma=1.4, f0=0.6
