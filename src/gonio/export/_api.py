@@ -59,7 +59,12 @@ def _lobes_of(src: FitSource) -> tuple[Lobes | None, str | None, list[str]]:
 
 
 def export(
-    fit: Any, target: str, *, refit_from: str = "auto", cache: dict[Any, Any] | None = None
+    fit: Any,
+    target: str,
+    *,
+    refit_from: str = "auto",
+    cache: dict[Any, Any] | None = None,
+    price: bool = True,
 ) -> Export:
     """Export a fit to ``target``.
 
@@ -70,6 +75,9 @@ def export(
     refit_from : where a refit takes its data: ``"auto"`` (the measurement file recorded in the
         fit when readable, else the fitted model sampled densely), ``"measurement"`` (only the
         file: an error when it is gone) or ``"model"`` (always the sampled model).
+    price : False skips the appearance part of a refit's price (the sphere images and their
+        HDR-FLIP, :mod:`._price`) and the retry under other losses; the losses are still
+        reported and the file still says it is a refit.
     cache : a dictionary shared by several calls for the same fit file, so that targets with the
         same family (Blender and USD) reuse one refit.
 
@@ -108,13 +116,13 @@ def export(
             "a delta lobe has no values to sample"
         )
     tmpl, fixed, family = mod.refit_template(src.model, lobes)
-    key = (source, family, refit_from)
+    key = (source, family, refit_from, price)
     if cache is not None and source is not None and key in cache:
         r = cache[key]
     else:
         start = time.perf_counter()
         rd = _data_for(src, refit_from, target, reason)
-        r = _best_refit(src, tmpl, fixed, family, rd)
+        r = _best_refit(src, tmpl, fixed, family, rd, price)
         r["total_seconds"] = time.perf_counter() - start
         if cache is not None and source is not None:
             cache[key] = r
@@ -139,16 +147,18 @@ def export(
 
 
 def _best_refit(
-    src: FitSource, tmpl: Any, fixed: dict[str, Any], family: str, rd: Any
+    src: FitSource, tmpl: Any, fixed: dict[str, Any], family: str, rd: Any, price: bool = True
 ) -> dict[str, Any]:
     """The refit under the fit's metric, priced (:class:`._price.Pricer`). Where its export's
     HDR-FLIP against the measurement exceeds :data:`LOOKS_WORSE` times the fit's, the refit is
     tried again under each of :data:`._refit.EXTRA_LOSSES` and the export with the lowest
     HDR-FLIP is returned; ``candidates`` lists every refit tried, ``seconds`` is the chosen
     refit's own time (data read separately). A spectral fit (no appearance images) is refitted
-    under the fit's metric alone, unpriced."""
-    if src.spectral:
+    under the fit's metric alone, unpriced, as is any refit with ``price=False``."""
+    if src.spectral or not price:
+        start = time.perf_counter()
         r = refit(src, tmpl, fixed, family, rd)
+        r["seconds"] = time.perf_counter() - start
         r["appearance"] = None
         return r
     pricer = Pricer(src.model, rd.path)

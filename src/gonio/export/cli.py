@@ -105,6 +105,12 @@ def register(subparsers: Any) -> None:
         "every RGB fit (the renderer's process must import gonio and call "
         "gonio.export.mitsuba_plugin.register()); default: Mitsuba's stock BSDFs",
     )
+    p.add_argument(
+        "--no-price",
+        action="store_true",
+        help="skip the appearance part of a refit's price (sphere images and HDR-FLIP against "
+        "the measurement, a few seconds per refit); the losses are still reported",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
@@ -112,6 +118,20 @@ def register(subparsers: Any) -> None:
 def _summary_lines(e: Any) -> list[str]:
     """The summary: mapping, then the notes (a refit's price first)."""
     return [f"{e.target}: {e.mapping} mapping of {e.family}", *(f"note: {n}" for n in e.notes)]
+
+
+def _refuse_overwrite(args: argparse.Namespace, suffixes: Any) -> None:
+    """ParameterError when a file written for ``--out`` would be one of the inputs."""
+    out = Path(args.out)
+    main = suffixes[0]
+    stem = out.name[: -len(main)] if out.name.endswith(main) else out.stem
+    for path in (out.with_name(stem + s) for s in suffixes):
+        for src in (args.fit, *([args.refit_from] if args.refit_from else [])):
+            if same_file(src, path):
+                raise ParameterError(
+                    f"--out {args.out} would overwrite the input {src} (as {path}); "
+                    "choose another name"
+                )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -130,17 +150,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         from gonio.export import export
 
-        e = export(args.fit, args.to, refit_from=args.refit_from)
+        if args.out:  # refuse before any refit: the paths depend on the target alone
+            _refuse_overwrite(args, registry.target(args.to).SUFFIXES)
+        price = not getattr(args, "no_price", False)
+        e = export(args.fit, args.to, refit_from=args.refit_from, price=price)
     report = e.to_json()
     if args.out:
-        inputs = [args.fit, *([args.refit_from] if args.refit_from else [])]
-        for path in e.paths(args.out):
-            for src in inputs:
-                if same_file(src, path):
-                    raise ParameterError(
-                        f"--out {args.out} would overwrite the input {src} (as {path}); "
-                        "choose another name"
-                    )
+        _refuse_overwrite(args, list(e.files))  # the files written (the plugin's too)
         paths = e.write(args.out)
         report["files"] = [str(p) for p in paths]
         if args.json:
