@@ -49,6 +49,7 @@ BENCHMARKS = (
     "bench_mcmc_agreement",
     "bench_view",
     "bench_mitsuba_plugin",
+    "bench_export",
 )
 
 Row = dict[str, str]

@@ -47,6 +47,21 @@ MODELS = {
     + models.TorranceSparrow(
         alpha=0.05, distribution="ggx", shadowing="smith", fresnel=models.Dielectric(1.5)
     ),
+    # Metallic BSDF node (Blender >= 4.3): physical conductor, and Beckmann with F82 = Schlick
+    "conductor": models.Lambert(albedo=[0.1, 0.1, 0.1])
+    + models.TorranceSparrow(
+        alpha=0.2,
+        distribution="ggx",
+        shadowing="smith",
+        fresnel=models.Conductor(eta=[0.143, 0.374, 1.442], k=[3.983, 2.385, 1.603]),
+    ),
+    "beckmann": models.Lambert(albedo=[0.3, 0.2, 0.1])
+    + models.TorranceSparrow(
+        alpha=0.3,
+        distribution="beckmann",
+        shadowing="smith",
+        fresnel=models.Schlick([0.9, 0.6, 0.3]),
+    ),
 }
 
 

@@ -30,11 +30,11 @@ def test_help_documents_targets_mapping_and_refit(capsys):
 
 def test_export_writes_files_and_json(tmp_path, capsys):
     fit = write_record(tmp_path / "fit.json", fit_record(GGX))
-    assert (
-        main(["export", str(fit), "--to", "mitsuba", "--out", str(tmp_path / "m.xml"), "--json"])
-        == 0
-    )
+    args = ["--to", "mitsuba", "--out", str(tmp_path / "m.xml"), "--json", "--no-price"]
+    assert main(["export", str(fit), *args]) == 0
     report = json.loads(capsys.readouterr().out)
+    assert report["refit"]["appearance"] is None  # --no-price: the losses only
+    assert report["notes"][0].startswith("REFIT, not the fit: mitsuba cannot express")
     assert report["mapping"] == "refit"  # Schlick Fresnel: Mitsuba's conductor has eta, k
     assert report["refit"]["refit_loss"] > 0 and report["refit"]["original_loss"] == 0.0
     assert sorted(report["files"]) == sorted([str(tmp_path / "m.xml"), str(tmp_path / "m.json")])
@@ -98,7 +98,8 @@ def test_a_refused_file_operation_becomes_one_line(tmp_path, capsys):
     # folder or a full disk), which the command line prints as one line; nothing is written
     fit = write_record(tmp_path / "fit.json", fit_record(GGX))
     (tmp_path / "afile").write_text("")
-    rc = main(["export", str(fit), "--to", "pbrt", "--out", str(tmp_path / "afile/sub/m.pbrt")])
+    out = str(tmp_path / "afile/sub/m.pbrt")
+    rc = main(["export", str(fit), "--to", "pbrt", "--out", out, "--no-price"])
     err = capsys.readouterr().err
     assert rc == 1 and err.count("\n") == 1 and err.startswith("gonio: "), err
     assert str(tmp_path / "afile") in err

@@ -27,10 +27,11 @@ EXACT = {
     "lambert": (L, {"mitsuba", "pbrt", "blender", "openpbr"}),
     "lambert+ggx/schlick": (L + ts(), {"blender", "usd"}),
     "lambert+ggx/dielectric": (L + ts(fresnel=D), {"mitsuba", "blender"}),
-    "lambert+ggx/conductor": (L + ts(fresnel=C), {"mitsuba"}),
-    "lambert+beckmann/conductor": (L + ts("beckmann", fresnel=C), {"mitsuba"}),
-    "ggx/conductor": (ts(fresnel=C), {"mitsuba", "pbrt"}),
-    "ggx/schlick": (ts(), {"blender", "openpbr", "usd"}),
+    "lambert+ggx/conductor": (L + ts(fresnel=C), {"mitsuba", "blender"}),
+    "lambert+beckmann/conductor": (L + ts("beckmann", fresnel=C), {"mitsuba", "blender"}),
+    "lambert+beckmann/schlick": (L + ts("beckmann"), {"blender"}),  # Metallic BSDF, F82
+    "ggx/conductor": (ts(fresnel=C), {"mitsuba", "pbrt", "blender"}),
+    "ggx/schlick": (ts(), {"mitsuba", "blender", "openpbr", "usd"}),  # principled metal
     "lambert+ts (preset: beckmann, vcavity, schlick)": (L + ts("beckmann", "vcavity"), set()),
     "blinn": (L + ts("blinn", fresnel=C), set()),
     "mix 0.5/0.5 conductor": (HALF[0] + models.Scaled(ts(fresnel=C), 0.5), {"mitsuba", "pbrt"}),

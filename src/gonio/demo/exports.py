@@ -23,7 +23,9 @@ def export_fits(out: Path, models: list[Any], say: Any = None) -> None:
         for target, mod in registry.targets().items():
             if say is not None:
                 say(f"{m.label} -> {target}")
-            e = export(fit_path, target, cache=cache)
+            # unpriced: the losses only (the appearance part renders and scores each refit,
+            # about a minute of CPU for the demo's fits; `gonio export` prices by default)
+            e = export(fit_path, target, cache=cache, price=False)
             paths = e.write(folder / f"{stem}{mod.SUFFIXES[0]}")
             rows.append(
                 {

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,6 +27,12 @@ from gonio.fit.data import FitData, from_arrays, prepare
 
 #: Grid of :func:`model_samples`: theta_h, phi_h, theta_d, phi_d node counts.
 GRID = (24, 3, 16, 12)
+#: A refit uses at most this many measured cells, one per stratum along theta_h
+#: (:meth:`~gonio.fit.data.FitData.stratified_subset`, as the default fit's training cells): the
+#: target families have at most 8 parameters, and a MERL table's 9e5 cells would cost minutes.
+MAX_CELLS = 8192
+#: Measured refit data by (path, theta_max_deg), read once per process.
+_MEASURED: dict[tuple[str, float], FitData] = {}
 
 
 @dataclass(frozen=True)
@@ -75,22 +80,21 @@ def refit_data(src: FitSource, measurement: bool = True) -> RefitData:
     """The data a refit of ``src`` uses (see the module docstring); ``measurement=False``
     skips the recorded file and samples the model."""
     from gonio.errors import GonioError
+    from gonio.export._price import measurement_path
 
     desc = src.record["data"]
     theta = float(desc.get("theta_max_deg") or 80.0)
-    path = desc.get("path") if measurement else None
+    path = measurement_path(desc.get("path"), src.path) if measurement else None
     fd = None
     if path:
-        p = Path(path)
-        if not p.is_absolute() and src.path is not None and not p.exists():
-            p = src.path.parent / p
-        if p.exists():
-            try:
-                fd = prepare(p, theta)
-            except GonioError:
-                fd = None
-            if fd is not None and fd.channels != len(src.channels):
-                fd = None
+        try:
+            if (path, theta) not in _MEASURED:
+                _MEASURED[(path, theta)] = prepare(path, theta).stratified_subset(MAX_CELLS)
+            fd = _MEASURED[(path, theta)]
+        except GonioError:
+            fd = None
+        if fd is not None and fd.channels != len(src.channels):
+            fd = None
     kind = "measurement"
     if fd is None:
         wi, wo, f = model_samples(src.model, theta)
@@ -102,19 +106,31 @@ def refit_data(src: FitSource, measurement: bool = True) -> RefitData:
     return RefitData(fd, kind, None if path is None else str(path))
 
 
+#: Losses a refit is tried under when the refit under the fit's own metric looks worse than the
+#: fit (HDR-FLIP against the measurement, :mod:`._price`); the candidate that looks closest to
+#: the measurement is exported. The fit's metric can favour a lobe that matches the sampled
+#: cells but not the look (a single GGX lobe in place of a chrome's two narrow lobes); the
+#: cube-root loss weights the dim tails more.
+EXTRA_LOSSES = ("cube-root",)
+
+
 def refit(
     src: FitSource,
     template: BRDFModel,
     fixed: dict[str, Any],
     family: str,
     data: RefitData | None = None,
+    loss: str | None = None,
 ) -> dict[str, Any]:
     """Fit ``template`` (a gonio model the target expresses exactly) to the fit's data.
 
-    Returns a JSON-ready dictionary: ``family``, ``data`` (kind, path, n_samples), ``metric``,
-    ``original_loss`` (as recorded), ``original_loss_on_refit_data``, ``refit_loss``,
-    ``params`` and ``model_spec`` of the refitted model (``"model"`` key: the model itself, not
-    JSON, removed before writing).
+    ``loss`` is the loss the refit minimizes (default: the fit's metric). Returns a JSON-ready
+    dictionary: ``family``, ``data`` (kind, path, n_samples), ``metric`` (the fit's),
+    ``original_loss`` (as recorded), ``original_loss_on_refit_data`` and ``refit_loss`` (the
+    fit's and the refit's loss under ``metric`` on the same data), ``refit_metric`` (the loss
+    minimized) and ``on_refit_metric`` (``{"fit", "export"}`` under it), ``params`` and
+    ``model_spec`` of the refitted model (``"model"`` key: the model itself, not JSON, removed
+    before writing).
     """
     from gonio.fit import fit
     from gonio.fit.losses import evaluate
@@ -122,19 +138,25 @@ def refit(
 
     rd = data or refit_data(src)
     metric = str(src.record.get("metric") or "wls")
+    minimized = loss or metric
     theta = float(rd.data.source.get("theta_max_deg") or 80.0)
-    res = fit(rd.data, model=template, loss=metric, fixed=fixed, theta_max_deg=theta)
+    res = fit(rd.data, model=template, loss=minimized, fixed=fixed, theta_max_deg=theta)
     f0 = np.asarray(src.model.f(rd.data.wi, rd.data.wo), np.float64)
     if src.spectral:  # the data were converted to RGB: so is the model's prediction
         f0 = f0 @ rgb_matrix(src.wavelengths_nm)  # type: ignore[arg-type]
-    original = evaluate(metric, f0, rd.data)
+    f1 = np.asarray(res.model.f(rd.data.wi, rd.data.wo), np.float64)
     return {
         "family": family,
         "data": {"kind": rd.kind, "path": rd.path, "n_samples": rd.data.n},
         "metric": metric,
         "original_loss": src.record.get("loss"),
-        "original_loss_on_refit_data": original,
-        "refit_loss": float(res.loss),
+        "original_loss_on_refit_data": evaluate(metric, f0, rd.data),
+        "refit_loss": float(res.loss) if minimized == metric else evaluate(metric, f1, rd.data),
+        "refit_metric": minimized,
+        "on_refit_metric": {
+            "fit": evaluate(minimized, f0, rd.data),
+            "export": evaluate(minimized, f1, rd.data),
+        },
         "params": to_jsonable(res.params),
         "model_spec": res.model.to_dict(),
         "model": res.model,

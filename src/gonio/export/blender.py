@@ -9,10 +9,15 @@ distribution): the specular lobe -> Principled BSDF with Roughness = sqrt(alpha)
 squares it); a Schlick Fresnel term -> Metallic 1, Base Color = f0, Specular Tint white (the
 F82-tint model with a white tint is Schlick's formula); a Dielectric(eta) term with one eta for
 every channel -> Metallic 0, Base Color black, IOR = eta, Specular IOR Level 0.5 (no
-adjustment); the diffuse term -> a Diffuse BSDF (Roughness 0: Lambert) with Color = albedo,
+adjustment); a Conductor(eta, k) term, or a Beckmann lobe with Schlick Fresnel -> a Metallic BSDF
+node (Blender 4.3 or later: the script refuses to run on older ones) with the fitted
+distribution, Roughness = sqrt(alpha) and Fresnel type Physical Conductor (IOR = eta,
+Extinction = k) or F82 (Base Color = f0, Edge Tint white: Schlick's formula); the diffuse term ->
+a Diffuse BSDF (Roughness 0: Lambert) with Color = albedo,
 added to the Principled BSDF by an Add Shader (the Principled BSDF's own base layer would
 darken the diffuse by the specular albedo, which gonio's sum does not). Refitted: every other
-model to Lambert + TorranceSparrow(ggx, smith, Schlick(f0)).
+model to Lambert + TorranceSparrow(ggx, smith, Schlick(f0)). Cycles' microfacet lobes use the
+height-correlated Smith term, as gonio's.
 """
 
 from __future__ import annotations
@@ -28,12 +33,17 @@ SUFFIXES = (".py",)
 #: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
 HELP = """\
 Python script building the node tree with bpy (.py): blender --python FILE.py.
-[Lambert + TorranceSparrow(ggx, smith, Schlick|Dielectric)]
+[Lambert + TorranceSparrow(ggx, smith, Schlick|Dielectric|Conductor), TS(beckmann, smith,
+Schlick|Conductor)]
 Diffuse BSDF (Color = albedo, Roughness 0) + Principled BSDF (distribution GGX,
 Roughness = sqrt(alpha); Schlick: Metallic 1, Base Color = f0, Specular Tint white;
-Dielectric: Metallic 0, Base Color black, IOR = eta) joined by an Add Shader.
+Dielectric: Metallic 0, Base Color black, IOR = eta) joined by an Add Shader;
+Conductor or Beckmann: Metallic BSDF node (Blender >= 4.3), Physical Conductor
+(IOR = eta, Extinction = k) or F82 (Base Color = f0, Edge Tint white).
 """
-FAMILY = "Lambert + TorranceSparrow(ggx, smith, Schlick | Dielectric)"
+FAMILY = "Lambert + TorranceSparrow(ggx|beckmann, smith, Schlick | Dielectric | Conductor)"
+#: Blender version that added the Metallic BSDF node.
+METALLIC_NODE = (4, 3)
 
 
 def check(lobes: Lobes) -> str | None:
@@ -43,17 +53,25 @@ def check(lobes: Lobes) -> str | None:
     sp = lobes.specular
     if sp is None:
         return None
-    if sp.distribution != "ggx":
-        return f"the {sp.distribution} distribution (the Principled BSDF is GGX)"
+    if sp.distribution not in ("ggx", "beckmann"):
+        return f"the {sp.distribution} distribution (Cycles has GGX and Beckmann)"
+    if sp.distribution == "beckmann" and sp.fresnel == "dielectric":
+        return "Beckmann with dielectric Fresnel (the Principled BSDF is GGX)"
     if sp.shadowing != "smith":
-        return f"{sp.shadowing} shadowing (Cycles' GGX uses Smith's)"
+        return f"{sp.shadowing} shadowing (Cycles' microfacet lobes use Smith's)"
     if sp.scale is not None:
         return "a scaled microfacet lobe"
     if sp.fresnel == "dielectric" and uniform(sp.eta) is None:
         return "a per-channel index of refraction (the Principled IOR is one number)"
-    if sp.fresnel not in ("schlick", "dielectric"):
-        return f"{sp.fresnel} Fresnel (the Principled BSDF has Schlick/F82 and dielectric)"
+    if sp.fresnel not in ("schlick", "dielectric", "conductor"):
+        return f"{sp.fresnel} Fresnel (Cycles has Schlick/F82, dielectric and conductor)"
     return None
+
+
+def _metallic_node(lobes: Lobes) -> bool:
+    """Whether the lobe needs the Metallic BSDF node (a conductor, or Beckmann)."""
+    sp = lobes.specular
+    return sp is not None and (sp.fresnel == "conductor" or sp.distribution == "beckmann")
 
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
@@ -66,6 +84,10 @@ def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any]
 
 def _color(v: list[float]) -> str:
     return "(" + ", ".join(fmt(x) for x in v) + ", 1.0)"
+
+
+def _vec3(v: list[float]) -> str:
+    return "(" + ", ".join(fmt(x) for x in v) + ")"
 
 
 def build(name: str, lobes: Lobes) -> Export:
@@ -90,7 +112,37 @@ def build(name: str, lobes: Lobes) -> Export:
             '    diffuse.inputs["Roughness"].default_value = 0.0  # Lambert',
             "    shaders.append(diffuse)",
         ]
-    if sp is not None:
+    if sp is not None and _metallic_node(lobes):
+        rough = float(sp.alpha) ** 0.5
+        dist = sp.distribution.upper()
+        m: dict[str, Any] = {"distribution": dist, "Roughness": rough}
+        body += [
+            f"    if bpy.app.version < {METALLIC_NODE}:",
+            "        raise RuntimeError('this material needs Blender 4.3 or later (Metallic BSDF')",
+            '    metal = nodes.new("ShaderNodeBsdfMetallic")',
+            "    metal.location = (-300, -200)",
+            f'    metal.distribution = "{dist}"  # single scattering, as the fitted lobe',
+            f'    metal.inputs["Roughness"].default_value = {fmt(rough)}  # sqrt(alpha)',
+        ]
+        if sp.fresnel == "conductor":
+            eta, k = rgb(sp.eta), rgb(sp.k)
+            m.update({"fresnel_type": "PHYSICAL_CONDUCTOR", "IOR": eta, "Extinction": k})
+            body += [
+                '    metal.fresnel_type = "PHYSICAL_CONDUCTOR"',
+                f'    metal.inputs["IOR"].default_value = {_vec3(eta)}',
+                f'    metal.inputs["Extinction"].default_value = {_vec3(k)}',
+            ]
+        else:
+            f0 = rgb(sp.f0)
+            m.update({"fresnel_type": "F82", "Base Color": f0, "Edge Tint": [1.0, 1.0, 1.0]})
+            body += [
+                '    metal.fresnel_type = "F82"',
+                f'    metal.inputs["Base Color"].default_value = {_color(f0)}  # Schlick f0',
+                '    metal.inputs["Edge Tint"].default_value = (1.0, 1.0, 1.0, 1.0)',
+            ]
+        body.append("    shaders.append(metal)")
+        params["Metallic BSDF"] = m
+    elif sp is not None:
         rough = float(sp.alpha) ** 0.5
         p: dict[str, Any] = {"distribution": "GGX", "Roughness": rough}
         body += [

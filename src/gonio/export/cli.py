@@ -36,15 +36,29 @@ summary (mapping, target parameters, refit losses, notes) is printed as JSON on 
 """
 
 
+TABLE_HEAD = """\
+family x target (gonio.export.table): exact = the target's stock BSDF evaluates the fitted f;
+plugin (refit N) = exact through the gonio Mitsuba plugin (--plugin), refit N without it;
+refit N = the target's family is refitted to the fit's data, for reason N below, and the export
+states its price (both losses and the appearance score of export and fit against the
+measurement) on the terminal, in --json and as a comment in the written file:
+"""
+
+
 def epilog(targets: dict[str, Any]) -> str:
-    """``gonio export --help``'s text below the options: each target's ``HELP`` entry, then
-    what is refitted and how."""
+    """``gonio export --help``'s text below the options: each target's ``HELP`` entry, the
+    family x target table, then what is refitted and how."""
+    from gonio.export import table
+
     rows = []
     for name, mod in targets.items():
         first, *rest = mod.HELP.strip("\n").split("\n")
         rows.append(f"  {name:<9} {first}")
         rows += [f"{'':12}{line}" for line in rest]
-    return EPILOG_HEAD + "\n" + "\n".join(rows) + "\n\n" + EPILOG_TAIL
+    return (
+        EPILOG_HEAD + "\n" + "\n".join(rows) + "\n\n" + TABLE_HEAD + "\n" + table.text()
+        + "\n\n" + EPILOG_TAIL
+    )  # fmt: skip
 
 
 def register(subparsers: Any) -> None:
@@ -91,29 +105,33 @@ def register(subparsers: Any) -> None:
         "every RGB fit (the renderer's process must import gonio and call "
         "gonio.export.mitsuba_plugin.register()); default: Mitsuba's stock BSDFs",
     )
+    p.add_argument(
+        "--no-price",
+        action="store_true",
+        help="skip the appearance part of a refit's price (sphere images and HDR-FLIP against "
+        "the measurement, a few seconds per refit); the losses are still reported",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
 
 def _summary_lines(e: Any) -> list[str]:
-    lines = [f"{e.target}: {e.mapping} mapping of {e.family}"]
-    r = e.refit
-    if r is not None:
-        d = r["data"]
-        where = d["path"] if d["kind"] == "measurement" else "the fitted model, densely sampled"
-        orig = r["original_loss"]
-        orig_txt = "unknown" if orig is None else format(orig, ".6g")
-        if d["kind"] != "measurement":
-            orig_txt += " on its measurement, not comparable"
-        on_data = r["original_loss_on_refit_data"]
-        lines.append(
-            f"refit {r['family']} on {d['n_samples']} samples of {where}: {r['metric']} loss "
-            f"{r['refit_loss']:.6g} (original fit: {orig_txt}"
-            + ("" if on_data is None else f"; original model on these data: {on_data:.6g}")
-            + ")"
-        )
-    lines += [f"note: {n}" for n in e.notes]
-    return lines
+    """The summary: mapping, then the notes (a refit's price first)."""
+    return [f"{e.target}: {e.mapping} mapping of {e.family}", *(f"note: {n}" for n in e.notes)]
+
+
+def _refuse_overwrite(args: argparse.Namespace, suffixes: Any) -> None:
+    """ParameterError when a file written for ``--out`` would be one of the inputs."""
+    out = Path(args.out)
+    main = suffixes[0]
+    stem = out.name[: -len(main)] if out.name.endswith(main) else out.stem
+    for path in (out.with_name(stem + s) for s in suffixes):
+        for src in (args.fit, *([args.refit_from] if args.refit_from else [])):
+            if same_file(src, path):
+                raise ParameterError(
+                    f"--out {args.out} would overwrite the input {src} (as {path}); "
+                    "choose another name"
+                )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -132,17 +150,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         from gonio.export import export
 
-        e = export(args.fit, args.to, refit_from=args.refit_from)
+        if args.out:  # refuse before any refit: the paths depend on the target alone
+            _refuse_overwrite(args, registry.target(args.to).SUFFIXES)
+        price = not getattr(args, "no_price", False)
+        e = export(args.fit, args.to, refit_from=args.refit_from, price=price)
     report = e.to_json()
     if args.out:
-        inputs = [args.fit, *([args.refit_from] if args.refit_from else [])]
-        for path in e.paths(args.out):
-            for src in inputs:
-                if same_file(src, path):
-                    raise ParameterError(
-                        f"--out {args.out} would overwrite the input {src} (as {path}); "
-                        "choose another name"
-                    )
+        _refuse_overwrite(args, list(e.files))  # the files written (the plugin's too)
         paths = e.write(args.out)
         report["files"] = [str(p) for p in paths]
         if args.json:

@@ -3,18 +3,23 @@
 Mapping (exact): Lambert -> ``diffuse`` (``reflectance`` = albedo); a Torrance-Sparrow lobe with
 Beckmann or GGX and Smith shadowing -> ``roughconductor`` (``distribution`` unchanged,
 ``alpha`` = gonio's alpha unchanged, ``eta``/``k`` = the Conductor's complex index; a
-Dielectric(eta) Fresnel term is the conductor formula with ``k = 0``); a sum -> ``blendbsdf``
-(``f = (1 - w) f_0 + w f_1``) with ``w = min(0.5, 1 - max albedo)``, the diffuse reflectance
-divided by ``1 - w`` and the conductor's ``specular_reflectance`` = ``1 / w`` (a uniform
+Dielectric(eta) Fresnel term is the conductor formula with ``k = 0``); a lone GGX/Smith lobe
+with Schlick Fresnel -> ``principled`` with ``metallic`` 1, ``base_color`` = f0 and
+``roughness`` = sqrt(alpha) (Mitsuba squares it; with metallic 1 its diffuse, sheen and
+dielectric parts are weighted 0 and its Fresnel is Schlick's from ``base_color``); a sum ->
+``blendbsdf`` (``f = (1 - w) f_0 + w f_1``) with ``w = min(0.5, 1 - max albedo)``, the diffuse
+reflectance divided by ``1 - w`` and the conductor's ``specular_reflectance`` = ``1 / w`` (a uniform
 spectrum, which Mitsuba accepts above 1). Refitted: other lobes, V-cavity shadowing, Blinn,
-Schlick or no Fresnel (Mitsuba's conductor has none of them): Lambert + TorranceSparrow(ggx or
+Schlick Fresnel next to a diffuse term (``principled`` cannot be scaled inside a ``blendbsdf``
+and its own diffuse is Disney's, not Lambert's) or no Fresnel: Lambert + TorranceSparrow(ggx or
 beckmann as fitted, smith, Conductor(eta, k)). Not used: ``roughplastic`` (its diffuse part
-scatters inside the coating, which no gonio model expresses) and ``principled`` (a blend of
-several lobes with its own energy terms).
+scatters inside the coating, which no gonio model expresses).
 
 Mitsuba's Smith term is the separable product ``G1(wi) G1(wo)``; gonio's is height-correlated.
-They agree at normal incidence and differ toward grazing angles (on the sphere under one
-directional light at 27 degrees: 0.9 % relative RMSE for GGX at alpha = 0.5, <= 0.5 % below).
+They agree at normal incidence and differ toward grazing angles: over the appearance sphere's
+pixels under lights at 0, 30 and 60 degrees (Mitsuba's ``BSDF.eval``), 1.1 % relative RMSE for
+GGX at alpha 0.4 and 2.2 % at 0.5 (Beckmann 0.1 % at 0.55), so GGX lobes above
+:data:`GGX_ALPHA_MAX` are refitted.
 """
 
 from __future__ import annotations
@@ -34,17 +39,23 @@ SUFFIXES = (".xml", ".json")
 #: Entry of ``gonio export --help``: what is written, [families expressed exactly], mapping.
 HELP = """\
 Mitsuba 3 XML <bsdf> fragment (.xml) and its load_dict dictionary (.json).
-[Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor|Dielectric)]
+[Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor|Dielectric), TS(ggx, smith, Schlick)]
 diffuse: reflectance = albedo; roughconductor: distribution as fitted,
 alpha = alpha (unchanged), eta/k = the conductor's index (k = 0 for Dielectric);
+a lone TS(ggx, smith, Schlick): principled, metallic 1, base_color = f0, roughness = sqrt(alpha);
 a sum is a blendbsdf of weight w = min(0.5, 1 - max albedo) with reflectance
 albedo / (1 - w) and specular_reflectance 1 / w. Mitsuba's Smith term is separable,
-gonio's height-correlated (0.9 % relative RMSE at GGX alpha 0.5 on a sphere).
+gonio's height-correlated: GGX above alpha 0.45 (over 2 % relative RMSE) is refitted.
 """
 FAMILY = "Lambert + TorranceSparrow(beckmann|ggx, smith, Conductor(eta, k))"
+#: Largest GGX alpha exported as exact: Mitsuba's separable Smith term G1(wi) G1(wo) against
+#: gonio's height-correlated one, over the appearance sphere's pixels at 0/30/60 degrees (Mitsuba's
+#: BSDF.eval, tests/export/test_table.py): 1.1 % relative RMSE at alpha 0.4, 2.2 % at 0.5
+#: (Beckmann: 0.1 % at 0.55).
+GGX_ALPHA_MAX = 0.45
 SEPARABLE_NOTE = (
     "Mitsuba's Smith shadowing is separable (G1(wi) G1(wo)), gonio's height-correlated: they "
-    "differ toward grazing angles (0.9 % relative RMSE on the test sphere for GGX at alpha 0.5)"
+    "differ toward grazing angles (up to 2 % relative RMSE on the sphere for GGX at alpha 0.45)"
 )
 
 
@@ -60,11 +71,34 @@ def check(lobes: Lobes) -> str | None:
         return f"the {sp.distribution} distribution (Mitsuba has beckmann and ggx)"
     if sp.shadowing != "smith":
         return f"{sp.shadowing} shadowing (Mitsuba's microfacet lobes use Smith's)"
+    if sp.distribution == "ggx" and sp.alpha > GGX_ALPHA_MAX:
+        return (
+            f"GGX alpha {sp.alpha:.3g} > {GGX_ALPHA_MAX}: Mitsuba's separable Smith term differs "
+            "from gonio's height-correlated one by more than 2 % there"
+        )
+    if principled(lobes):
+        return None
+    if sp.fresnel == "schlick" and lobes.diffuse is not None:
+        return (
+            "Schlick Fresnel beside a diffuse term (principled's metal cannot be scaled in a "
+            "blendbsdf; roughconductor takes a complex index eta, k)"
+        )
     if sp.fresnel not in ("conductor", "dielectric"):
         return f"{sp.fresnel} Fresnel (Mitsuba's roughconductor takes a complex index eta, k)"
     if sp.scale is not None and uniform(sp.scale) is None:
         return "a per-channel lobe scale"
     return None
+
+
+def principled(lobes: Lobes) -> bool:
+    """Whether ``lobes`` is a lone GGX/Smith/Schlick lobe: Mitsuba's ``principled`` metal."""
+    sp = lobes.specular
+    return (
+        sp is not None
+        and lobes.diffuse is None
+        and sp.scale is None
+        and (sp.distribution, sp.shadowing, sp.fresnel) == ("ggx", "smith", "schlick")
+    )
 
 
 def refit_template(model: Any, lobes: Lobes | None) -> tuple[Any, dict[str, Any], str]:
@@ -91,6 +125,13 @@ def bsdf_dict(lobes: Lobes) -> tuple[dict[str, Any], dict[str, Any]]:
     sp = lobes.specular
     cond = None
     params: dict[str, Any] = {}
+    if principled(lobes):
+        assert sp is not None
+        f0, rough = rgb(sp.f0), float(sp.alpha) ** 0.5
+        params.update(base_color=f0, metallic=1.0, roughness=rough)
+        node = {"type": "principled", "base_color": _spectrum(f0), "metallic": 1.0,
+                "roughness": rough}  # fmt: skip
+        return node, params
     if sp is not None:
         eta = rgb(sp.eta)
         k = rgb(sp.k) if sp.fresnel == "conductor" else [0.0, 0.0, 0.0]
