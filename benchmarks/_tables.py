@@ -35,6 +35,7 @@ BENCHMARKS = (
     "bench_fit",
     "bench_published",
     "bench_appearance",
+    "bench_prior",
     "bench_render",
     "bench_scattered_render",
     "bench_equal_time",

@@ -55,6 +55,10 @@ SUFFIX = ".prior.h5"
 DATASETS = ("mask", "mean", "basis", "variances", "residual_var")
 #: Largest rank a file may declare.
 MAX_RANK = 1024
+#: Largest |mean| in the mapped space (log(f cos cos + eps) of f up to 1e10 1/sr is below 24).
+MAX_MAPPED = 50.0
+#: Largest prior or residual variance, mapped units² (real priors have a few hundred at most).
+MAX_VARIANCE = 1e6
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 
 
@@ -309,10 +313,24 @@ def check_prior(path: PathLike, arrays: dict[str, np.ndarray], meta: dict) -> No
             raise fail(path, f"/{name} must be float {shape}, got {arr.dtype} {arr.shape}")
         if not np.isfinite(arr).all():
             raise fail(path, f"/{name} holds NaN or infinite numbers")
+    bounds = {
+        "mean": MAX_MAPPED,
+        "basis": 1.0 + 1e-3,
+        "variances": MAX_VARIANCE,
+        "residual_var": MAX_VARIANCE,
+    }
+    for name, bound in bounds.items():
+        worst = float(np.abs(np.asarray(arrays[name], np.float64)).max(initial=0.0))
+        if worst > bound:
+            raise fail(path, f"/{name} holds {worst:.3g}, beyond {bound:g} (not a prior)")
     if not (np.asarray(arrays["variances"]) > 0).all():
         raise fail(path, "/variances must be > 0")
     if (np.asarray(arrays["residual_var"]) < 0).any():
         raise fail(path, "/residual_var must be >= 0")
+    B = np.asarray(arrays["basis"]).reshape(-1, rank)
+    norms = np.sqrt(np.einsum("ik,ik->k", B, B, dtype=np.float64))
+    if np.abs(norms - 1.0).max(initial=0.0) > 1e-3:
+        raise fail(path, "/basis columns are not of unit norm")
     eps = float(meta["space"]["epsilon"])
     if not math.isfinite(eps):
         raise fail(path, "space epsilon must be finite")

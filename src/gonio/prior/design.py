@@ -33,9 +33,10 @@ def _candidates(prior: Any, wi: Any, wo: Any) -> tuple[np.ndarray, np.ndarray, n
 def _reductions(cov: np.ndarray, A: np.ndarray, s2: np.ndarray) -> np.ndarray:
     """``(n,)`` reduction of ``tr Σ`` by each candidate (module docstring)."""
     P = A @ cov  # (n, C, K)
-    S = np.einsum("nck,ndk->ncd", P, A)
+    At = A.transpose(0, 2, 1)
+    S = P @ At
     S[:, np.arange(S.shape[1]), np.arange(S.shape[1])] += np.maximum(s2, 1e-300)
-    Q = np.einsum("nck,ndk->ncd", P, P)
+    Q = P @ P.transpose(0, 2, 1)
     return np.einsum("ncc->n", np.linalg.solve(S, Q))
 
 

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
 
+from gonio._bounded import MAX_BRDF
 from gonio.errors import ParameterError
 from gonio.prior import space
 
@@ -226,7 +227,8 @@ def to_table(
     prior: Any, mapped: np.ndarray, mapped_sigma: np.ndarray | None, meta: dict
 ) -> TabulatedBRDF:
     """A mapped table over the valid cells as a :class:`TabulatedBRDF` in sr⁻¹ on the
-    prior's grid (σ by the delta method when ``mapped_sigma`` is given)."""
+    prior's grid (σ by the delta method when ``mapped_sigma`` is given); values and σ are
+    clipped at :data:`gonio._bounded.MAX_BRDF` (1e10 sr⁻¹, beyond any measurement)."""
     from gonio.brdf.tabulated import TabulatedBRDF
 
     wi, wo = prior.cell_directions()
@@ -235,11 +237,14 @@ def to_table(
     C = prior.n_channels
     keep = prior.mask.reshape(-1)
     vals = np.zeros((keep.size, C), np.float32)
-    vals[keep] = space.from_mapped(mapped, cc, prior.epsilon)
+    with np.errstate(over="ignore"):
+        vals[keep] = np.minimum(space.from_mapped(mapped, cc, prior.epsilon), MAX_BRDF)
     sig = None
     if mapped_sigma is not None:
         sig = np.zeros((keep.size, C), np.float32)
-        sig[keep] = space.sigma_from_mapped(mapped, mapped_sigma, cc)
+        with np.errstate(over="ignore", invalid="ignore"):
+            s = space.sigma_from_mapped(mapped, mapped_sigma, cc)
+        sig[keep] = np.minimum(np.nan_to_num(s, nan=MAX_BRDF), MAX_BRDF)
         sig = sig.reshape(*grid, C)
     return TabulatedBRDF(
         values=vals.reshape(*grid, C),
