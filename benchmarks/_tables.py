@@ -99,6 +99,21 @@ def markdown(rows: Iterable[Row], columns: Sequence[Column], digits: int = 3) ->
     return "\n".join(lines)
 
 
+def write_csv(rows: list[dict], name: str, comment: str = "") -> None:
+    """Write ``rows`` (dicts; the union of their keys, in first-seen order, but ``published``)
+    as ``results/NAME``, with ``comment`` as a first ``#`` line."""
+    RESULTS.mkdir(exist_ok=True)
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys and k != "published"]
+    with open(RESULTS / name, "w", newline="") as fh:
+        if comment:
+            fh.write(f"# {comment}\n")
+        w = csv.DictWriter(fh, keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+
+
 def write(name: str, table: str, readme: Path = README) -> None:
     """Replace the text between ``<!-- table:NAME -->`` and ``<!-- /table:NAME -->``."""
     text = readme.read_text(encoding="utf-8")

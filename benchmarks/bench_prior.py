@@ -219,19 +219,6 @@ def summarize(rows: list[dict]) -> list[dict]:
     return out
 
 
-def _write_csv(rows: list[dict], name: str, comment: str = "") -> None:
-    RESULTS.mkdir(exist_ok=True)
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with open(RESULTS / name, "w", newline="") as fh:
-        if comment:
-            fh.write(f"# {comment}\n")
-        w = csv.DictWriter(fh, keys, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-
-
 def _plot(rows: list[dict], path: Path) -> None:
     import matplotlib
 
@@ -314,6 +301,7 @@ def main() -> None:
     args = ap.parse_args()
     sys.path.insert(0, str(HERE))
     import _nbrdf_split
+    import _tables
 
     tuning, held = _nbrdf_split.split(ARCHIVE)
     halves = {"held-out": (tuning, held), "tuning": (held, tuning)}
@@ -342,7 +330,7 @@ def main() -> None:
             load1=os.getloadavg()[0],
         )
         builds.append(figures)
-        _write_csv(builds, "prior_build.csv", comment)
+        _tables.write_csv(builds, "prior_build.csv", comment)
         for k, name in enumerate(scored[: args.materials]):
             t0 = time.perf_counter()
             r = run_material(prior, name, fold, wi[idx], wo[idx])
@@ -355,8 +343,8 @@ def main() -> None:
                 f"{rec['mapped_mae']:.3f}; {time.perf_counter() - t0:.0f} s",
                 flush=True,
             )
-            _write_csv(rows, "prior.csv", comment)
-            _write_csv(summarize(rows), "prior_summary.csv", comment)
+            _tables.write_csv(rows, "prior.csv", comment)
+            _tables.write_csv(summarize(rows), "prior_summary.csv", comment)
             _plot(rows, RESULTS / "prior.png")
             write_tables()
     tmp.cleanup()

@@ -35,7 +35,7 @@ import numpy as np
 
 from gonio import __version__
 from gonio._bounded import MAX_CHANNELS, loads_json
-from gonio.errors import FormatError, GonioError
+from gonio.errors import GonioError
 from gonio.io._common import PathLike, check_input_file, fail
 from gonio.io._hdf5_guard import (
     ReadBudgetExceeded,
@@ -336,50 +336,13 @@ def check_prior(path: PathLike, arrays: dict[str, np.ndarray], meta: dict) -> No
         raise fail(path, "space epsilon must be finite")
 
 
-def is_prior_file(path: PathLike) -> bool:
-    """Whether ``path`` opens as HDF5 with ``format = "gonio-prior"`` (no other check)."""
-    try:
-        read_prior_header(path)
-    except (FormatError, OSError):
-        return False
-    return True
-
-
-def read_prior_header(path: PathLike) -> dict:
-    """The checked metadata of a prior file without its arrays; FormatError otherwise."""
-    p = check_input_file(path)
-    with open(p, "rb") as fh:
-        if fh.read(8) != _HDF5_MAGIC:
-            raise fail(p, f"not a {FORMAT_NAME} file (not HDF5)")
-    try:
-        h5 = open_bounded(p)
-    except OSError as exc:
-        raise fail(p, f"corrupt or truncated HDF5 file ({exc})") from None
-    try:
-        raw = check_group_datasets(h5, p, p.stat().st_size)
-        check_global_heaps(p, raw)
-        if _attr(h5, "format", p) != FORMAT_NAME:
-            raise fail(p, f"HDF5 file is not a {FORMAT_NAME} file")
-        meta = loads_json(str(_attr(h5, "metadata", p)).encode("utf-8"), str(p))
-    except GonioError:
-        raise
-    except Exception as exc:
-        raise fail(p, f"corrupt {FORMAT_NAME} file ({type(exc).__name__}: {exc})") from None
-    finally:
-        h5.close()
-    _check_schema(meta, p)
-    return meta
-
-
 __all__ = [
     "DATASETS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "SUFFIX",
     "check_prior",
-    "is_prior_file",
     "prior_metadata_schema",
     "read_prior_file",
-    "read_prior_header",
     "write_prior_file",
 ]
