@@ -266,7 +266,7 @@ def write_tables() -> None:
             ("median predicted", "median_predicted_mae"),
         ],
     )
-    build_rows = _tables.read("prior_build.csv")
+    build_rows = _tables.read("prior_build.csv") if (RESULTS / "prior_build.csv").exists() else []
     if build_rows:
         text += "\n\n" + _tables.markdown(
             build_rows,
@@ -298,6 +298,11 @@ def main() -> None:
         "(prior of the tuning half), tuning, or both comma-separated",
     )
     ap.add_argument("--cache", default=None, help="folder keeping the built priors")
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the materials already in results/prior.csv and score only the others",
+    )
     args = ap.parse_args()
     sys.path.insert(0, str(HERE))
     import _nbrdf_split
@@ -310,6 +315,8 @@ def main() -> None:
     cache = Path(args.cache) if args.cache else Path(tmp.name)
     cache.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
+    if args.resume and (RESULTS / "prior.csv").exists():
+        rows = _tables.read("prior.csv")  # materials already scored are not scored again
     builds: list[dict] = []
     comment = f"gonio.prior reconstruction; split seed {_nbrdf_split.SEED}, two folds"
     for fold in folds:
@@ -332,6 +339,8 @@ def main() -> None:
         builds.append(figures)
         _tables.write_csv(builds, "prior_build.csv", comment)
         for k, name in enumerate(scored[: args.materials]):
+            if any(r["material"] == name and r["split"] == fold for r in rows):
+                continue
             t0 = time.perf_counter()
             r = run_material(prior, name, fold, wi[idx], wo[idx])
             rows += r

@@ -23,6 +23,9 @@ def files(tmp_path_factory, tables):
     mask = np.zeros(t.mask.shape, bool)
     mask.reshape(-1)[rng.choice(mask.size, 60, replace=False)] = True
     io.save(t.replace(mask=mask & t.mask), d / "sparse.brdf.h5")
+    from gonio.prior import build_prior
+
+    build_prior(tables[:5], [f"m{i}" for i in range(5)], max_rank=3).write(d / "lib.prior.h5")
     return d
 
 
@@ -82,3 +85,45 @@ def test_bad_prior_is_one_line(files, tmp_path):
     assert p.returncode != 0 and "Traceback" not in p.stderr
     assert len(p.stderr.strip().splitlines()) == 1 and str(bad) in p.stderr
     assert not out.exists()
+
+
+def test_reconstruct_a_run_folder_with_sigma(files, tmp_path, capsys):
+    """A run folder's RUN/table.brdf.h5 (scattered samples with sigma) in one call."""
+    from gonio.brdf.measured import MeasuredSamples
+
+    t = io.load(files / "sparse.brdf.h5")
+    wi, wo, values, _, _ = t.valid_nodes()
+    run = tmp_path / "run"
+    run.mkdir()
+    io.save(MeasuredSamples(wi, wo, values, sigma=0.05 * values + 1e-3), run / "table.brdf.h5")
+    out = tmp_path / "rec.brdf.h5"
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(run),
+                "--prior",
+                str(files / "lib.prior.h5"),
+                "--out",
+                str(out),
+                "--json",
+            ]
+        )
+        == 0
+    )
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["sigma_known"] and summary["samples"] == len(values)
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path),
+                "--prior",
+                str(files / "lib.prior.h5"),
+                "--out",
+                str(tmp_path / "y.brdf.h5"),
+            ]
+        )
+        == 2
+    )
+    assert "not a run folder" in capsys.readouterr().err
