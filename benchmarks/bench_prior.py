@@ -286,6 +286,20 @@ def write_tables() -> None:
     _tables.write("prior", text)
 
 
+def _merge(_tables, comment: str) -> None:
+    """``prior.csv`` and ``prior_reverse.csv`` as one (a material scored by both: the first's
+    rows), then the summary, plot and README table."""
+    rows = _tables.read("prior.csv") if (RESULTS / "prior.csv").exists() else []
+    done = {r["material"] for r in rows}
+    if (RESULTS / "prior_reverse.csv").exists():
+        rows += [r for r in _tables.read("prior_reverse.csv") if r["material"] not in done]
+        (RESULTS / "prior_reverse.csv").unlink()
+    _tables.write_csv(rows, "prior.csv", comment)
+    _tables.write_csv(summarize(rows), "prior_summary.csv", comment)
+    _plot(rows, RESULTS / "prior.png")
+    write_tables()
+
+
 def main() -> None:
     import os
 
@@ -303,6 +317,18 @@ def main() -> None:
         action="store_true",
         help="keep the materials already in results/prior.csv and score only the others",
     )
+    ap.add_argument(
+        "--reverse",
+        action="store_true",
+        help="score the materials last first, "
+        "into results/prior_reverse.csv (a second process beside a first one)",
+    )
+    ap.add_argument(
+        "--merge",
+        action="store_true",
+        help="score nothing: merge "
+        "results/prior_reverse.csv into results/prior.csv and write the outputs",
+    )
     args = ap.parse_args()
     sys.path.insert(0, str(HERE))
     import _nbrdf_split
@@ -315,8 +341,12 @@ def main() -> None:
     cache = Path(args.cache) if args.cache else Path(tmp.name)
     cache.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
-    if args.resume and (RESULTS / "prior.csv").exists():
-        rows = _tables.read("prior.csv")  # materials already scored are not scored again
+    out_csv = "prior_reverse.csv" if args.reverse else "prior.csv"
+    if args.merge:
+        _merge(_tables, comment=f"gonio.prior reconstruction; split seed {_nbrdf_split.SEED}")
+        return
+    if args.resume and (RESULTS / out_csv).exists():
+        rows = _tables.read(out_csv)  # materials already scored are not scored again
     builds: list[dict] = []
     comment = f"gonio.prior reconstruction; split seed {_nbrdf_split.SEED}, two folds"
     for fold in folds:
@@ -338,7 +368,8 @@ def main() -> None:
         )
         builds.append(figures)
         _tables.write_csv(builds, "prior_build.csv", comment)
-        for k, name in enumerate(scored[: args.materials]):
+        todo = scored[: args.materials]
+        for k, name in enumerate(todo[::-1] if args.reverse else todo):
             if any(r["material"] == name and r["split"] == fold for r in rows):
                 continue
             t0 = time.perf_counter()
@@ -352,10 +383,11 @@ def main() -> None:
                 f"{rec['mapped_mae']:.3f}; {time.perf_counter() - t0:.0f} s",
                 flush=True,
             )
-            _tables.write_csv(rows, "prior.csv", comment)
-            _tables.write_csv(summarize(rows), "prior_summary.csv", comment)
-            _plot(rows, RESULTS / "prior.png")
-            write_tables()
+            _tables.write_csv(rows, out_csv, comment)
+            if not args.reverse:
+                _tables.write_csv(summarize(rows), "prior_summary.csv", comment)
+                _plot(rows, RESULTS / "prior.png")
+                write_tables()
     tmp.cleanup()
 
 

@@ -31,7 +31,7 @@ def files(tmp_path_factory, tables):
 
 def test_build_reconstruct_fit_render(files, capsys):
     d = files
-    prior = d / "lib.prior.h5"
+    prior = d / "cli.prior.h5"
     args = [
         "prior",
         "build",
