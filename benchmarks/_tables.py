@@ -35,6 +35,7 @@ BENCHMARKS = (
     "bench_fit",
     "bench_published",
     "bench_appearance",
+    "bench_prior",
     "bench_render",
     "bench_scattered_render",
     "bench_equal_time",
@@ -61,17 +62,6 @@ def read(name: str) -> list[Row]:
     """The rows of ``results/NAME`` (lines starting with ``#`` are comments)."""
     with open(RESULTS / name, newline="") as fh:
         return list(csv.DictReader(line for line in fh if not line.startswith("#")))
-
-
-def write_csv(name: str, rows: Sequence[dict]) -> Path:
-    """Write ``rows`` (dictionaries with the same keys, in column order) to ``results/NAME``."""
-    RESULTS.mkdir(exist_ok=True)
-    path = RESULTS / name
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    return path
 
 
 def num(value: object, digits: int = 3) -> str:
@@ -109,6 +99,21 @@ def markdown(rows: Iterable[Row], columns: Sequence[Column], digits: int = 3) ->
             cells.append(num(value, digits))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def write_csv(rows: list[dict], name: str, comment: str = "") -> None:
+    """Write ``rows`` (dicts; the union of their keys, in first-seen order, but ``published``)
+    as ``results/NAME``, with ``comment`` as a first ``#`` line."""
+    RESULTS.mkdir(exist_ok=True)
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys and k != "published"]
+    with open(RESULTS / name, "w", newline="") as fh:
+        if comment:
+            fh.write(f"# {comment}\n")
+        w = csv.DictWriter(fh, keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
 
 
 def write(name: str, table: str, readme: Path = README) -> None:

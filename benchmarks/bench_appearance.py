@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import csv
 import io as _io
 import json
 import math
@@ -285,16 +284,9 @@ def summarize(rows: list[dict]) -> tuple[list[dict], list[dict]]:
 
 
 def _write_csv(rows: list[dict], name: str, comment: str = "") -> None:
-    RESULTS.mkdir(exist_ok=True)
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys and k != "published"]
-    with open(RESULTS / name, "w", newline="") as fh:
-        if comment:
-            fh.write(f"# {comment}\n")
-        w = csv.DictWriter(fh, keys, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
+    import _tables
+
+    _tables.write_csv(rows, name, comment)
 
 
 def _plot(per: list[dict], path: Path) -> None:

@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         r["x_stock"] = r["seconds"] / stock[r["variant"], r["scene"]]
     import _tables
 
-    _tables.write_csv("mitsuba_plugin.csv", rows)
+    _tables.write_csv(rows, "mitsuba_plugin.csv")
     for r in rows:
         print(r)
     write_tables()

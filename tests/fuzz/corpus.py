@@ -22,7 +22,7 @@ from tests.conftest import ROOT, SHARED_DATA
 
 #: Kinds of check, one per reader family (the worker's ``CHECKS``).
 KINDS = ("native", "merl", "rgl", "nbrdf", "cornell", "alta", "exr", "exr_slices", "rig", "plan",
-         "fit")  # fmt: skip
+         "fit", "prior")  # fmt: skip
 
 
 def has_nbrdf_reader() -> bool:
@@ -171,6 +171,29 @@ def _fit_json(out: Path) -> list[Seed]:
     return seeds
 
 
+def _prior_files(out: Path) -> list[Seed]:
+    """Two small material priors (``*.prior.h5``): a random orthonormal basis on a coarse grid,
+    RGB and mono."""
+    from gonio.brdf.grid import Channels
+    from gonio.prior import Prior, prior_axes, space
+
+    seeds = []
+    for name, C, K in (("rgb", 3, 3), ("mono", 1, 2)):
+        rng = np.random.default_rng(11 + C)
+        axes = prior_axes(6, 5, 5)
+        mask = space.valid_mask(axes)
+        V = int(mask.sum())
+        B, _ = np.linalg.qr(rng.normal(size=(V * C, K)))
+        ch = Channels.rgb() if C == 3 else Channels.mono()
+        prior = Prior(axes, mask, rng.normal(-2.0, 0.5, (V, C)), B.reshape(V, C, K),
+                      np.linspace(2.0, 0.5, K), np.full((V, C), 0.01), ch,
+                      meta={"materials": ["a", "b", "c"]})  # fmt: skip
+        p = out / f"{name}.prior.h5"
+        prior.write(p)
+        seeds.append(Seed(f"prior:{name}", "prior", p))
+    return seeds
+
+
 def _rgl_written(out: Path) -> list[Seed]:
     """RGL tensor files written by gonio's writer (:mod:`gonio.io.rgl_write`) from two analytic
     models: a Lambert + rough Torrance-Sparrow (RGB) and a grey Lambert (one colour channel)."""
@@ -237,6 +260,8 @@ def build_corpus(out: Path, real: bool = True) -> list[Seed]:
         seeds.append(Seed(f"rig:{name}", "rig", rigs / name))
     seeds += _plans(out)
     seeds += _fit_json(out)
+    with _fixed_time():
+        seeds += _prior_files(out)
     seeds += _rgl_written(out)
     if has_nbrdf_reader():
         from tests.fuzz.nbrdf import seed_archives

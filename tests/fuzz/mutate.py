@@ -807,6 +807,7 @@ STRUCTURED: dict[str, Callable[[bytes, Rng], tuple[bytes, str]]] = {
     "rig": m_toml,
     "plan": m_toml,
     "fit": m_json,
+    "prior": m_hdf5,
 }
 TEXT_KINDS = ("cornell", "alta", "rig", "plan", "fit")
 #: Native files get three shares of the cases (HDF5 has by far the most structure to corrupt),

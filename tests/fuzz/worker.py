@@ -303,6 +303,36 @@ def c_nbrdf(path: str) -> str:
     return f"nbrdf archive: {len(listed)} materials, read {names}" + (f"; {trip}" if names else "")
 
 
+def c_prior(path: str) -> str:
+    """A material prior (``*.prior.h5``) through ``gonio.prior.Prior.read``; a reconstruction
+    from a few samples must be finite and within the readers' bounds, the chosen
+    configurations distinct, and the file must survive a write and a read."""
+    import tempfile
+
+    from gonio.prior import Prior
+
+    prior = Prior.read(path)
+    wi, wo = _dirs(8, 5)
+    with np.errstate(all="ignore"):
+        r = prior.reconstruct(wi, wo, np.full((8, prior.n_channels), 0.3))
+    if not (np.isfinite(r.mapped).all() and np.isfinite(r.predicted_error)):
+        raise Lie("a reconstruction from a valid prior is not finite")
+    _check_values("reconstruction", r.table.values, r.table.mask, True, 0.0)
+    idx = prior.choose(wi, wo, 3)
+    if len(set(idx.tolist())) != 3:
+        raise Lie(f"choose() repeated a configuration: {idx}")
+    with tempfile.TemporaryDirectory() as tmp:
+        back = Prior.read(_write_prior(prior, Path(tmp) / "p.prior.h5"))
+    if back.rank != prior.rank or not np.array_equal(back.basis, prior.basis):
+        raise Lie("a prior changed through write and read")
+    return f"prior: rank {prior.rank}, {prior.n_valid} cells, error {r.predicted_error:.3g}"
+
+
+def _write_prior(prior: Any, path: Path) -> Path:
+    prior.write(path)
+    return path
+
+
 def c_exr(path: str) -> str:
     from gonio.io.exr import read_exr
 
@@ -464,6 +494,7 @@ CHECKS = {
     "rig": c_rig,
     "plan": c_plan,
     "fit": c_fit,
+    "prior": c_prior,
     "selftest-hang": c_selftest_hang,
     "selftest-spin": c_selftest_spin,
     "selftest-memory": c_selftest_memory,
