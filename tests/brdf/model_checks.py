@@ -142,10 +142,12 @@ def check_sample_weight_consistent(model, n: int = 4000, seed: int = 4) -> None:
 #: degree cells). A density error whose relative size is even over such a cell adds
 #: n * sum((p' - p)^2 / p) to the statistic's mean, the same sum on either grid, and the critical
 #: excess over the mean grows as sqrt(2 * dof): half the samples need half the excess, which a
-#: quarter of the cells gives, so the power against such errors is kept at half the draws.
-#: Sharp lobes name their own cells (``res_theta``/``res_phi`` or a mirror cap); tests that a
-#: wrong sampler fails name their sample count and keep chi2_test's cells.
-CHI2_DEFAULTS = {"n_samples": 500_000, "res_theta": 45, "res_phi": 90}
+#: quarter of the cells gives, so the power against such errors is kept at half the draws. The
+#: expected counts are integrated with 12 Gauss-Legendre nodes per cell and dimension, the node
+#: spacing of chi2_test's default (6 per 1 x 2 degree cell), so a lobe a fraction of a degree
+#: wide (Phong n = 20000) is integrated about as finely as there. Tests that a wrong sampler
+#: fails name their sample count and keep chi2_test's cells.
+CHI2_DEFAULTS = {"n_samples": 500_000, "res_theta": 45, "res_phi": 90, "order": 12}
 _CHI2_CHOICES = ("n_samples", "res_theta", "res_phi", "axis", "theta_max", "mirror_cap")
 
 

@@ -27,6 +27,7 @@ from gonio.brdf.sampling.distributions import (
 )
 from gonio.brdf.tabulated import Axis, TabulatedBRDF
 from gonio.errors import ParameterError
+from tests.brdf.model_checks import CHI2_DEFAULTS
 from tests.brdf.test_tabulated import _GGXLike
 
 HALF = math.pi / 2
@@ -241,13 +242,10 @@ def _chi2(table, theta_o_deg, method, proposal="majorant", phi_o=0.0):
         # grid: histogram on the same grid so the expected counts are integrated exactly
         kw = {"n_samples": 1_000_000, "res_theta": 64, "res_phi": 128}
     else:
-        # Rejection draws are the costly ones: half the samples on cells of 2 x 4 degrees (a
-        # quarter of the 90 x 180 default cells) keep the power against a density error whose
-        # relative size is even over such a cell. The error adds n * sum((p' - p)^2 / p) to the
-        # statistic's mean (the same sum on either grid for such an error), and the critical
-        # excess over the mean grows as sqrt(2 * dof): half the samples need half the excess,
-        # which a quarter of the cells gives.
-        kw = {"n_samples": 500_000, "res_theta": 45, "res_phi": 90}
+        # Rejection draws are the costly ones: the grid of model_checks.CHI2_DEFAULTS (half the
+        # samples on a quarter of the cells, the same power against a density error even over
+        # a cell; see there)
+        kw = CHI2_DEFAULTS
     r = chi2_test(sample, pdf, n_tests=N_TABLE, **kw)
     assert r.passed, f"{method} at theta_o={theta_o_deg}: {r.message}"
     assert r.pdf_integral <= 1 + 1e-3
