@@ -155,20 +155,43 @@ def check_sample_weight_consistent(model, n: int = 4000, seed: int = 4) -> None:
     np.testing.assert_allclose(np.asarray(s.weight)[ok], expect, rtol=1e-4, atol=1e-10)
 
 
-def check_chi2(
-    model, theta_o_deg, n_tests: int, n_samples: int = 1_000_000, mirror_cap=None, **kw
-) -> None:
+#: The chi-square grid of a test that chooses neither its sample count nor its cells: 500,000
+#: samples on cells of 2 x 4 degrees (45 x 90; chi2_test's own default is 1,000,000 on 1 x 2
+#: degree cells). A density error whose relative size is even over such a cell adds
+#: n * sum((p' - p)^2 / p) to the statistic's mean, the same sum on either grid, and the critical
+#: excess over the mean grows as sqrt(2 * dof): half the samples need half the excess, which a
+#: quarter of the cells gives, so the power against such errors is kept at half the draws. The
+#: expected counts are integrated with 12 Gauss-Legendre nodes per cell and dimension, the node
+#: spacing of chi2_test's default (6 per 1 x 2 degree cell), so a lobe a fraction of a degree
+#: wide (Phong n = 20000) is integrated about as finely as there. Tests that a wrong sampler
+#: fails name their sample count and keep chi2_test's cells.
+CHI2_DEFAULTS = {"n_samples": 500_000, "res_theta": 45, "res_phi": 90, "order": 12}
+_CHI2_CHOICES = ("n_samples", "res_theta", "res_phi", "axis", "theta_max", "mirror_cap")
+
+
+def chi2_kwargs(kw: dict) -> dict:
+    """``kw`` with :data:`CHI2_DEFAULTS` filled in where it chooses no count or cells."""
+    if any(k in kw for k in _CHI2_CHOICES):
+        return {"n_samples": 1_000_000, **kw}
+    return {**CHI2_DEFAULTS, **kw}
+
+
+def check_chi2(model, theta_o_deg, n_tests: int, mirror_cap=None, **kw) -> None:
     """Chi-square test of ``model.sample`` against ``model.pdf`` at each theta_o (phi_o = 0.3).
 
     ``mirror_cap`` (radians): histogram in a frame centred on the mirror direction of ``wo``,
     over a cap of that angular radius (for sharp lobes; see :func:`chi2_test`'s ``axis``).
+    Without ``n_samples`` and cells, the grid is :data:`CHI2_DEFAULTS`.
     """
+    kw = chi2_kwargs({**kw, **({} if mirror_cap is None else {"mirror_cap": mirror_cap})})
+    kw.pop("mirror_cap", None)
     for t in theta_o_deg:
         wo = np.asarray(frames.spherical_to_direction(np.radians(t), 0.3))
         sample, pdf = model_sampler(model, wo)
+        cap = {}
         if mirror_cap is not None:
-            kw = {**kw, "axis": wo * np.array([-1.0, -1.0, 1.0]), "theta_max": mirror_cap}
-        r = chi2_test(sample, pdf, n_samples=n_samples, n_tests=n_tests, **kw)
+            cap = {"axis": wo * np.array([-1.0, -1.0, 1.0]), "theta_max": mirror_cap}
+        r = chi2_test(sample, pdf, n_tests=n_tests, **kw, **cap)
         assert r.passed, f"{model!r} at theta_o={t} deg: {r.message}"
 
 

@@ -16,9 +16,12 @@ from gonio.errors import ParameterError
 
 @pytest.fixture(scope="module")
 def table():
+    # sampling structures for 8 outgoing buckets of 32 x 64 cells (the default is 32 of 64 x 128):
+    # the tests compare a bound material with the table it binds, whatever the resolution, and
+    # each bucket the 64 random directions fall into is built for every sampling method
     axes = render_axes(32, 16, 16)
     return TabulatedBRDF.from_model(models.Lambert([0.2, 0.4, 0.6]) + models.Phong(0.0, 0.5, 20.0),
-                                    axes=axes)  # fmt: skip
+                                    axes=axes, sampling_res=(8, 32, 64))  # fmt: skip
 
 
 def _dirs(n, seed):

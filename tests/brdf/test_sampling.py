@@ -27,6 +27,7 @@ from gonio.brdf.sampling.distributions import (
 )
 from gonio.brdf.tabulated import Axis, TabulatedBRDF
 from gonio.errors import ParameterError
+from tests.brdf.model_checks import CHI2_DEFAULTS
 from tests.brdf.test_tabulated import _GGXLike
 
 HALF = math.pi / 2
@@ -226,7 +227,7 @@ def rough():
     return TabulatedBRDF.from_model(_GGXLike(kd=0.2, ks=0.7, alpha=0.5), axes=_axes())
 
 
-def _chi2(table, theta_o_deg, method, proposal="majorant", phi_o=0.0, n=1_000_000):
+def _chi2(table, theta_o_deg, method, proposal="majorant", phi_o=0.0):
     wo = np.asarray(frames.spherical_to_direction(math.radians(theta_o_deg), phi_o))
 
     def sample(u):
@@ -236,10 +237,16 @@ def _chi2(table, theta_o_deg, method, proposal="majorant", phi_o=0.0, n=1_000_00
     def pdf(wi):
         return np.asarray(table.pdf(wi, wo, method=method, proposal=proposal))
 
-    # inversion/alias densities are constant on the sampler's 64 x 128 (theta, phi - phi_o) grid:
-    # histogram on the same grid so the expected counts are integrated exactly
-    kw = {"res_theta": 64, "res_phi": 128} if method != "rejection" else {}
-    r = chi2_test(sample, pdf, n_samples=n, n_tests=N_TABLE, **kw)
+    if method != "rejection":
+        # inversion/alias densities are constant on the sampler's 64 x 128 (theta, phi - phi_o)
+        # grid: histogram on the same grid so the expected counts are integrated exactly
+        kw = {"n_samples": 1_000_000, "res_theta": 64, "res_phi": 128}
+    else:
+        # Rejection draws are the costly ones: the grid of model_checks.CHI2_DEFAULTS (half the
+        # samples on a quarter of the cells, the same power against a density error even over
+        # a cell; see there)
+        kw = CHI2_DEFAULTS
+    r = chi2_test(sample, pdf, n_tests=N_TABLE, **kw)
     assert r.passed, f"{method} at theta_o={theta_o_deg}: {r.message}"
     assert r.pdf_integral <= 1 + 1e-3
     return r

@@ -45,11 +45,12 @@ _jit_sampler_pdf = jax.jit(lambda m, wi, wo: m.pdf(wi, wo))
 
 
 def check_chi2_jit(model, theta_o_deg, n_tests: int, drop_delta: bool = False, **kw) -> None:
-    """Like ``model_checks.check_chi2`` (phi_o = 0.3, >= 1e6 samples) with jitted sampling."""
+    """Like ``model_checks.check_chi2`` (phi_o = 0.3, the same grid) with jitted sampling."""
+    kw = model_checks.chi2_kwargs(kw)
     for t in theta_o_deg:
         wo = np.asarray(frames.spherical_to_direction(np.radians(t), 0.3))
         sample, pdf = jit_sampler(model, wo, drop_delta)
-        r = chi2_test(sample, pdf, n_samples=kw.pop("n_samples", 1_000_000), n_tests=n_tests, **kw)
+        r = chi2_test(sample, pdf, n_tests=n_tests, **kw)
         assert r.passed, f"{model!r} at theta_o={t} deg: {r.message}"
 
 
