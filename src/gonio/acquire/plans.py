@@ -19,6 +19,11 @@ Kinds
     An isotropic coarse pass, then for every incident angle a fine (theta_o, delta_phi) patch
     around the peak found in the coarse data (or the mirror direction when the coarse data
     show no clear peak, and in dry runs).
+``list``
+    An explicit list of configurations, each ``[theta_i, phi_i, theta_o, phi_o]`` in degrees
+    (the form a guided or optimal run writes as ``RUN/plan_chosen.toml``, so that it can be
+    rerun as a fixed plan). ``isotropic = true`` lets the rig turn the sample about its normal
+    (only ``phi_o - phi_i`` matters).
 
 Plan files (TOML)
 -----------------
@@ -36,6 +41,11 @@ Plan files (TOML)
     window_deg = 10.0        # half-width of the patch around the peak (theta_o and delta_phi)
     step_deg = 2.5           # spacing inside the patch
     peak_ratio = 1.5         # peak / median of the coarse row needed to trust the data
+
+    # list: [theta_i, phi_i, theta_o, phi_o] in degrees, one row per configuration
+    kind = "list"
+    isotropic = true
+    configurations = [[20, 0, 40, 180], [45, 0, 45, 90]]
 
 Built-in plans are listed by :func:`builtin_plans`.
 """
@@ -306,6 +316,58 @@ class Adaptive(Plan):
         return {"name": self.name, "kind": self.kind, "stages": self.n_stages}
 
 
+class ConfigList(Plan):
+    """An explicit list of configurations: ``angles`` (N, 4) radians, rows
+    (theta_i, phi_i, theta_o, phi_o)."""
+
+    kind = "list"
+
+    def __init__(self, angles, isotropic: bool = False, name: str = "") -> None:
+        super().__init__(name)
+        self.angles = np.asarray(angles, dtype=float).reshape(-1, 4)
+        self.isotropic = bool(isotropic)
+
+    def stage(self, k: int = 0, results: Sequence[Result] = ()) -> Iterator[Target]:
+        for ti, pi, to, po in self.angles:
+            yield Target(_dir(ti, pi), _dir(to, po), self.isotropic, k)
+
+
+def _config_rows(rows) -> np.ndarray:
+    """``configurations`` of a list plan (degrees) -> (N, 4) radians; PlanError naming the row."""
+    key = "configurations"
+    if not isinstance(rows, (list, tuple)) or not rows:
+        raise _key_error(key, "give a non-empty list of [theta_i, phi_i, theta_o, phi_o] (deg)")
+    if len(rows) > MAX_TARGETS:
+        raise _key_error(key, f"{len(rows)} configurations, more than {MAX_TARGETS}")
+    out = np.empty((len(rows), 4))
+    for n, row in enumerate(rows):
+        if not isinstance(row, (list, tuple)) or len(row) != 4:
+            raise _key_error((key, n), "a configuration is [theta_i, phi_i, theta_o, phi_o] (deg)")
+        if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in row):
+            raise _key_error((key, n), "angles must be numbers (degrees)")
+        vals = [float(v) for v in row]
+        if not all(math.isfinite(v) for v in vals):
+            raise _key_error((key, n), "angles must be finite")
+        if not (0.0 <= vals[0] <= 90.0 and 0.0 <= vals[2] <= 90.0):
+            raise _key_error((key, n), "polar angles must lie in [0, 90] deg")
+        if not (abs(vals[1]) <= 360.0 and abs(vals[3]) <= 360.0):
+            raise _key_error((key, n), "azimuths must lie in [-360, 360] deg")
+        out[n] = vals
+    return np.radians(out)
+
+
+def list_spec(wi: np.ndarray, wo: np.ndarray, isotropic: bool, name: str) -> dict:
+    """A ``kind = "list"`` plan spec of directions ``wi``, ``wo`` (N, 3), degrees rounded to
+    1e-6 (what a guided or optimal run writes of the configurations it chose)."""
+    from gonio.rigs.kinematics import spherical
+
+    ti, pi = np.degrees(spherical(np.asarray(wi, dtype=float).reshape(-1, 3)))
+    to, po = np.degrees(spherical(np.asarray(wo, dtype=float).reshape(-1, 3)))
+    ti, to = np.clip(ti, 0.0, 90.0), np.clip(to, 0.0, 90.0)
+    rows = [[round(float(v), 6) for v in row] for row in zip(ti, pi, to, po, strict=True)]
+    return {"kind": "list", "name": name, "isotropic": bool(isotropic), "configurations": rows}
+
+
 # --- specs, files and built-ins -------------------------------------------------------------
 
 _KEYS = {
@@ -313,7 +375,11 @@ _KEYS = {
     "isotropic": ("theta_i_deg", "theta_o_deg", "dphi_deg"),
     "halfdiff": ("theta_h_deg", "theta_d_deg", "phi_d_deg"),
     "adaptive": ("theta_i_deg", "theta_o_deg", "dphi_deg"),
+    "list": ("configurations",),
 }
+
+#: kinds built by another module from the same spec (their planner needs a material prior)
+_EXTERNAL_KINDS: tuple[str, ...] = ()
 
 BUILTIN: dict[str, dict] = {
     "iso-tiny": {
@@ -392,7 +458,17 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
         raise PlanError("a plan must be a table")
     kind = spec.get("kind")
     if not isinstance(kind, str) or kind not in _KEYS:
-        raise _key_error("kind", f"{kind!r} is not one of {sorted(_KEYS)}")
+        raise _key_error("kind", f"{kind!r} is not one of {sorted([*_KEYS, *_EXTERNAL_KINDS])}")
+    if kind == "list":
+        extra = sorted(set(spec) - {"kind", "name", "isotropic", "configurations"})
+        if extra:
+            raise _key_error(extra[0], "unknown for kind 'list'")
+        if not isinstance(spec.get("isotropic", False), bool):
+            raise _key_error("isotropic", "must be true or false")
+        if "configurations" not in spec:
+            raise PlanError("plan key configurations: missing (kind 'list' needs configurations)")
+        rows = _config_rows(spec["configurations"])
+        return ConfigList(rows, spec.get("isotropic", False), name=spec.get("name", name) or "list")
     allowed = {"kind", "name", *_KEYS[kind]} | ({"refine"} if kind == "adaptive" else set())
     allowed |= {"reciprocal"} if kind == "isotropic" else set()
     if not isinstance(spec.get("reciprocal", False), bool):
