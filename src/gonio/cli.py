@@ -35,6 +35,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.view.cli",
     "gonio.demo.cli",
     "gonio.export.cli",
+    "gonio.prior.cli",
 )
 
 #: command -> (module that registers it, its one-line help as that module states it); a test
@@ -72,6 +73,14 @@ LAZY_COMMANDS: dict[str, tuple[str, str]] = {
     "export": (
         "gonio.export.cli",
         "write a fit as a renderer's material (gonio export --help lists the targets)",
+    ),
+    "prior": (
+        "gonio.prior.cli",
+        "build a material prior (mean + low-rank basis) from a library of BRDF tables",
+    ),
+    "reconstruct": (
+        "gonio.prior.cli",
+        "reconstruct a full table with sigma from sparse samples through a prior",
     ),
 }
 

@@ -276,6 +276,8 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     ) as bar:
         task = bar.add_task(f"reading {path.name}")
         data = prepare(path, opts["theta_max_deg"])
+        if data.source.get("sigma_ignored") and not as_json:
+            console.print(f"{path.name}: {data.source['sigma_ignored']}")
         if opts.get("loss") == "auto" and data.sigma is None and not as_json:
             from gonio.fit.api import AUTO_LOSS_WITHOUT_SIGMA
             from gonio.fit.selection import DEFAULT_LOSS

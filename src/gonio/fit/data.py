@@ -9,6 +9,9 @@ for; 1 for scattered samples). Samples are dropped, and counted, when a value or
 finite, when sigma is not positive, when a direction is at or below the horizon, or when either
 polar angle exceeds the cutoff ``theta_max`` (80 degrees by default: grazing cells are the least
 reliable part of every gonioreflectometer measurement and the literature's fits exclude them).
+A table whose metadata say ``sigma_correlated`` (a reconstruction through a material prior,
+:mod:`gonio.prior`) is read without its sigma: that sigma is correlated across cells, not the
+independent noise per value a chi-square weights by.
 """
 
 from __future__ import annotations
@@ -25,6 +28,12 @@ from gonio.errors import FitError
 
 #: Default polar-angle cutoff in degrees for both directions.
 DEFAULT_THETA_MAX_DEG = 80.0
+#: Why a table's sigma is not used (its metadata say ``sigma_correlated``: a prior
+#: reconstruction, :mod:`gonio.prior`); recorded in ``FitData.source["sigma_ignored"]``.
+SIGMA_CORRELATED_NOTE = (
+    "its sigma is correlated across cells (a prior reconstruction): fitted and ranked as data "
+    "without sigma, no chi-square or BIC from it"
+)
 
 
 @dataclass(frozen=True)
@@ -240,6 +249,11 @@ def prepare(
         values = values[:, None]
     sigma = getattr(data, "sigma", None)
     sigma = None if sigma is None else np.asarray(sigma, dtype=np.float64)
+    if sigma is not None and meta.get("sigma_correlated"):
+        # a prior reconstruction's sigma comes from a few coefficients: correlated across
+        # cells, so it cannot weight a chi-square of independent residuals
+        sigma = None
+        source["sigma_ignored"] = SIGMA_CORRELATED_NOTE
     if sigma is not None and sigma.ndim == 1:
         sigma = sigma[:, None]
     weights = getattr(data, "weights", None)

@@ -29,6 +29,7 @@ SCHEMA_MODULES: tuple[str, ...] = (
     "gonio.io.native_schema",  # table-metadata.schema.json
     "gonio.rigs.schema",  # rig.schema.json (owned by rigs)
     "gonio.io.fit_result",  # fit-result.schema.json
+    "gonio.io.prior_file",  # prior-metadata.schema.json
 )
 
 #: JSON Schema dialect of every generated schema.
