@@ -200,7 +200,7 @@ def test_list_plan_parses_orders_and_refuses_bad_rows(tmp_path):
     [
         ({"kind": "list"}, "configurations: missing"),
         ({"kind": "list", "configurations": []}, "non-empty list"),
-        ({"kind": "list", "configurations": [[1, 2, 3]]}, r"configurations\[0\]: a configuration"),
+        ({"kind": "list", "configurations": [[1, 2, 3]]}, r"configurations\[0\]: give"),
         ({"kind": "list", "configurations": [[1, 2, 3, "x"]]}, "must be numbers"),
         ({"kind": "list", "configurations": [[1, 2, 3, True]]}, "must be numbers"),
         ({"kind": "list", "configurations": [[1, 2, 3, 400]]}, "azimuths"),

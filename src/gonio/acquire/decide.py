@@ -23,12 +23,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from gonio.acquire.journal import Journal
-from gonio.acquire.planning import StagePlan, plan_stage
-from gonio.acquire.plans import Plan, Result, Spent
+from gonio.acquire.planning import StagePlan, plan_stage, start_pose
+from gonio.acquire.plans import Plan, Result, Spent, list_spec
 from gonio.rigs.config import RigConfig
 
 
@@ -78,8 +79,9 @@ def spent_of(journal: Journal) -> Spent:
     """Configurations measured or rejected so far, and the rig seconds of the journaled
     batches (``batch_rig_s`` of each decision)."""
     counts = journal.counts()
-    rig_s = sum(float(d.get("batch_rig_s", 0.0)) for d in journal.decisions().values())
-    return Spent(counts["done"] + counts["rejected"], rig_s)
+    decisions = tuple(journal.decisions().values())
+    rig_s = sum(float(d.get("batch_rig_s", 0.0)) for d in decisions)
+    return Spent(counts["done"] + counts["rejected"], rig_s, decisions)
 
 
 def next_stage(
@@ -97,6 +99,7 @@ def next_stage(
         return NextStage(
             plan_stage(rig, plan, stage, list(results), start_deg, first_index, time_budget_s)
         )
+    plan.for_rig(rig, start_pose(rig))
     d = plan.decide(stage, results, spent)
     detail = {
         "stage": stage,
@@ -116,3 +119,56 @@ def next_stage(
     detail["targets"] = len(targets)
     detail["batch_rig_s"] = round(batch_rig_s(sp, per_config_rig_s(rig)), 6)
     return NextStage(sp, detail)
+
+
+#: the list plan a dynamic run writes of the configurations it chose (``kind = "list"``)
+CHOSEN_PLAN = "plan_chosen.toml"
+
+
+def write_chosen_plan(journal: Journal, run_dir: Path, plan: Plan) -> Path:
+    """Write ``RUN/plan_chosen.toml``: the configurations a dynamic plan chose (every accepted
+    target, in configuration order) as a ``kind = "list"`` plan, so that anyone can rerun them
+    as a fixed plan (``gonio acquire --plan RUN/plan_chosen.toml``)."""
+    import tomli_w
+
+    from gonio.io.atomic import atomic_output
+
+    cfgs = sorted(
+        (c for c in journal.configs() if c.status in ("planned", "rejected")), key=lambda c: c.idx
+    )
+    spec = list_spec(
+        np.array([c.wi for c in cfgs]).reshape(-1, 3),
+        np.array([c.wo for c in cfgs]).reshape(-1, 3),
+        all(c.isotropic for c in cfgs),
+        f"{plan.name}-chosen",
+    )
+    rows = spec.pop("configurations")
+    text = (
+        f"# the {len(cfgs)} configurations plan {plan.name!r} ({plan.kind}) chose in this run,"
+        " [theta_i, phi_i, theta_o, phi_o] in degrees\n"
+        + tomli_w.dumps(spec)
+        + "configurations = [\n"
+        + "".join(f"  [{', '.join(repr(float(v)) for v in r)}],\n" for r in rows)
+        + "]\n"
+    )
+    path = Path(run_dir) / CHOSEN_PLAN
+    with atomic_output(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def batches(journal: Journal) -> list[dict]:
+    """One row per decision of a dynamic run: the stage, the configurations measured before it,
+    its predicted error (None before any sample), the batch size, the rig seconds spent before
+    it, and why the run stopped there (None: it went on)."""
+    return [
+        {
+            "stage": k,
+            "measured_before": d.get("spent_configurations", 0),
+            "predicted_error": d.get("predicted_error"),
+            "batch": 0 if d.get("stop") is not None else d.get("targets", 0),
+            "rig_s_before": d.get("spent_rig_s", 0.0),
+            "stop": d.get("stop"),
+        }
+        for k, d in sorted(journal.decisions().items())
+    ]

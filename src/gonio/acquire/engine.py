@@ -43,7 +43,14 @@ import numpy as np
 
 from gonio import interrupts
 from gonio.acquire import rundir, stopping
-from gonio.acquire.decide import NextStage, next_stage, results_of, spent_of
+from gonio.acquire.decide import (
+    NextStage,
+    batches,
+    next_stage,
+    results_of,
+    spent_of,
+    write_chosen_plan,
+)
 from gonio.acquire.journal import Journal, PlannedConfig
 from gonio.acquire.planning import StagePlan as StagePlan  # re-exported: planning moved out
 from gonio.acquire.planning import dry_run as dry_run
@@ -74,6 +81,8 @@ class RunSummary:
     bus: dict = field(default_factory=dict)
     wall_s: float = 0.0
     rejected: int = 0  # accepted configurations skipped because their frame could not be measured
+    batches: list = field(default_factory=list)  # a dynamic plan's decisions (decide.batches)
+    chosen_plan: str | None = None  # RUN/plan_chosen.toml of a complete dynamic run
 
 
 def open_run(run_dir: Path) -> tuple[Journal, RigConfig, Plan]:
@@ -373,13 +382,21 @@ class _Run:
             and stages_complete(journal, self.plan)
             and counts["done"] + counts["rejected"] == counts["planned"]
         )
-        table, note = None, ""
+        table, note, chosen, rows = None, "", None, []
         try:
             if complete and write_table:
                 table, note = write_run_table(journal, self.rig, self.channels)
                 if counts["rejected"]:
                     note += f"; {rejected_note(journal)}"
                 self.log("table", path=table, note=note)
+            if complete and self.plan.dynamic:
+                chosen = str(write_chosen_plan(journal, self.run_dir, self.plan))
+                self.log("chosen_plan", path=chosen)
+            rows = batches(journal) if self.plan.dynamic else []
+            if rows and complete:  # the simulator knows its truth: how the run went, truly
+                true = self.plan.true_errors(results_of(journal), journal.decisions(), self.rig)
+                for r in rows:
+                    r["true_error"] = true.get(r["stage"])
             self.log(
                 "end", complete=complete, **counts, measured_now=self.measured_now, bus=self.bus
             )
@@ -404,6 +421,8 @@ class _Run:
             self.bus,
             time.monotonic() - self.t_start,
             counts["rejected"],
+            rows,
+            chosen,
         )
 
 

@@ -149,6 +149,7 @@ def dry_run(rig: RigConfig, plan: Plan, time_budget_s: float = 10.0) -> list[Sta
     out = []
     start = start_pose(rig)
     if plan.dynamic:  # its later batches depend on the data: the first one only
+        plan.for_rig(rig, start)
         d = plan.decide(0, [], Spent())
         return [plan_stage(rig, plan, 0, [], start, 0, time_budget_s, targets=list(d.targets))]
     idx = 0
