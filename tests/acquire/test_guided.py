@@ -97,38 +97,46 @@ def test_optimal_never_proposes_an_unreachable_configuration(
     assert np.sum(stage.move_s) <= stage.lexicographic_s + 1e-9  # ordered for travel
 
 
-def test_guided_stops_on_budget_and_target_and_writes_a_list_plan(prior_file, tmp_path):
-    plan = _plan(
-        tmp_path, prior_file, 'kind = "guided"\nbatch = 3\nfirst = 4\nbudget_configurations = 10\n'
-    )
-    s = acquire(tmp_path / "run", "sim_sample", plan, progress=False)
+#: the guided plan of the reference run and of the kill-and-resume runs
+GUIDED = 'kind = "guided"\nbatch = 3\nfirst = 4\nbudget_configurations = 10\n'
+
+
+@pytest.fixture(scope="module")
+def reference(prior_file, tmp_path_factory):
+    """An uninterrupted guided run (budget of 10 configurations): its folder and summary."""
+    d = tmp_path_factory.mktemp("guided")
+    s = acquire(d / "ref", "sim_sample", _plan(d, prior_file, GUIDED), progress=False)
+    return d / "ref", s
+
+
+def test_guided_stops_on_budget_and_target_and_writes_a_list_plan(reference, prior_file, tmp_path):
+    run, s = reference
     assert s.complete and s.done == 10
     errs = [b["predicted_error"] for b in s.batches]
     assert [b["batch"] for b in s.batches] == [4, 3, 3, 0]
     assert errs[0] is None and all(e > 0 for e in errs[1:])
     assert "configuration budget" in s.batches[-1]["stop"]
+    assert all(b["true_error"] > 0 for b in s.batches[1:])  # the simulator knows its truth
     # the chosen configurations, rerun as a fixed plan, are the same targets
     chosen, spec = load_plan(Path(s.chosen_plan))
     assert chosen.kind == "list" and spec["isotropic"] is True
-    cfgs, decisions = _configs(tmp_path / "run")
+    cfgs, decisions = _configs(run)
     got = np.array([t.wo for t in chosen.stage(0)])
     want = np.array([c[3] for c in sorted(cfgs)])
     np.testing.assert_allclose(got, want, atol=1e-7)
     assert set(decisions) == {0, 1, 2, 3}
-    # a target between the second and third predicted errors stops at the third decision
-    target = 0.5 * (errs[2] + errs[3]) if errs[3] < errs[2] else errs[2]
-    plan2 = _plan(
-        tmp_path, prior_file,
-        f'kind = "guided"\nbatch = 3\nfirst = 4\ntarget = {target!r}\nbudget_configurations = 40\n',
-        "target",
-    )  # fmt: skip
-    s2 = acquire(tmp_path / "run2", "sim_sample", plan2, progress=False)
-    assert s2.complete and "target" in s2.batches[-1]["stop"]
-    assert [b["predicted_error"] for b in s2.batches][: len(s2.batches)] == errs[: len(s2.batches)]
-    # a rig-time budget: the spent rig seconds reach it
-    plan3 = _plan(tmp_path, prior_file, 'kind = "guided"\nbatch = 3\nbudget_s = 5.0\n', "rig_s")
-    s3 = acquire(tmp_path / "run3", "sim_sample", plan3, progress=False)
-    assert "rig-time budget" in s3.batches[-1]["stop"]
+    # a target at the second predicted error stops at the second decision, as chosen before
+    body = f'kind = "guided"\nbatch = 3\nfirst = 4\ntarget = {errs[2]!r}\n'
+    s2 = acquire(tmp_path / "run2", "sim_sample", _plan(tmp_path, prior_file, body, "t"),
+                 progress=False)  # fmt: skip
+    assert s2.complete and s2.done == 7 and "target" in s2.batches[-1]["stop"]
+    assert [b["predicted_error"] for b in s2.batches] == errs[:3]
+    # a rig-time budget: the first batch spends more than 1 rig second
+    body = 'kind = "guided"\nbatch = 3\nbudget_s = 1.0\n'
+    s3 = acquire(tmp_path / "run3", "sim_sample", _plan(tmp_path, prior_file, body, "r"),
+                 progress=False)  # fmt: skip
+    assert s3.done == 3 and "rig-time budget" in s3.batches[-1]["stop"]
+    assert s3.batches[-1]["rig_s_before"] > 1.0
 
 
 def test_dry_run_says_what_a_guided_run_will_do(prior_file, tmp_path, capsys):
@@ -160,14 +168,12 @@ def test_bad_prior_plans_are_one_line(prior_file, tmp_path):
         load_plan(p)
 
 
-def _kill_and_resume_guided(prior_file, tmp_path, kills: int, seed: int):
-    body = 'kind = "guided"\nbatch = 3\nfirst = 4\nbudget_configurations = 13\n'
-    plan = _plan(tmp_path, prior_file, body)
-    ref = acquire(tmp_path / "ref", "sim_sample", plan, progress=False)
-    assert ref.complete and ref.done == 13
+def _kill_and_resume_guided(reference, prior_file, tmp_path, kills: int, seed: int):
+    ref_run, ref = reference
+    plan = _plan(tmp_path, prior_file, GUIDED)
     run = tmp_path / "run"
     rng = random.Random(seed)
-    for n, point in enumerate(sorted(rng.sample(range(1, 13), kills))):
+    for n, point in enumerate(sorted(rng.choices(range(1, ref.done), k=kills))):
         cmd = (
             acquire_cmd("--rig", "sim_sample", "--plan", plan, "--out", run)
             if n == 0
@@ -181,22 +187,22 @@ def _kill_and_resume_guided(prior_file, tmp_path, kills: int, seed: int):
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["complete"]
-    assert _configs(run) == _configs(tmp_path / "ref")  # the same choices, the same decisions
+    assert _configs(run) == _configs(ref_run)  # the same choices, the same decisions
     import h5py
 
-    with h5py.File(run / "table.brdf.h5") as a, h5py.File(tmp_path / "ref" / "table.brdf.h5") as b:
-        for key in ("values", "wi", "wo"):
-            if key in b:
-                np.testing.assert_array_equal(a[key][()], b[key][()])
-    assert (run / "plan_chosen.toml").read_text() == (
-        tmp_path / "ref" / "plan_chosen.toml"
-    ).read_text()
+    with h5py.File(run / "table.brdf.h5") as a, h5py.File(ref_run / "table.brdf.h5") as b:
+        for key in ("values", "sigma", "wi", "wo", "gridded/values"):
+            np.testing.assert_array_equal(a[key][()], b[key][()])
+    assert (run / "plan_chosen.toml").read_text() == (ref_run / "plan_chosen.toml").read_text()
 
 
-def test_guided_run_killed_twice_resumes_to_the_same_choices(prior_file, tmp_path):
-    _kill_and_resume_guided(prior_file, tmp_path, kills=2, seed=3)
+def test_guided_run_killed_twice_resumes_to_the_same_choices(reference, prior_file, tmp_path):
+    _kill_and_resume_guided(reference, prior_file, tmp_path, kills=2, seed=3)
 
 
 @pytest.mark.slow
-def test_guided_run_killed_ten_times_resumes_to_the_same_choices(prior_file, tmp_path):
-    _kill_and_resume_guided(prior_file, tmp_path, kills=10, seed=11)
+def test_guided_run_killed_ten_times_resumes_to_the_same_choices(reference, prior_file, tmp_path):
+    """SIGKILL at ten seeded moments (after a seeded number of samples; a number already
+    reached kills the resumed process as it starts; batch boundaries fall between a batch's
+    last sample and the next decision)."""
+    _kill_and_resume_guided(reference, prior_file, tmp_path, kills=10, seed=11)
