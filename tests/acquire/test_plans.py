@@ -211,3 +211,13 @@ def test_list_plan_parses_orders_and_refuses_bad_rows(tmp_path):
 def test_bad_list_plans(spec, match):
     with pytest.raises(PlanError, match=match):
         plan_from_spec(spec)
+
+
+def test_published_example_list_plan_loads_and_plans():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "data-schema" / "examples" / "plan_list.toml"
+    plan, spec = load_plan(path)
+    assert plan.kind == "list" and spec["name"] == "example-list"
+    (stage,) = dry_run(RIG, plan, time_budget_s=1.0)
+    assert len(stage.accepted) == 4 and not stage.refused
