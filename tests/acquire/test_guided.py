@@ -206,3 +206,28 @@ def test_guided_run_killed_ten_times_resumes_to_the_same_choices(reference, prio
     reached kills the resumed process as it starts; batch boundaries fall between a batch's
     last sample and the next decision)."""
     _kill_and_resume_guided(reference, prior_file, tmp_path, kills=10, seed=11)
+
+
+def test_model_keys_are_checked(prior_file):
+    base = {"kind": "guided", "prior": str(prior_file), "batch": 2}
+    with pytest.raises(PlanError, match="model: 'nope' is not a gonio fit model"):
+        plan_from_spec({**base, "model": "nope", "target": 1.0})
+    with pytest.raises(PlanError, match="target_width: needs model"):
+        plan_from_spec({**base, "target_width": 0.1})
+    plan = plan_from_spec({**base, "model": "phong", "target_width": 0.5})
+    assert plan.describe()["model"] == "phong"
+
+
+@pytest.mark.slow
+def test_guided_stops_when_the_model_parameters_are_known(prior_file, tmp_path):
+    """With ``model`` the analytic fit is journaled with each decision; ``target_width`` stops
+    the run once the widest 95 % interval is that fraction of its parameter (the sim_sample
+    truth is a Phong: 7 samples pin it)."""
+    body = 'kind = "guided"\nbatch = 3\nfirst = 4\nmodel = "phong"\ntarget_width = 0.5\n'
+    body += "budget_configurations = 16\n"
+    s = acquire(tmp_path / "run", "sim_sample", _plan(tmp_path, prior_file, body), progress=False)
+    assert s.complete and "phong parameters known" in s.batches[-1]["stop"]
+    _, decisions = _configs(tmp_path / "run")
+    fit = decisions[max(decisions)]["fit"]
+    assert fit["max_relative_width"] <= 0.5
+    np.testing.assert_allclose(fit["params"]["n"], 80.0, rtol=0.2)

@@ -20,7 +20,8 @@ _PLAN_HELP = (
     " [refine] window_deg, step_deg, peak_ratio); halfdiff needs theta_h_deg, theta_d_deg,"
     " phi_d_deg; 'list' gives configurations = [[theta_i, phi_i, theta_o, phi_o], ...] (deg)"
     " and optionally isotropic = true; 'optimal' (count = N) and 'guided' (batch, first,"
-    " target, budget_configurations, budget_s in rig seconds) choose their configurations"
+    " target, budget_configurations, budget_s in rig seconds; model and target_width for an"
+    " analytic fit after each batch) choose their configurations"
     " with a material prior (prior = PATH, relative to the plan file) among the"
     " configurations the rig reaches on a candidate grid (theta_deg, dphi_deg); a run of"
     " either writes what it chose to RUN/plan_chosen.toml, a 'list' plan"
@@ -235,6 +236,8 @@ def _rule(d: dict) -> str:
         stops.append(f"{d['budget_configurations']} configurations")
     if d.get("budget_s") is not None:
         stops.append(f"{d['budget_s']:g} rig seconds")
+    if d.get("target_width") is not None:
+        stops.append(f"{d['model']} parameters known to {d['target_width']:g} of their value")
     return (
         f"guided: first batch {d.get('first')}, then batches of {d.get('batch')} until "
         + " or ".join(stops)

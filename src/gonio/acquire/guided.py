@@ -17,7 +17,10 @@ keep-outs, the light-camera minimum angle, the grazing limit: the rig's own
     from every sample so far and its predicted error (mean absolute error in the prior's mapped
     space); the next batch is chosen given what was measured. The run stops when the predicted
     error is at most ``target``, or the next batch would pass ``budget_configurations`` or the
-    rig-time ``budget_s`` (rig seconds, :mod:`gonio.acquire.decide`).
+    rig-time ``budget_s`` (rig seconds, :mod:`gonio.acquire.decide`). With ``model`` the
+    analytic fit of that model (:func:`gonio.fit.fit`, Laplace intervals) is journaled with each
+    decision, and ``target_width`` stops the run once every parameter is known to that
+    fraction of its value (the widest 95 % interval).
 
 Plan files (TOML)::
 
@@ -26,6 +29,9 @@ Plan files (TOML)::
     batch = 5
     first = 10                            # default: batch
     target = 0.05                         # predicted table error, mapped space
+    model = "lambert+ward"                # also fit this analytic model after each batch ...
+    target_width = 0.1                    # ... and stop when its widest 95 % interval is <=
+                                          #     this fraction of the parameter's value
     budget_configurations = 80
     budget_s = 1800.0                     # rig seconds
     theta_deg = { start = 0, stop = 80, step = 5 }    # candidate grid (default)
@@ -66,7 +72,8 @@ MAX_CANDIDATES = 20_000
 _COMMON = {"kind", "name", "prior", "prior_sha256", "theta_deg", "dphi_deg"}
 _KEYS = {
     "optimal": _COMMON | {"count"},
-    "guided": _COMMON | {"batch", "first", "target", "budget_configurations", "budget_s"},
+    "guided": _COMMON
+    | {"batch", "first", "target", "budget_configurations", "budget_s", "model", "target_width"},
 }
 
 
@@ -277,10 +284,20 @@ class Guided(PriorPlan):
         self.target = _positive_float(spec, "target", None)
         self.budget_configurations = _positive_int(spec, "budget_configurations", None, False)
         self.budget_s = _positive_float(spec, "budget_s", None)
-        if self.target is None and self.budget_configurations is None and self.budget_s is None:
+        self.model = spec.get("model")
+        if self.model is not None:
+            from gonio.fit.presets import available
+
+            if not isinstance(self.model, str) or self.model not in available():
+                raise plan_key_error("model", f"{self.model!r} is not a gonio fit model name")
+        self.target_width = _positive_float(spec, "target_width", None)
+        if self.target_width is not None and self.model is None:
+            raise plan_key_error("target_width", "needs model = NAME (the analytic fit)")
+        rules = (self.target, self.budget_configurations, self.budget_s, self.target_width)
+        if all(r is None for r in rules):
             raise PlanError(
-                "plan kind 'guided' needs a stopping rule: target, budget_configurations or"
-                " budget_s"
+                "plan kind 'guided' needs a stopping rule: target, target_width,"
+                " budget_configurations or budget_s"
             )
 
     def decide(self, k: int, results: Sequence[Result], spent: Spent) -> Decision:
@@ -292,6 +309,16 @@ class Guided(PriorPlan):
         err = state.get("predicted_error")
         if self.target is not None and err is not None and err <= self.target:
             return Decision((), f"predicted error {err:.4g} <= target {self.target:g}", state)
+        if self.model is not None and results:
+            state["fit"] = fit_state(self.model, results)
+            width = state["fit"]["max_relative_width"]
+            if self.target_width is not None and width is not None and width <= self.target_width:
+                return Decision(
+                    (),
+                    f"{self.model} parameters known: widest 95 % interval {width:.4g} of its"
+                    f" value <= target_width {self.target_width:g}",
+                    state,
+                )
         if self.budget_s is not None and spent.rig_s >= self.budget_s:
             return Decision(
                 (), f"rig-time budget spent ({spent.rig_s:.1f} of {self.budget_s:g} s)", state
@@ -317,7 +344,34 @@ class Guided(PriorPlan):
             "target": self.target,
             "budget_configurations": self.budget_configurations,
             "budget_s": self.budget_s,
+            "model": self.model,
+            "target_width": self.target_width,
         }
+
+
+def fit_state(model: str, results: Sequence[Result]) -> dict:
+    """The analytic fit ``model`` of the samples with Laplace intervals (:func:`gonio.fit.fit`):
+    its parameters and the widest 95 % interval relative to its parameter's value (None while
+    the fit fails or a parameter is unconstrained)."""
+    from gonio.brdf.measured import MeasuredSamples
+    from gonio.errors import GonioError
+    from gonio.fit import fit
+
+    wi, wo, values, sigma = _arrays(results)
+    try:
+        r = fit(MeasuredSamples(wi=wi, wo=wo, values=values, sigma=sigma), model=model,
+                uncertainty="laplace")  # fmt: skip
+    except GonioError as exc:
+        return {"model": model, "error": str(exc), "max_relative_width": None}
+    widths = []
+    for key, (lo, hi) in r.intervals(95).items():
+        v = np.abs(np.asarray(r.params[key], dtype=float))
+        w = (np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float)) / np.maximum(v, 1e-12)
+        widths.append(np.ravel(w))
+    w = np.concatenate(widths) if widths else np.array([np.nan])
+    worst = float(np.max(w)) if np.all(np.isfinite(w)) else None
+    params = {k: np.asarray(v, dtype=float).tolist() for k, v in r.params.items()}
+    return {"model": model, "params": params, "max_relative_width": worst}
 
 
 def _positive_int(spec: dict, key: str, default: int | None, required: bool = True) -> int | None:
