@@ -48,6 +48,7 @@ BENCHMARKS = (
     "bench_zoo",
     "bench_mcmc_agreement",
     "bench_view",
+    "bench_guided",
 )
 
 Row = dict[str, str]

@@ -231,3 +231,18 @@ def test_guided_stops_when_the_model_parameters_are_known(prior_file, tmp_path):
     fit = decisions[max(decisions)]["fit"]
     assert fit["max_relative_width"] <= 0.5
     np.testing.assert_allclose(fit["params"]["n"], 80.0, rtol=0.2)
+
+
+def test_optimal_run_and_a_changed_prior_is_refused_on_resume(prior_file, tmp_path):
+    import shutil
+
+    mine = tmp_path / "mine.prior.h5"
+    shutil.copy(prior_file, mine)
+    plan = _plan(tmp_path, mine, 'kind = "optimal"\ncount = 3\n')
+    s = acquire(tmp_path / "run", "sim_sample", plan, progress=False, write_table=False)
+    assert s.complete and s.done == 3 and [b["batch"] for b in s.batches] == [3, 0]
+    assert s.batches[-1]["stop"] == "all chosen configurations measured"
+    with open(mine, "ab") as fh:
+        fh.write(b"\0")
+    with pytest.raises(PlanError, match=r"prior .* changed since the run started"):
+        acquire(tmp_path / "run", resume=True, progress=False)
