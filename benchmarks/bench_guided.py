@@ -412,6 +412,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plans", default=",".join([*FIXED, *(f"optimal-{n}" for n in OPTIMAL),
                                                   "guided"]))  # fmt: skip
     ap.add_argument("--cache", default=None, help="folder keeping the built prior")
+    ap.add_argument("--prior", default=None,
+                    help="a prior file to use instead of building the tuning half's (its "
+                    "materials must not include the scored ones)")  # fmt: skip
     ap.add_argument(
         "--tables-only",
         action="store_true",
@@ -431,24 +434,34 @@ def main(argv: list[str] | None = None) -> int:
     tmp = tempfile.TemporaryDirectory()
     cache = Path(args.cache) if args.cache else Path(tmp.name)
     cache.mkdir(parents=True, exist_ok=True)
-    prior, prior_path = build(tuning, cache)
+    if args.prior:
+        from gonio.prior import Prior
+
+        prior_path = Path(args.prior).resolve()
+        prior = Prior.read(prior_path)
+        inside = set(prior.meta.get("materials", [])) & set(held)
+        if inside:
+            raise SystemExit(f"--prior holds scored materials: {sorted(inside)[:3]}")
+    else:
+        prior, prior_path = build(tuning, cache)
     plans = [p.strip() for p in args.plans.split(",") if p.strip()]
     rows: list[dict] = []
     todo = [(n, f"{ARCHIVE}::{n}", "nbrdf-held-out", "sim_sample") for n in held[: args.materials]]
-    if args.rgl:
-        todo += [
-            (p.stem, str(p), "rgl", "sim_sample") for p in sorted((SHARED / "rgl").glob("*.bsdf"))
-        ]
-    if args.imaging and todo:
+    if args.imaging and todo:  # after the sweep's NBRDF truths, before the RGL files
         todo.append((todo[0][0], todo[0][1], todo[0][2], "sim"))
+    if args.rgl:
+        rgl = sorted((SHARED / "rgl").glob("*.bsdf"))
+        todo += [(p.stem, str(p), "rgl", "sim_sample") for p in rgl]
     t0 = time.perf_counter()
     for name, address, split, rig in todo:
         which = plans if rig == "sim_sample" else ["optimal-20", "guided"]
         rows += run_material(prior, prior_path, name, address, split, rig, args.fit,
                              Path(tmp.name), which)  # fmt: skip
         spent = time.perf_counter() - t0
-        comment = (f"bench_guided: prior of the {len(tuning)} tuning NBRDF materials (rank "
-                   f"{prior.rank}); {len(todo)} truths; {spent:.0f} s so far")  # fmt: skip
+        n_prior = len(prior.meta.get("materials", []))
+        comment = (f"bench_guided: prior {prior_path.name} of {n_prior}"
+                   f" materials (rank {prior.rank}; NBRDF tuning half unless --prior); "
+                   f"{len(todo)} truths; {spent:.0f} s so far")  # fmt: skip
         _write_csv(rows, "guided.csv", comment)
         _write_csv(summarize(rows), "guided_summary.csv", comment)
     plot(rows, RESULTS / "guided.png")

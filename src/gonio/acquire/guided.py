@@ -163,12 +163,17 @@ class PriorPlan(Plan):
     # --- helpers -----------------------------------------------------------------------------
     def _choose(self, count: int, chosen: Sequence[int], results: Sequence[Result]) -> list[int]:
         """``count`` new grid indices (never one chosen before), in the prior's order."""
-        free = [i for i in self.candidates if i not in set(chosen)]
-        count = min(count, len(free))
-        if count <= 0:
+        taken = set(chosen)
+        free = [i for i in self.candidates if i not in taken]
+        if not free:
             return []
         wi = np.array([self.grid[i].wi for i in free])
         wo = np.array([self.grid[i].wo for i in free])
+        usable = np.asarray(self.prior.observe(wi, wo).usable, dtype=bool)  # the prior sees them
+        free, wi, wo = [i for i, u in zip(free, usable, strict=True) if u], wi[usable], wo[usable]
+        count = min(count, len(free))
+        if count <= 0:
+            return []
         measured = _measured(results) if results else None
         picks = self.prior.choose(wi, wo, count, measured=measured)
         return [free[int(p)] for p in np.asarray(picks, dtype=int).ravel()[:count]]
