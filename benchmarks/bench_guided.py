@@ -129,6 +129,7 @@ class Scorer:
     """The truth on the prior's cells and in sphere images; scores of estimates against it."""
 
     def __init__(self, prior, truth) -> None:
+        from gonio.appearance.environment import N_PROPOSALS
         from gonio.appearance.score import Reference
         from gonio.prior import space
 
@@ -137,7 +138,9 @@ class Scorer:
         self.wi, self.wo = wi, wo
         self.cc = space.cos_product(wi, wo)
         self.want = self.mapped(truth)
-        self.ref = Reference.of(truth)
+        # the point-light images are the measure; the studio image (which score() renders too)
+        # gets the fewest samples it allows
+        self.ref = Reference.of(truth, env_samples=N_PROPOSALS)
 
     def mapped(self, material) -> np.ndarray:
         from gonio.prior import space
@@ -171,7 +174,7 @@ def run_plan(plan, rig, out: Path):
     from gonio.acquire.journal import Journal
 
     t0 = time.perf_counter()
-    s = acquire(out, rig, plan, progress=False, write_table=False)
+    s = acquire(out, rig, plan, progress=False, write_table=False)  # guided: true errors too
     wall = time.perf_counter() - t0
     j = Journal(out)
     return s, j, wall
@@ -235,7 +238,6 @@ def run_material(prior, prior_path: Path, name: str, address: str, split: str, r
             rows.append(row)
             if plan == "guided":  # its curve: every decision's reconstruction, scored truly
                 walls = decision_wall(folder / "run")
-                true = prior_plan_true_errors(prior_path, j, rig)
                 cum = 0.0
                 for b in s.batches:
                     cum += walls.get(b["stage"], 0.0)
@@ -245,21 +247,11 @@ def run_material(prior, prior_path: Path, name: str, address: str, split: str, r
                                  "configurations": b["measured_before"],
                                  "rig_s": b["rig_s_before"], "compute_s": cum,
                                  "time_s": b["rig_s_before"] + cum,
-                                 "err_prior": true.get(b["stage"]),
+                                 "err_prior": b.get("true_error"),
                                  "predicted_error": b["predicted_error"]})  # fmt: skip
         finally:
             j.close()
     return rows
-
-
-def prior_plan_true_errors(prior_path: Path, journal, rig) -> dict[int, float]:
-    """The guided run's decisions scored against the truth (as its summary does)."""
-    from gonio.acquire.decide import results_of
-    from gonio.acquire.plans import plan_from_spec
-
-    plan = plan_from_spec({"kind": "guided", "prior": str(prior_path), "batch": 1,
-                           "target": 1.0})  # fmt: skip
-    return plan.true_errors(results_of(journal), journal.decisions(), rig)
 
 
 def summarize(rows: list[dict]) -> list[dict]:
