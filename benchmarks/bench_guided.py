@@ -304,11 +304,13 @@ def summarize(rows: list[dict]) -> list[dict]:
 
 
 def read_rows() -> list[dict]:
-    """``results/guided.csv`` with its numbers as numbers (empty cells as None)."""
+    """``results/guided.csv`` (and ``guided_imaging.csv``, a run of ``--imaging-only``) with
+    numbers as numbers (empty cells as None)."""
     import _tables
 
     out = []
-    for r in _tables.read("guided.csv"):
+    names = [n for n in ("guided.csv", "guided_imaging.csv") if (RESULTS / n).exists()]
+    for r in (r for n in names for r in _tables.read(n)):
         row: dict = {}
         for k, v in r.items():
             try:
@@ -414,6 +416,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rgl", action="store_true", help="also the RGL files of the shared data")
     ap.add_argument("--imaging", action="store_true",
                     help="also the first material on the imaging rig 'sim'")  # fmt: skip
+    ap.add_argument(
+        "--imaging-only",
+        action="store_true",
+        help="only the imaging-rig material, into results/guided_imaging.csv",
+    )
     ap.add_argument("--fit", action="store_true", help="also the default analytic fit")
     ap.add_argument("--plans", default=",".join([*FIXED, *(f"optimal-{n}" for n in OPTIMAL),
                                                   "guided"]))  # fmt: skip
@@ -455,7 +462,9 @@ def main(argv: list[str] | None = None) -> int:
     todo = [(n, f"{ARCHIVE}::{n}", "nbrdf-held-out", "sim_sample") for n in held[: args.materials]]
     if args.imaging and todo:  # after the sweep's NBRDF truths, before the RGL files
         todo.append((todo[0][0], todo[0][1], todo[0][2], "sim"))
-    if args.rgl:
+    if args.imaging_only:
+        todo = [(todo[0][0], todo[0][1], todo[0][2], "sim")]
+    if args.rgl and not args.imaging_only:
         rgl = sorted((SHARED / "rgl").glob("*.bsdf"))
         todo += [(p.stem, str(p), "rgl", "sim_sample") for p in rgl]
     t0 = time.perf_counter()
@@ -468,8 +477,14 @@ def main(argv: list[str] | None = None) -> int:
         comment = (f"bench_guided: prior {prior_path.name} of {n_prior}"
                    f" materials (rank {prior.rank}; NBRDF tuning half unless --prior); "
                    f"{len(todo)} truths; {spent:.0f} s so far")  # fmt: skip
+        if args.imaging_only:
+            _write_csv(rows, "guided_imaging.csv", comment)
+            continue
         _write_csv(rows, "guided.csv", comment)
         _write_csv(summarize(rows), "guided_summary.csv", comment)
+    if args.imaging_only:
+        tmp.cleanup()
+        return 0
     plot(rows, RESULTS / "guided.png")
     write_tables()
     tmp.cleanup()
