@@ -194,7 +194,7 @@ def run_plan(plan, rig, out: Path):
     return s, j, wall
 
 
-def score_estimates(sc: Scorer, journal, with_fit: bool) -> dict:
+def score_estimates(sc: Scorer, journal, with_fit: bool, with_flip: bool = True) -> dict:
     """The prior reconstruction (and the default fit) of a run's samples, scored."""
     wi, wo, values, sigma = samples_of(journal)
     t0 = time.perf_counter()
@@ -203,8 +203,9 @@ def score_estimates(sc: Scorer, journal, with_fit: bool) -> dict:
         "compute_rec_s": time.perf_counter() - t0,
         "err_prior": sc.error(rec.mapped),
         "predicted_error": float(rec.predicted_error),
-        "flip_prior": sc.flip(rec.table),
     }
+    if with_flip:
+        out["flip_prior"] = sc.flip(rec.table)
     if with_fit:
         from gonio.brdf.measured import MeasuredSamples
         from gonio.fit.selection import select
@@ -214,7 +215,8 @@ def score_estimates(sc: Scorer, journal, with_fit: bool) -> dict:
             data = MeasuredSamples(wi=wi, wo=wo, values=values, sigma=sigma)
             model = select(data).result.model
             out["err_fit"] = sc.error(sc.mapped(model))
-            out["flip_fit"] = sc.flip(model)
+            if with_flip:
+                out["flip_fit"] = sc.flip(model)
         except Exception as exc:  # a fit that fails on few samples is a result, not a crash
             out["fit_note"] = f"{type(exc).__name__}: {exc}"[:120]
         out["compute_fit_s"] = time.perf_counter() - t0
@@ -222,7 +224,8 @@ def score_estimates(sc: Scorer, journal, with_fit: bool) -> dict:
 
 
 def run_material(prior, prior_path: Path, name: str, address: str, split: str, rig_name: str,
-                 with_fit: bool, tmp: Path, plans: list[str]) -> list[dict]:  # fmt: skip
+                 with_fit: bool, tmp: Path, plans: list[str],
+                 flip_plans: tuple[str, ...] = ()) -> list[dict]:  # fmt: skip
     from gonio.rigs.sim.truth import load_truth
 
     rig = truth_rig(address, rig_name)
@@ -245,7 +248,7 @@ def run_material(prior, prior_path: Path, name: str, address: str, split: str, r
         try:
             rig_s = rig_seconds(j, rig)
             decide_s = sum(decision_wall(folder / "run").values())
-            est = score_estimates(sc, j, with_fit)
+            est = score_estimates(sc, j, with_fit, plan in flip_plans)
             row = {**base, "plan": plan, "point": "final", "configurations": s.done,
                    "rig_s": rig_s, "compute_s": decide_s, "time_s": rig_s + decide_s,
                    "acquire_wall_s": wall, **est}  # fmt: skip
@@ -422,6 +425,20 @@ def main(argv: list[str] | None = None) -> int:
         help="only the imaging-rig material, into results/guided_imaging.csv",
     )
     ap.add_argument("--fit", action="store_true", help="also the default analytic fit")
+    ap.add_argument(
+        "--full-sweep",
+        type=int,
+        default=10**6,
+        metavar="N",
+        help="every plan for the first N truths; then demo, optimal-20 and guided only",
+    )
+    ap.add_argument(
+        "--flip",
+        type=int,
+        default=10**6,
+        metavar="M",
+        help="HDR-FLIP (of demo, optimal-20, guided) for the first M truths only",
+    )
     ap.add_argument("--plans", default=",".join([*FIXED, *(f"optimal-{n}" for n in OPTIMAL),
                                                   "guided"]))  # fmt: skip
     ap.add_argument("--cache", default=None, help="folder keeping the built prior")
@@ -468,10 +485,13 @@ def main(argv: list[str] | None = None) -> int:
         rgl = sorted((SHARED / "rgl").glob("*.bsdf"))
         todo += [(p.stem, str(p), "rgl", "sim_sample") for p in rgl]
     t0 = time.perf_counter()
-    for name, address, split, rig in todo:
-        which = plans if rig == "sim_sample" else ["optimal-20", "guided"]
+    core = [p for p in plans if p in ("demo", "optimal-20", "guided")]
+    for n, (name, address, split, rig) in enumerate(todo):
+        which = plans if n < args.full_sweep else core
+        which = which if rig == "sim_sample" else ["optimal-20", "guided"]
+        flips = ("demo", "optimal-20", "guided") if n < args.flip else ()
         rows += run_material(prior, prior_path, name, address, split, rig, args.fit,
-                             Path(tmp.name), which)  # fmt: skip
+                             Path(tmp.name), which, flips)  # fmt: skip
         spent = time.perf_counter() - t0
         n_prior = len(prior.meta.get("materials", []))
         comment = (f"bench_guided: prior {prior_path.name} of {n_prior}"
