@@ -288,31 +288,32 @@ def summarize(rows: list[dict]) -> list[dict]:
                         and r["err_prior"] <= demo["err_prior"]), None)  # fmt: skip
             row["guided_time_to_demo_err_s"] = hit["time_s"] if hit else ""
             row["guided_configurations_then"] = hit["configurations"] if hit else ""
+            row["guided_rig_s_then"] = hit["rig_s"] if hit else ""
             row["time_ratio"] = hit["time_s"] / demo["time_s"] if hit else ""
             row["goal_met"] = bool(hit and hit["time_s"] <= demo["time_s"] / 5)
         for n in OPTIMAL:
             r = next((r for r in mine if r["plan"] == f"optimal-{n}"), None)
             if r:
                 row[f"optimal_{n}_err"] = r["err_prior"]
-                row[f"optimal_{n}_flip"] = r["flip_prior"]
+                row[f"optimal_{n}_flip"] = r.get("flip_prior")
         g = next((r for r in mine if r["plan"] == "guided" and r["point"] == "final"), None)
         if g:
             row["guided_final_err"] = g["err_prior"]
-            row["guided_final_flip"] = g["flip_prior"]
+            row["guided_final_flip"] = g.get("flip_prior")
             row["guided_final_time_s"] = g["time_s"]
         if demo is not None:
-            row["demo_flip"] = demo["flip_prior"]
+            row["demo_flip"] = demo.get("flip_prior")
         out.append(row)
     return out
 
 
-def read_rows() -> list[dict]:
+def read_rows(names: tuple[str, ...] = ("guided.csv", "guided_imaging.csv")) -> list[dict]:
     """``results/guided.csv`` (and ``guided_imaging.csv``, a run of ``--imaging-only``) with
     numbers as numbers (empty cells as None)."""
     import _tables
 
     out = []
-    names = [n for n in ("guided.csv", "guided_imaging.csv") if (RESULTS / n).exists()]
+    names = [n for n in names if (RESULTS / n).exists()]
     for r in (r for n in names for r in _tables.read(n)):
         row: dict = {}
         for k, v in r.items():
@@ -397,6 +398,8 @@ def write_tables() -> None:
         ("demo: time s", "demo_time_s"),
         ("demo: mapped err", "demo_err"),
         ("guided: time s to demo err", "guided_time_to_demo_err_s"),
+        ("… of it rig s", "guided_rig_s_then"),
+        ("… configs", "guided_configurations_then"),
         ("time ratio", "time_ratio"),
         ("<= 1/5", "goal_met"),
         ("optimal-20 err", "optimal_20_err"),
@@ -425,6 +428,8 @@ def main(argv: list[str] | None = None) -> int:
         help="only the imaging-rig material, into results/guided_imaging.csv",
     )
     ap.add_argument("--fit", action="store_true", help="also the default analytic fit")
+    ap.add_argument("--append", action="store_true",
+                    help="continue results/guided.csv, skipping the truths it holds")  # fmt: skip
     ap.add_argument(
         "--full-sweep",
         type=int,
@@ -485,6 +490,10 @@ def main(argv: list[str] | None = None) -> int:
         rgl = sorted((SHARED / "rgl").glob("*.bsdf"))
         todo += [(p.stem, str(p), "rgl", "sim_sample") for p in rgl]
     t0 = time.perf_counter()
+    if args.append:  # continue results/guided.csv: the truths it holds are not run again
+        rows = read_rows(("guided.csv",))
+        done = {(r["material"], r["rig"]) for r in rows}
+        todo = [t for t in todo if (t[0], t[3]) not in done]
     core = [p for p in plans if p in ("demo", "optimal-20", "guided")]
     for n, (name, address, split, rig) in enumerate(todo):
         which = plans if n < args.full_sweep else core
