@@ -51,6 +51,7 @@ BENCHMARKS = (
     "bench_view",
     "bench_mitsuba_plugin",
     "bench_export",
+    "bench_guided",
 )
 
 Row = dict[str, str]

@@ -7,11 +7,12 @@ from __future__ import annotations
 import sqlite3
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from tests.console_script import env
 
-__all__ = ["acquire_cmd", "done_samples", "env", "gonio", "gonio_cmd"]
+__all__ = ["acquire_cmd", "done_samples", "env", "gonio", "gonio_cmd", "run_until"]
 
 
 def gonio_cmd(*args) -> list[str]:
@@ -47,3 +48,21 @@ def done_samples(run: Path, timeout: float = 1.0) -> int:
             con.close()
     except sqlite3.DatabaseError:
         return 0
+
+
+def run_until(cmd, run: Path, n_done: int, sig: int, timeout: float = 60.0) -> int:
+    """Run ``cmd``; send ``sig`` once ``run`` has ``n_done`` samples journaled; its exit code."""
+    proc = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    t0 = time.monotonic()
+    try:
+        while proc.poll() is None and time.monotonic() - t0 < timeout:
+            if done_samples(run) >= n_done:
+                proc.send_signal(sig)
+                break
+            time.sleep(0.01)
+        proc.wait(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode

@@ -6,7 +6,6 @@ import json
 import random
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ from gonio.rigs.config import load_rig
 from gonio.rigs.session import open_rig
 from gonio.rigs.sim import FaultConfig
 from gonio.rigs.sim.sample import SimulatedSampleCamera
-from tests.acquire.child import acquire_cmd, done_samples, env
+from tests.acquire.child import acquire_cmd, done_samples, env, run_until
 
 RIG = load_rig("sim")
 
@@ -162,23 +161,6 @@ def test_plan_with_nothing_reachable_is_refused_before_any_motion(tmp_path):
     assert not run.exists()
 
 
-def _run_until(cmd, run: Path, n_done: int, sig: int, timeout: float = 60.0) -> int:
-    proc = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    t0 = time.monotonic()
-    try:
-        while proc.poll() is None and time.monotonic() - t0 < timeout:
-            if done_samples(run) >= n_done:
-                proc.send_signal(sig)
-                break
-            time.sleep(0.01)
-        proc.wait(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    return proc.returncode
-
-
 def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int, extra=()):
     ref, _ = reference
     run = tmp_path / "run"
@@ -191,7 +173,7 @@ def _kill_and_resume(reference, tmp_path, plan_file, kills: int, seed: int, extr
             if first
             else (acquire_cmd("--resume", run, *extra))
         )
-        rc = _run_until(cmd, run, n, signal.SIGKILL)
+        rc = run_until(cmd, run, n, signal.SIGKILL)
         first = False
         assert rc == -signal.SIGKILL or rc == 0
     out = subprocess.run(
@@ -225,7 +207,7 @@ def test_sigkill_many_times_on_a_faulty_bus(reference, tmp_path, plan_file):
 def test_ctrl_c_parks_the_rig_then_resume_completes(reference, tmp_path, plan_file):
     ref, _ = reference
     run = tmp_path / "run"
-    rc = _run_until(
+    rc = run_until(
         acquire_cmd("--rig", "sim_sample", "--plan", plan_file, "--out", run),
         run,
         5,

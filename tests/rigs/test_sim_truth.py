@@ -111,3 +111,30 @@ def test_rgl_truth_has_no_ramp_on_the_plane_of_incidence():
         wi, wo = frames.half_diff_to_directions(th, 0.0, td, np.full_like(th, math.radians(d)))
         f[d] = np.asarray(truth.f(np.asarray(wi), np.asarray(wo)))
     np.testing.assert_allclose(f[-0.2], f[0.2], rtol=2e-3)
+
+
+def test_nbrdf_member_is_a_truth_relative_to_the_rig_file(tmp_path):
+    """``[sim.sample] file = "ARCHIVE.zip::NAME"``: any material of a shared archive is a truth,
+    the archive resolved against the rig file, the member checked when the table is read."""
+    archive = shared_file("nbrdf", "merl_nbrdf.zip")
+    from gonio.io.nbrdf import list_materials
+
+    name = list_materials(archive)[0]
+    (tmp_path / "merl.zip").symlink_to(archive)
+    rig_path = tmp_path / "rig.toml"
+    rig_path.write_text(_rig_with_sample(f'file = "merl.zip::{name}"'))
+    from gonio.rigs.config import load_rig
+
+    rig = load_rig(rig_path)
+    assert str(truth_file(rig.sim.sample, rig.source)) == f"{tmp_path / 'merl.zip'}::{name}"
+    truth = load_truth(rig.sim.sample, rig.source)
+    ref = io.load(f"{archive}::{name}")
+    wi = frames.spherical_to_direction(np.array([0.3, 0.7]), np.array([0.0, 1.0]))
+    wo = frames.spherical_to_direction(np.array([0.5, 0.2]), np.array([3.0, 2.0]))
+    np.testing.assert_allclose(
+        np.asarray(truth.f(wi, wo)), np.maximum(np.asarray(ref.f(wi, wo)), 0.0), rtol=1e-6
+    )
+    with pytest.raises(RigConfigError, match=r"rig.toml:\d+: .*no such file: .*nope.zip"):
+        parse_rig(_rig_with_sample('file = "nope.zip::x"'), str(rig_path))
+    with pytest.raises(FormatError):
+        load_truth({"file": f"{archive}::no-such-material"}, "rig.toml")

@@ -18,7 +18,13 @@ _PLAN_HELP = (
     " add reciprocal = true to also measure every pair swapped, a reciprocity check; adaptive"
     " adds"
     " [refine] window_deg, step_deg, peak_ratio); halfdiff needs theta_h_deg, theta_d_deg,"
-    " phi_d_deg"
+    " phi_d_deg; 'list' gives configurations = [[theta_i, phi_i, theta_o, phi_o], ...] (deg)"
+    " and optionally isotropic = true; 'optimal' (count = N) and 'guided' (batch, first,"
+    " target, budget_configurations, budget_s in rig seconds; model and target_width for an"
+    " analytic fit after each batch) choose their configurations"
+    " with a material prior (prior = PATH, relative to the plan file) among the"
+    " configurations the rig reaches on a candidate grid (theta_deg, dphi_deg); a run of"
+    " either writes what it chose to RUN/plan_chosen.toml, a 'list' plan"
 )
 
 
@@ -50,6 +56,9 @@ def register(sub) -> None:
             " [sim.sample] model description is checked by 'gonio acquire' only (before any"
             " motion): building the model loads the model code (JAX), which a dry run does not."
             " The text output wraps to the terminal's width (COLUMNS when set, 80 when piped)."
+            "\n\nAn 'optimal' or 'guided' plan chooses its batches from the measurements: the"
+            " dry run plans its first batch (chosen by the prior before any data) and says how"
+            " the run goes on: the batch size and the stopping rule (target, budget)."
         ),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -202,11 +211,37 @@ def _plan(args: argparse.Namespace) -> int:
     }
     if plan.n_stages > 1:
         out["note"] = "later stages depend on measurements; predicted around the mirror direction"
+    if plan.dynamic:
+        # what a run of it will do without data: its first batch (counted above) and its rule
+        out["decides"] = plan.describe()
+        out["note"] = (
+            "the figures above are the first batch; later batches are chosen from the"
+            " measurements (" + _rule(out["decides"]) + ")"
+        )
     if args.json:
         print(dumps_json(out, indent=2))
         return 0
     _print_plan(out, plan, rig, costs, args.list_refused)
     return 0
+
+
+def _rule(d: dict) -> str:
+    """One phrase: how a dynamic plan goes on and when it stops."""
+    if d.get("kind") == "optimal":
+        return f"optimal: {d.get('count')} configurations in one batch, then stop"
+    stops = []
+    if d.get("target") is not None:
+        stops.append(f"predicted error <= {d['target']:g}")
+    if d.get("budget_configurations") is not None:
+        stops.append(f"{d['budget_configurations']} configurations")
+    if d.get("budget_s") is not None:
+        stops.append(f"{d['budget_s']:g} rig seconds")
+    if d.get("target_width") is not None:
+        stops.append(f"{d['model']} parameters known to {d['target_width']:g} of their value")
+    return (
+        f"guided: first batch {d.get('first')}, then batches of {d.get('batch')} until "
+        + " or ".join(stops)
+    )
 
 
 def _print_plan(out: dict, plan, rig, costs, list_refused: int) -> None:
@@ -304,6 +339,9 @@ def _acquire(args: argparse.Namespace) -> int:
         "bus": summary.bus,
         "wall_s": round(summary.wall_s, 3),
     }
+    if summary.batches:
+        out["batches"] = summary.batches
+        out["chosen_plan"] = summary.chosen_plan
     if args.json:
         print(dumps_json(out, indent=2))
     else:
@@ -318,6 +356,18 @@ def _acquire(args: argparse.Namespace) -> int:
             f" {summary.bus.get('retries', 0)} retries,"
             f" {summary.bus.get('resent_goals', 0)} goals re-sent"
         )
+        for b in summary.batches:
+            err = b["predicted_error"]
+            err = "-" if err is None else f"{err:.4f}"
+            then = f"stop: {b['stop']}" if b["stop"] else f"batch of {b['batch']}"
+            true = b.get("true_error")
+            true = "" if true is None else f" (true {true:.4f})"
+            print(
+                f"  decision {b['stage']}: {b['measured_before']} measured,"
+                f" predicted error {err}{true}, {b['rig_s_before']:.0f} rig s; {then}"
+            )
+        if summary.chosen_plan:
+            print(f"  chosen configurations: {summary.chosen_plan}")
         if summary.table:
             print(f"  table: {summary.table}")
         elif summary.table_note:

@@ -16,8 +16,10 @@ the rig; the engine measures through the camera and the light
 (:func:`gonio.acquire.imaging.measurement`: brackets -> HDR -> pose -> radiometry for a RAW
 camera). The run directory appears with its complete journal (:mod:`gonio.acquire.rundir`).
 Each stage of the plan is planned once (inverse kinematics, refusals with reasons, travel-time
-ordering) and journaled atomically before any motion; later stages see earlier stages'
-samples. Once the servos
+ordering: :mod:`gonio.acquire.planning`) and journaled atomically before any motion; later
+stages see earlier stages' samples. A dynamic plan (``optimal``, ``guided``) decides each batch
+from the journaled samples with their sigma and journals the decision with it
+(:mod:`gonio.acquire.decide`); it ends when a decision says stop. Once the servos
 are powered every way out parks the rig, or turns torque off when it cannot
 (:mod:`gonio.acquire.stopping`). SIGINT/SIGTERM (:mod:`gonio.interrupts`): the first finishes the
 configuration in progress, parks and stops; a second abandons the configuration and parks.
@@ -41,171 +43,25 @@ import numpy as np
 
 from gonio import interrupts
 from gonio.acquire import rundir, stopping
+from gonio.acquire.decide import (
+    NextStage,
+    batches,
+    next_stage,
+    results_of,
+    spent_of,
+    write_chosen_plan,
+)
 from gonio.acquire.journal import Journal, PlannedConfig
-from gonio.acquire.ordering import move_times, path_time, plan_route
-from gonio.acquire.plans import Plan, Result, load_plan
+from gonio.acquire.planning import StagePlan as StagePlan  # re-exported: planning moved out
+from gonio.acquire.planning import dry_run as dry_run
+from gonio.acquire.planning import plan_stage as plan_stage
+from gonio.acquire.planning import refuse_if_any, refuse_if_nothing, start_pose
+from gonio.acquire.plans import Plan, Spent, load_plan
 from gonio.acquire.runlog import RunLog
 from gonio.errors import DeviceError, FrameError, PlanError
 from gonio.rigs.config import RigConfig, load_rig
 from gonio.rigs.devices import Geometry
 from gonio.rigs.kinematics import Kinematics, Pose
-
-# --- planning (shared with `gonio plan --dry-run`) -----------------------------------------
-
-
-@dataclass
-class StagePlan:
-    """One planned stage: configurations in execution order, refusals, predicted motion."""
-
-    stage: int
-    configs: list[PlannedConfig]
-    move_s: np.ndarray  # predicted time of each accepted move, in order (rig time, s)
-    lexicographic_s: float  # predicted motion time in the plan's own order
-
-    @property
-    def accepted(self) -> list[PlannedConfig]:
-        return [c for c in self.configs if c.status == "planned"]
-
-    @property
-    def refused(self) -> list[PlannedConfig]:
-        return [c for c in self.configs if c.status == "refused"]
-
-
-def _joint_order(kin: Kinematics, rig: RigConfig):
-    names = [kin.joint_names[r] for r in kin.ROLES]
-    return names, [rig.joint(n) for n in names]
-
-
-def plan_stage(
-    rig: RigConfig,
-    plan: Plan,
-    stage: int,
-    results: list[Result],
-    start_deg: dict[str, float],
-    first_index: int,
-    time_budget_s: float = 10.0,
-) -> StagePlan:
-    """Inverse kinematics, safety refusals and travel-time ordering for one stage.
-
-    ``start_deg`` is the pose the stage starts from (joint name -> deg). Configuration indices
-    are assigned in the plan's own order from ``first_index``; ``seq`` is the execution order.
-    """
-    kin = Kinematics(rig)
-    names, joints = _joint_order(kin, rig)
-    start = np.array([start_deg[n] for n in names])
-    near = kin.joints_deg_to_pose(start_deg)
-    targets = list(plan.stage(stage, results))
-    cands: list[np.ndarray] = []
-    accepted: list[int] = []
-    base: list[np.ndarray] = []
-    refused: list[tuple[int, str]] = []
-    for i, t in enumerate(targets):
-        poses = [
-            c
-            for c in kin.candidates(t.wi, t.wo, t.isotropic, near.rot if t.isotropic else 0.0)
-            if kin.refusal(c) is None
-        ]
-        if not poses:
-            _, why = kin.inverse(t.wi, t.wo, t.isotropic, near)
-            refused.append((i, why or "no pose"))
-            continue
-        accepted.append(i)
-        best, _ = kin.inverse(t.wi, t.wo, t.isotropic, near)
-        base.append(np.degrees(best.as_tuple()))
-        cands.append(np.degrees(np.array([c.as_tuple() for c in poses])))
-    order, choice = plan_route(start, cands, joints, time_budget_s=time_budget_s)
-    if len(cands):
-        # keep the plan's own order (with the reference-nearest poses) if the heuristic lost
-        base_arr = np.array(base)
-        routed = np.array([cands[k][choice[k]] for k in range(len(cands))])
-        if path_time(start, base_arr, np.arange(len(base)), joints) < path_time(
-            start, routed, order, joints
-        ):
-            order = np.arange(len(base))
-            choice = np.array(
-                [
-                    int(np.argmin(np.abs(cands[k] - base_arr[k]).sum(axis=1)))
-                    for k in range(len(cands))
-                ]
-            )
-    configs: list[PlannedConfig] = []
-    seq_of = {int(o): s for s, o in enumerate(order)}
-    for k, i in enumerate(accepted):
-        t = targets[i]
-        pose = cands[k][choice[k]]
-        configs.append(
-            PlannedConfig(
-                idx=first_index + i,
-                stage=stage,
-                seq=seq_of[k],
-                wi=tuple(map(float, t.wi)),
-                wo=tuple(map(float, t.wo)),
-                isotropic=t.isotropic,
-                joints_deg={n: float(v) for n, v in zip(names, pose, strict=True)},
-                status="planned",
-                reason=None,
-            )
-        )
-    n_acc = len(accepted)
-    for j, (i, why) in enumerate(refused):
-        t = targets[i]
-        configs.append(
-            PlannedConfig(
-                first_index + i,
-                stage,
-                n_acc + j,
-                tuple(map(float, t.wi)),
-                tuple(map(float, t.wo)),
-                t.isotropic,
-                None,
-                "refused",
-                why,
-            )
-        )
-    configs.sort(key=lambda c: c.seq)
-    if n_acc:
-        poses = np.array([cands[k][choice[k]] for k in range(n_acc)])
-        mt = move_times(start, poses, order, joints)
-        lex = float(np.sum(move_times(start, np.array(base), np.arange(n_acc), joints)))
-    else:
-        mt, lex = np.zeros(0), 0.0
-    return StagePlan(stage, configs, mt, lex)
-
-
-def dry_run(rig: RigConfig, plan: Plan, time_budget_s: float = 10.0) -> list[StagePlan]:
-    """Plan every stage without hardware; later stages see no measurements (the adaptive plan
-    then refines around the mirror direction)."""
-    out = []
-    start = start_pose(rig)
-    idx = 0
-    for s in range(plan.n_stages):
-        sp = plan_stage(rig, plan, s, [], start, idx, time_budget_s)
-        out.append(sp)
-        idx += len(sp.configs)
-        if sp.accepted:
-            start = dict(sp.accepted[-1].joints_deg)
-    return out
-
-
-def start_pose(rig: RigConfig) -> dict[str, float]:
-    """Joint angles (deg) a run starts planning from: the park pose, zero offsets elsewhere."""
-    start = dict(rig.park_deg)
-    for j in rig.joints:
-        start.setdefault(j.name, j.zero_offset_deg)
-    return start
-
-
-def _refuse_if_nothing(sp: StagePlan) -> None:
-    if sp.accepted:
-        return
-    if not sp.refused:
-        raise PlanError(f"nothing to measure: stage {sp.stage} of the plan has no configuration")
-    c = sp.refused[0]
-    raise PlanError(
-        f"nothing to measure: all {len(sp.refused)} poses of stage {sp.stage} are refused by the"
-        f" rig, first #{c.idx}: {c.reason} ('gonio plan --list-refused N' lists them)"
-    )
-
 
 # --- the run ------------------------------------------------------------------------------
 
@@ -225,6 +81,8 @@ class RunSummary:
     bus: dict = field(default_factory=dict)
     wall_s: float = 0.0
     rejected: int = 0  # accepted configurations skipped because their frame could not be measured
+    batches: list = field(default_factory=list)  # a dynamic plan's decisions (decide.batches)
+    chosen_plan: str | None = None  # RUN/plan_chosen.toml of a complete dynamic run
 
 
 def open_run(run_dir: Path) -> tuple[Journal, RigConfig, Plan]:
@@ -307,10 +165,10 @@ def _acquire(
             plan_obj, spec = load_plan(plan)
             # the first stage is planned before anything is created or the bus opened: a plan
             # with nothing the rig can reach (or, strict, with any pose it cannot) moves nothing
-            first = plan_stage(rig_cfg, plan_obj, 0, [], start_pose(rig_cfg), 0)
+            first = next_stage(rig_cfg, plan_obj, 0, [], Spent(), start_pose(rig_cfg), 0)
             if strict:
-                _refuse_if_any(first)
-            _refuse_if_nothing(first)
+                refuse_if_any(first.plan)
+            refuse_if_nothing(first.plan)
             meta = {"strict": "1" if strict else "0"}
             if exposure_planning is not None:  # a resumed run keeps the choice
                 meta["exposure_planning"] = "1" if exposure_planning else "0"
@@ -382,7 +240,7 @@ class _Run:
         self.bus: dict = {}
         self.stop_note = ""
         self._closed = False
-        self.first_stage: StagePlan | None = first_stage  # stage 0 planned before the bus opened
+        self.first_stage: NextStage | None = first_stage  # stage 0 planned before the bus opened
         self.channels: tuple[str, ...] = ()  # the camera's, once the devices are open
         self.hold = rundir.RunHold(run_dir)  # the run folder's lock, held by acquire()
 
@@ -449,19 +307,26 @@ class _Run:
         scale = float(ses.time_scale)  # rig seconds per wall second
         with _Progress(self.progress) as bar:
             start_deg = start_pose(rig)
-            for stage in range(plan.n_stages):
+            stage = -1
+            while plan.dynamic or stage + 1 < plan.n_stages:
+                stage += 1
                 if not journal.stage_planned(stage):
-                    results = [
-                        Result(tuple(s.wi), tuple(s.wo), float(np.mean(s.value)))
-                        for s in journal.samples()
-                    ]
                     if stage == 0 and self.first_stage is not None:
-                        sp = self.first_stage  # no samples yet: the same plan, not made twice
+                        nxt = self.first_stage  # no samples yet: the same plan, not made twice
                     else:
-                        sp = plan_stage(rig, plan, stage, results, start_deg, journal.next_index())
+                        t0 = time.monotonic()
+                        nxt = next_stage(
+                            rig, plan, stage, results_of(journal), spent_of(journal),
+                            start_deg, journal.next_index(),
+                        )  # fmt: skip
+                        if nxt.decision is not None:
+                            log("decision_wall_s", stage=stage, s=time.monotonic() - t0)
+                    sp = nxt.plan
                     if journal.get_meta("strict") == "1":
-                        _refuse_if_any(sp)
-                    journal.plan_stage(stage, sp.configs)
+                        refuse_if_any(sp)
+                    journal.plan_stage(stage, sp.configs, nxt.decision)
+                    if nxt.decision is not None:
+                        log("decision", **nxt.decision)
                     log(
                         "stage_planned",
                         stage=stage,
@@ -471,6 +336,8 @@ class _Run:
                     )
                     for c in sp.refused:
                         log("refused", idx=c.idx, reason=c.reason)
+                if plan.dynamic and journal.decisions().get(stage, {}).get("stop") is not None:
+                    break
                 stage_cfgs = [
                     c for c in journal.configs(stage) if c.status in ("planned", "rejected")
                 ]
@@ -512,16 +379,24 @@ class _Run:
         counts = journal.counts()
         complete = (
             not flag.requested
-            and all(journal.stage_planned(s) for s in range(self.plan.n_stages))
+            and stages_complete(journal, self.plan)
             and counts["done"] + counts["rejected"] == counts["planned"]
         )
-        table, note = None, ""
+        table, note, chosen, rows = None, "", None, []
         try:
             if complete and write_table:
                 table, note = write_run_table(journal, self.rig, self.channels)
                 if counts["rejected"]:
                     note += f"; {rejected_note(journal)}"
                 self.log("table", path=table, note=note)
+            if complete and self.plan.dynamic:
+                chosen = str(write_chosen_plan(journal, self.run_dir, self.plan))
+                self.log("chosen_plan", path=chosen)
+            rows = batches(journal) if self.plan.dynamic else []
+            if rows and complete:  # the simulator knows its truth: how the run went, truly
+                true = self.plan.true_errors(results_of(journal), journal.decisions(), self.rig)
+                for r in rows:
+                    r["true_error"] = true.get(r["stage"])
             self.log(
                 "end", complete=complete, **counts, measured_now=self.measured_now, bus=self.bus
             )
@@ -546,7 +421,16 @@ class _Run:
             self.bus,
             time.monotonic() - self.t_start,
             counts["rejected"],
+            rows,
+            chosen,
         )
+
+
+def stages_complete(journal: Journal, plan: Plan) -> bool:
+    """Every stage planned: all ``n_stages`` of a fixed plan, a stop decision of a dynamic one."""
+    if plan.dynamic:
+        return any(d.get("stop") is not None for d in journal.decisions().values())
+    return all(journal.stage_planned(s) for s in range(plan.n_stages))
 
 
 def _reason(exc: BaseException) -> str:
@@ -555,15 +439,6 @@ def _reason(exc: BaseException) -> str:
     if isinstance(exc, DeviceError):
         return "device error"
     return f"error ({type(exc).__name__})"
-
-
-def _refuse_if_any(sp: StagePlan) -> None:
-    if sp.refused:
-        c = sp.refused[0]
-        raise PlanError(
-            f"plan refused before any motion: {len(sp.refused)} pose(s) refused in stage"
-            f" {sp.stage}, first #{c.idx}: {c.reason}"
-        )
 
 
 def rejected_note(journal: Journal) -> str:

@@ -16,6 +16,12 @@ Tables
                                 what was measured: read-back angles and directions.
 ``events(n, t, kind, detail)``  what happened to the rig: servo faults and what was done
                                 (JSON detail; created by the first :meth:`Journal.event`).
+``decisions(stage, detail)``    what a plan that chooses from the measurements decided before
+                                stage ``stage``: the batch's reason, the reconstruction's
+                                summary, its predicted error, or why the run stops (JSON);
+                                written in the transaction that plans the stage, so a decision
+                                and its configurations are journaled together or not at all
+                                (created by the first decision: fixed plans have none).
 
 A write that the storage refuses (a full filesystem, a quota, a file-size limit, a read-only or
 failing disk; SQLite's "database or disk is full" and "disk I/O error") raises
@@ -165,6 +171,7 @@ class Journal:
                     " SQLite's quick_check"
                 )
             configs, samples = self.configs(), self.samples()
+            self.decisions()
         except sqlite3.DatabaseError as exc:
             raise storage_error(exc, self.path) or FormatError(
                 f"{self.path}: damaged journal ({exc})"
@@ -217,9 +224,21 @@ class Journal:
         return int(row[0])
 
     @_writes
-    def plan_stage(self, stage: int, configs: Sequence[PlannedConfig]) -> None:
-        """Record a whole stage atomically (configs already carry idx and seq)."""
+    def plan_stage(
+        self, stage: int, configs: Sequence[PlannedConfig], decision: dict | None = None
+    ) -> None:
+        """Record a whole stage atomically (configs already carry idx and seq), with the plan's
+        ``decision`` (JSON object) when it chose the stage from the measurements."""
         with self._tx():
+            if decision is not None:
+                self.db.execute(
+                    "CREATE TABLE IF NOT EXISTS decisions(stage INTEGER PRIMARY KEY,"
+                    " detail TEXT NOT NULL)"
+                )
+                self.db.execute(
+                    "INSERT INTO decisions(stage, detail) VALUES (?, ?)",
+                    (stage, dumps_json(decision)),
+                )
             self.db.executemany(
                 "INSERT INTO configs(idx, stage, seq, wi_x, wi_y, wi_z, wo_x, wo_y, wo_z,"
                 " isotropic, joints, status, reason) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
@@ -242,6 +261,14 @@ class Journal:
                 "INSERT INTO stages(stage, n, planned_at) VALUES (?, ?, ?)",
                 (stage, len(configs), time.time()),
             )
+
+    def decisions(self) -> dict[int, dict]:
+        """Stage -> the decision journaled with it ({} for a plan that decides nothing)."""
+        try:
+            rows = self.db.execute("SELECT stage, detail FROM decisions ORDER BY stage").fetchall()
+        except sqlite3.OperationalError:  # a journal written before decisions existed
+            return {}
+        return {int(k): json.loads(d) for k, d in rows}
 
     def configs(self, stage: int | None = None) -> list[PlannedConfig]:
         q = (

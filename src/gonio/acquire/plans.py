@@ -19,6 +19,14 @@ Kinds
     An isotropic coarse pass, then for every incident angle a fine (theta_o, delta_phi) patch
     around the peak found in the coarse data (or the mirror direction when the coarse data
     show no clear peak, and in dry runs).
+``optimal``, ``guided``
+    Configurations chosen by a material prior, before any data or batch by batch from the
+    measurements (:mod:`gonio.acquire.guided`).
+``list``
+    An explicit list of configurations, each ``[theta_i, phi_i, theta_o, phi_o]`` in degrees
+    (the form a guided or optimal run writes as ``RUN/plan_chosen.toml``, so that it can be
+    rerun as a fixed plan). ``isotropic = true`` lets the rig turn the sample about its normal
+    (only ``phi_o - phi_i`` matters).
 
 Plan files (TOML)
 -----------------
@@ -37,6 +45,11 @@ Plan files (TOML)
     step_deg = 2.5           # spacing inside the patch
     peak_ratio = 1.5         # peak / median of the coarse row needed to trust the data
 
+    # list: [theta_i, phi_i, theta_o, phi_o] in degrees, one row per configuration
+    kind = "list"
+    isotropic = true
+    configurations = [[20, 0, 40, 180], [45, 0, 45, 90]]
+
 Built-in plans are listed by :func:`builtin_plans`.
 """
 
@@ -45,110 +58,24 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gonio._bounded import loads_toml
+from gonio.acquire.plan_base import MAX_AXIS_VALUES as MAX_AXIS_VALUES  # re-exported
+from gonio.acquire.plan_base import (
+    MAX_TARGETS,
+    Plan,
+    Target,
+    direction_of,
+    plan_angles,
+    plan_key_error,
+)
+from gonio.acquire.plan_base import Decision as Decision
+from gonio.acquire.plan_base import Result as Result
+from gonio.acquire.plan_base import Spent as Spent
 from gonio.errors import PlanError
-
-#: Most values one plan axis may have, and most configurations one plan may ask for (10,000
-#: configurations are days of acquisition; the dry run orders them with an n x n cost matrix).
-MAX_AXIS_VALUES = 3600
-MAX_TARGETS = 10_000
-
-
-@dataclass(frozen=True)
-class Target:
-    """A requested configuration: directions in the sample frame (unit 3-vectors)."""
-
-    wi: tuple[float, float, float]
-    wo: tuple[float, float, float]
-    isotropic: bool = False
-    stage: int = 0
-
-
-@dataclass(frozen=True)
-class Result:
-    """A measured configuration handed to later stages: directions and a scalar value (1/sr)."""
-
-    wi: tuple[float, float, float]
-    wo: tuple[float, float, float]
-    value: float
-
-
-def _dir(theta: float, phi: float) -> tuple[float, float, float]:
-    st = math.sin(theta)
-    return (st * math.cos(phi), st * math.sin(phi), math.cos(theta))
-
-
-def _key_error(key: str | tuple, msg: str) -> PlanError:
-    """PlanError ``plan key KEY: msg`` that remembers the key (``load_plan`` adds the line)."""
-    path = (key,) if isinstance(key, str) else tuple(key)
-    dotted = ".".join(f"[{k}]" if isinstance(k, int) else str(k) for k in path).replace(".[", "[")
-    err = PlanError(f"plan key {dotted}: {msg}")
-    err.key_path = path
-    err.detail = msg
-    return err
-
-
-def _angles(spec, key: str) -> np.ndarray:
-    """Degrees list or {start, stop, step} (inclusive) -> radians array."""
-    if isinstance(spec, dict):
-        extra = sorted(set(spec) - {"start", "stop", "step"})
-        if extra:  # a misspelt "stop" must not leave the range silently as written elsewhere
-            raise _key_error((key, extra[0]), "unknown in a range (start, stop, step)")
-        try:
-            if any(isinstance(spec[k], bool) for k in ("start", "stop", "step")):
-                raise TypeError("a boolean is not a number of degrees")
-            start, stop, step = float(spec["start"]), float(spec["stop"]), float(spec["step"])
-        except (KeyError, TypeError, ValueError):
-            raise _key_error(key, "a range needs numeric start, stop, step") from None
-        # written so that NaN refuses
-        if not all(math.isfinite(v) for v in (start, stop, step)):
-            raise _key_error(key, "start, stop and step must be finite")
-        if not (step > 0 and stop >= start):
-            raise _key_error(key, "need step > 0 and stop >= start")
-        count = (stop - start) / step
-        if not count < MAX_AXIS_VALUES:
-            raise _key_error(
-                key, f"the range has {count + 1:.3g} values, more than {MAX_AXIS_VALUES}"
-            )
-        n = math.floor(count + 1e-9) + 1
-        vals = start + step * np.arange(n)
-    elif isinstance(spec, (list, tuple)) and spec:
-        if len(spec) > MAX_AXIS_VALUES:
-            raise _key_error(key, f"{len(spec)} values, more than {MAX_AXIS_VALUES}")
-        try:
-            if any(isinstance(v, bool) for v in spec):
-                raise TypeError("a boolean is not a number of degrees")
-            vals = np.array([float(v) for v in spec])
-        except (TypeError, ValueError):
-            raise _key_error(key, "values must be numbers (degrees)") from None
-    else:
-        raise _key_error(key, "give a list of degrees or {start, stop, step}")
-    bad = np.flatnonzero(~np.isfinite(vals))
-    if bad.size:
-        raise _key_error((key, int(bad[0])), f"{vals[bad[0]]} is not a finite number")
-    return np.radians(vals)
-
-
-class Plan:
-    """Base class: ``n_stages`` stages, stage ``k`` generated by :meth:`stage`."""
-
-    kind = "plan"
-    isotropic = False
-    n_stages = 1
-
-    def __init__(self, name: str = "") -> None:
-        self.name = name or self.kind
-
-    def stage(self, k: int, results: Sequence[Result] = ()) -> Iterator[Target]:
-        raise NotImplementedError
-
-    def describe(self) -> dict:
-        return {"name": self.name, "kind": self.kind}
 
 
 class Grid4D(Plan):
@@ -162,7 +89,7 @@ class Grid4D(Plan):
 
     def stage(self, k: int = 0, results: Sequence[Result] = ()) -> Iterator[Target]:
         for ti, pi, to, po in itertools.product(*self.axes):
-            yield Target(_dir(ti, pi), _dir(to, po), False, k)
+            yield Target(direction_of(ti, pi), direction_of(to, po), False, k)
 
 
 class Isotropic3D(Plan):
@@ -192,9 +119,9 @@ class Isotropic3D(Plan):
             if key in seen:
                 continue
             seen.add(key)
-            yield Target(_dir(ti, 0.0), _dir(to, dp), True, k)
+            yield Target(direction_of(ti, 0.0), direction_of(to, dp), True, k)
             if self.reciprocal and to - ti > 1e-9:
-                yield Target(_dir(to, 0.0), _dir(ti, dp), True, k)
+                yield Target(direction_of(to, 0.0), direction_of(ti, dp), True, k)
 
 
 class HalfDiff(Plan):
@@ -238,7 +165,7 @@ class Adaptive(Plan):
         super().__init__(name)
         for key, v in (("step_deg", step), ("window_deg", window), ("peak_ratio", peak_ratio)):
             if not (math.isfinite(v) and v > 0):  # NaN refuses
-                raise _key_error(("refine", key), "must be a finite number > 0")
+                raise plan_key_error(("refine", key), "must be a finite number > 0")
         self.coarse = coarse
         self.window = window
         self.step = step
@@ -296,7 +223,7 @@ class Adaptive(Plan):
                 if key in seen:
                     continue
                 seen.add(key)
-                t = Target(_dir(a, 0.0), _dir(b, dp), True, k)
+                t = Target(direction_of(a, 0.0), direction_of(b, dp), True, k)
                 ck = (round(t.wi[2], 9), round(t.wo[2], 9), round(t.wo[1], 9), round(t.wo[0], 9))
                 if ck in coarse:
                     continue
@@ -306,6 +233,58 @@ class Adaptive(Plan):
         return {"name": self.name, "kind": self.kind, "stages": self.n_stages}
 
 
+class ConfigList(Plan):
+    """An explicit list of configurations: ``angles`` (N, 4) radians, rows
+    (theta_i, phi_i, theta_o, phi_o)."""
+
+    kind = "list"
+
+    def __init__(self, angles, isotropic: bool = False, name: str = "") -> None:
+        super().__init__(name)
+        self.angles = np.asarray(angles, dtype=float).reshape(-1, 4)
+        self.isotropic = bool(isotropic)
+
+    def stage(self, k: int = 0, results: Sequence[Result] = ()) -> Iterator[Target]:
+        for ti, pi, to, po in self.angles:
+            yield Target(direction_of(ti, pi), direction_of(to, po), self.isotropic, k)
+
+
+def _config_rows(rows) -> np.ndarray:
+    """``configurations`` of a list plan (degrees) -> (N, 4) radians; PlanError naming the row."""
+    key = "configurations"
+    if not isinstance(rows, (list, tuple)) or not rows:
+        raise plan_key_error(key, "give a non-empty list of [theta_i, phi_i, theta_o, phi_o] (deg)")
+    if len(rows) > MAX_TARGETS:
+        raise plan_key_error(key, f"{len(rows)} configurations, more than {MAX_TARGETS}")
+    out = np.empty((len(rows), 4))
+    for n, row in enumerate(rows):
+        if not isinstance(row, (list, tuple)) or len(row) != 4:
+            raise plan_key_error((key, n), "give [theta_i, phi_i, theta_o, phi_o] (deg)")
+        if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in row):
+            raise plan_key_error((key, n), "angles must be numbers (degrees)")
+        vals = [float(v) for v in row]
+        if not all(math.isfinite(v) for v in vals):
+            raise plan_key_error((key, n), "angles must be finite")
+        if not (0.0 <= vals[0] <= 90.0 and 0.0 <= vals[2] <= 90.0):
+            raise plan_key_error((key, n), "polar angles must lie in [0, 90] deg")
+        if not (abs(vals[1]) <= 360.0 and abs(vals[3]) <= 360.0):
+            raise plan_key_error((key, n), "azimuths must lie in [-360, 360] deg")
+        out[n] = vals
+    return np.radians(out)
+
+
+def list_spec(wi: np.ndarray, wo: np.ndarray, isotropic: bool, name: str) -> dict:
+    """A ``kind = "list"`` plan spec of directions ``wi``, ``wo`` (N, 3), degrees rounded to
+    1e-6 (what a guided or optimal run writes of the configurations it chose)."""
+    from gonio.rigs.kinematics import spherical
+
+    ti, pi = np.degrees(spherical(np.asarray(wi, dtype=float).reshape(-1, 3)))
+    to, po = np.degrees(spherical(np.asarray(wo, dtype=float).reshape(-1, 3)))
+    ti, to = np.clip(ti, 0.0, 90.0), np.clip(to, 0.0, 90.0)
+    rows = [[round(float(v), 6) for v in row] for row in zip(ti, pi, to, po, strict=True)]
+    return {"kind": "list", "name": name, "isotropic": bool(isotropic), "configurations": rows}
+
+
 # --- specs, files and built-ins -------------------------------------------------------------
 
 _KEYS = {
@@ -313,7 +292,11 @@ _KEYS = {
     "isotropic": ("theta_i_deg", "theta_o_deg", "dphi_deg"),
     "halfdiff": ("theta_h_deg", "theta_d_deg", "phi_d_deg"),
     "adaptive": ("theta_i_deg", "theta_o_deg", "dphi_deg"),
+    "list": ("configurations",),
 }
+
+#: kinds built by :mod:`gonio.acquire.guided` from the same spec (they need a material prior)
+_EXTERNAL_KINDS: tuple[str, ...] = ("optimal", "guided")
 
 BUILTIN: dict[str, dict] = {
     "iso-tiny": {
@@ -391,27 +374,41 @@ def plan_from_spec(spec: dict, name: str = "") -> Plan:
     if not isinstance(spec, dict):
         raise PlanError("a plan must be a table")
     kind = spec.get("kind")
+    if isinstance(kind, str) and kind in _EXTERNAL_KINDS:
+        from gonio.acquire.guided import guided_plan_from_spec
+
+        return guided_plan_from_spec(spec, name)
     if not isinstance(kind, str) or kind not in _KEYS:
-        raise _key_error("kind", f"{kind!r} is not one of {sorted(_KEYS)}")
+        raise plan_key_error("kind", f"{kind!r} is not one of {sorted([*_KEYS, *_EXTERNAL_KINDS])}")
+    if kind == "list":
+        extra = sorted(set(spec) - {"kind", "name", "isotropic", "configurations"})
+        if extra:
+            raise plan_key_error(extra[0], "unknown for kind 'list'")
+        if not isinstance(spec.get("isotropic", False), bool):
+            raise plan_key_error("isotropic", "must be true or false")
+        if "configurations" not in spec:
+            raise PlanError("plan key configurations: missing (kind 'list' needs configurations)")
+        rows = _config_rows(spec["configurations"])
+        return ConfigList(rows, spec.get("isotropic", False), name=spec.get("name", name) or "list")
     allowed = {"kind", "name", *_KEYS[kind]} | ({"refine"} if kind == "adaptive" else set())
     allowed |= {"reciprocal"} if kind == "isotropic" else set()
     if not isinstance(spec.get("reciprocal", False), bool):
-        raise _key_error("reciprocal", "must be true or false")
+        raise plan_key_error("reciprocal", "must be true or false")
     extra = sorted(set(spec) - allowed)
     if extra:
-        raise _key_error(extra[0], f"unknown for kind {kind!r}")
+        raise plan_key_error(extra[0], f"unknown for kind {kind!r}")
     missing = [k for k in _KEYS[kind] if k not in spec]
     if missing:
         raise PlanError(
             f"plan key {missing[0]}: missing (kind {kind!r} needs {', '.join(_KEYS[kind])})"
         )
-    axes = [_angles(spec[k], k) for k in _KEYS[kind]]
+    axes = [plan_angles(spec[k], k) for k in _KEYS[kind]]
     n_targets = math.prod(len(a) for a in axes)
     if n_targets > MAX_TARGETS:
         raise PlanError(f"plan asks for {n_targets} configurations, more than {MAX_TARGETS}")
     for k, a in zip(_KEYS[kind], axes, strict=True):
         if k.startswith("theta") and not np.all((a >= 0) & (a <= math.pi / 2)):
-            raise _key_error(k, "polar angles must lie in [0, 90] deg")
+            raise plan_key_error(k, "polar angles must lie in [0, 90] deg")
     name = spec.get("name", name) or kind
     if kind == "grid4d":
         return Grid4D(*axes, name=name)
@@ -466,6 +463,10 @@ def load_plan(name_or_path: str | Path) -> tuple[Plan, dict]:
         raise PlanError(f"{where(str(p), text, path)}: {value} is not a finite number")
     spec.setdefault("name", p.stem)
     try:
+        if spec.get("kind") in _EXTERNAL_KINDS and isinstance(spec.get("prior"), str):
+            from gonio.acquire.guided import resolve_prior
+
+            spec = resolve_prior(spec, p.parent)  # the run records the absolute path and hash
         return plan_from_spec(spec, p.stem), spec
     except PlanError as exc:
         path = getattr(exc, "key_path", None)

@@ -261,7 +261,8 @@ SPEC: dict = {
         "sample": {
             "__doc__": (
                 "Ground-truth BRDF of the simulated sample: a model (Node.to_dict() form: type,"
-                " params) or file = path of a tabulated BRDF (relative to the rig file)."
+                " params) or file = path of a tabulated BRDF (relative to the rig file), or"
+                " ARCHIVE.zip::NAME, a member of a neural-BRDF archive."
             ),
             "__additional__": {},
         },
@@ -643,7 +644,7 @@ def _build(data: dict, text: str, source: str, check_sample_model: bool = True) 
             )
     sim = SimConfig(**data.get("sim", {}))
     if "sample" in data.get("sim", {}):
-        from gonio.rigs.sim.truth import truth_file
+        from gonio.rigs.sim.truth import file_part, truth_file
 
         try:
             path = truth_file(sim.sample, source)
@@ -656,9 +657,9 @@ def _build(data: dict, text: str, source: str, check_sample_model: bool = True) 
                 models.Node.from_dict(sim.sample)
             except Exception as exc:
                 raise fail(("sim", "sample"), f"not a gonio model: {exc}") from None
-        elif path is not None and not path.is_file():
+        elif path is not None and not file_part(path).is_file():
             # the table itself is read when the camera opens, before any motion
-            raise fail(("sim", "sample", "file"), f"no such file: {path}")
+            raise fail(("sim", "sample", "file"), f"no such file: {file_part(path)}")
     return RigConfig(
         name=data["name"],
         description=data.get("description", ""),

@@ -12,6 +12,13 @@ or a tabulated BRDF read through :func:`gonio.io.load` (RGL ``.bsdf``, MERL ``.b
     [sim.sample]
     file = "../shared/data/rgl/vch_golden_yellow_rgb.bsdf"   # relative to the rig file
 
+or a member of a neural-BRDF archive, addressed as :func:`gonio.io.load` does
+(``ARCHIVE.zip::NAME``; the archive relative to the rig file), so that any material of a shared
+archive can be the truth without writing a table::
+
+    [sim.sample]
+    file = "../shared/data/nbrdf/merl_nbrdf.zip::gold-paint"
+
 Measured RGB tables can hold small negative values where a spectral measurement was converted to
 RGB; a reflectance cannot be negative, so the ground truth clamps them to zero.
 
@@ -52,11 +59,23 @@ def truth_file(spec: dict, source: str) -> Path | None:
     extra = sorted(set(spec) - {"file"})
     if extra:
         raise ValueError(f"{extra[0]}: not allowed beside 'file'")
-    p = Path(str(spec["file"])).expanduser()
+    from gonio.io.nbrdf import MEMBER_SEP, split_member
+
+    text = str(spec["file"])
+    parts = split_member(text)
+    p = Path(parts[0] if parts else text).expanduser()
     src = Path(source)
     if not p.is_absolute() and src.suffix == ".toml" and src.parent.is_dir():
         p = src.parent / p
-    return p
+    return Path(f"{p}{MEMBER_SEP}{parts[1]}") if parts else p
+
+
+def file_part(path: Path) -> Path:
+    """The file on disk of a :func:`truth_file` path: the archive of ``ARCHIVE::NAME``."""
+    from gonio.io.nbrdf import split_member
+
+    parts = split_member(path)
+    return Path(parts[0]) if parts else path
 
 
 class ClampedTable:
@@ -121,6 +140,8 @@ def load_truth(spec: dict, source: str) -> Any:
                 f"{source}: sim.sample: {type(model).__name__} is not a BRDF model"
             )
         return model
-    if not path.is_file():
-        raise RigConfigError(f"{source}: sim.sample.file: no such file: {path}")
-    return _load_table(str(path.resolve()), path.stat().st_mtime_ns)
+    disk = file_part(path)
+    if not disk.is_file():
+        raise RigConfigError(f"{source}: sim.sample.file: no such file: {disk}")
+    member = str(path)[len(str(disk)) :]  # "::NAME" of an archive member, else ""
+    return _load_table(str(disk.resolve()) + member, disk.stat().st_mtime_ns)
