@@ -57,3 +57,25 @@ def test_fitted_models_carry_the_score_in_table_and_json(pvc, tmp_path, capsys):
     assert set(rec["appearance"]) == set(appearance.KEYS)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["table"][0]["appearance"]["hdr_flip"] == rec["appearance"]["hdr_flip"]
+
+
+def test_batch_score_carries_the_appearance_score_per_material(pvc, tmp_path, capsys):
+    import csv
+    import shutil
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for name in ("a", "b"):
+        shutil.copy(pvc, src / f"{name}.brdf.h5")
+    out = tmp_path / "o"
+    assert main(["fit", str(src), "-m", "lambert", "--score", "--no-plots", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "HDR-FLIP" in text and "rel. L1" in text
+    rows = list(csv.DictReader((out / "fits.csv").open()))
+    assert sorted(r["material"] for r in rows) == ["a", "b"]
+    for r in rows:
+        summary = json.loads((out / r["material"] / "summary.json").read_text())
+        score = summary["table"][0]["appearance"]
+        assert float(r["hdr_flip"]) == pytest.approx(score["hdr_flip"], rel=1e-12)
+        assert float(r["rel_l1"]) == pytest.approx(score["rel_l1"], rel=1e-12)
+        assert 0 < float(r["hdr_flip"]) < 1
