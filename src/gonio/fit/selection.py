@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from gonio.brdf.models import BRDFModel
-from gonio.errors import FitError
+from gonio.errors import FitError, GonioError
 from gonio.fit import presets
 from gonio.fit.api import FitOptions, fit
 from gonio.fit.compare import Comparison, summarize, with_nested
@@ -200,8 +200,11 @@ def _compiled_ahead(
     (:meth:`~gonio.fit.programs.Program.prepare`); leaving the body cancels the rest."""
     problems = []
     for name in names:
-        tmpl, fixed, _ = presets.build(name)
-        layout = Layout(tmpl, train.channels, fixed={**fixed, **(extra_fixed or {})})
+        try:
+            tmpl, fixed, _ = presets.build(name)
+            layout = Layout(tmpl, train.channels, fixed={**fixed, **(extra_fixed or {})})
+        except GonioError:  # e.g. a --fix key the family lacks: its fit reports it
+            continue
         problems.append(Problem(layout, loss, train))
     pool = ThreadPoolExecutor(1, thread_name_prefix="gonio-select-compile")
     jobs = [pool.submit(p.prepare, what) for p in problems for what in ("normal", "predict")]
