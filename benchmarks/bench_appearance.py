@@ -434,6 +434,7 @@ def main() -> None:
     )
     args = ap.parse_args()
     sys.path.insert(0, str(HERE))
+    sys.path.insert(0, str(ROOT / "src"))  # this checkout's gonio, not an installed one
     import _nbrdf_split
 
     tuning, held = _nbrdf_split.split(ARCHIVE)
