@@ -148,6 +148,34 @@ def test_published_fit_is_bbms_model(name):
     np.testing.assert_allclose(got, expect, rtol=1e-6, atol=1e-12, err_msg=f"{name} {material}")
 
 
+@pytest.mark.parametrize(
+    ("name", "material"),
+    [
+        ("low_cooktorrance_E1.fit", "polyurethane-foam"),
+        ("low_cooktorrance_E1.fit", "white-fabric2"),
+        ("low_cooktorrance_E2.fit", "polyurethane-foam"),
+    ],
+)
+def test_low_cook_torrance_rougher_than_one_is_bbms_model(name, material):
+    """Löw's three Cook-Torrance fits with m > 1 (the Beckmann distribution is normalized for
+    any m): converted, and equal to bbm's formula."""
+    fit = parse_ngan_fits(shared_file("fits", name).read_text())[material]
+    assert fit.params["roughness"] > 1
+    wi, wo = _pairs()
+    got = np.asarray(_F(to_model(fit), wi, wo))
+    expect = low_ct(fit.params, wi, wo) + np.array(fit.diffuse_albedo) / np.pi
+    np.testing.assert_allclose(got, expect, rtol=1e-6, atol=1e-12)
+
+
+def test_fits_search_torrance_sparrow_roughness_up_to_one_only():
+    from gonio.fit.params import Layout
+
+    layout = Layout(models.TorranceSparrow(alpha=0.3), 3)
+    (entry,) = [e for e in layout.entries if e.key == "alpha"]
+    assert entry.hi == 1.0 and np.exp(entry.box[1]) == pytest.approx(1.0)
+    assert models.TorranceSparrow(alpha=2.09).alpha == 2.09
+
+
 def test_ngan_he_is_refused_by_name():
     fit = parse_ngan_fits(shared_file("fits", "ngan_he.fit").read_text())["alum-bronze"]
     with pytest.raises(FormatError, match="NganHe"):

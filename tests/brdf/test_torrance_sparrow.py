@@ -91,7 +91,7 @@ def test_bad_arguments():
     with pytest.raises(ParameterError, match="alpha"):
         models.TorranceSparrow(alpha=0.0)
     with pytest.raises(ParameterError, match="alpha"):
-        models.TorranceSparrow(alpha=2.0)
+        models.TorranceSparrow(alpha=4.5)  # above ALPHA_MAX (up to it: a valid, rough lobe)
     with pytest.raises(ParameterError, match="fresnel"):
         models.TorranceSparrow(fresnel=0.04)
     with pytest.raises(ParameterError, match="visible"):

@@ -73,6 +73,11 @@ def test_true_model_is_preferred_and_renders_closest(demo):
     # the diffuse-only fits cannot show the coat's highlight
     assert by["lambert+ts"].rmse < by["lambert"].rmse / 5
     assert by["lambert+ts"].ssim > by["lambert"].ssim
+    # the appearance score agrees, and the report shows it
+    assert by["lambert+ts"].hdr_flip < by["lambert"].hdr_flip
+    assert by["lambert+ts"].rel_l1 < by["lambert"].rel_l1
+    html = (out / "index.html").read_text(encoding="utf-8")
+    assert "HDR-FLIP" in html and f"{by['lambert+ts'].hdr_flip:.3g}" in html
 
 
 def test_outputs_exist_and_are_readable(demo):

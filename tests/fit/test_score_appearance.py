@@ -57,3 +57,63 @@ def test_fitted_models_carry_the_score_in_table_and_json(pvc, tmp_path, capsys):
     assert set(rec["appearance"]) == set(appearance.KEYS)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["table"][0]["appearance"]["hdr_flip"] == rec["appearance"]["hdr_flip"]
+
+
+def _batch_of_two(pvc, tmp_path):
+    import shutil
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for name in ("a", "b"):
+        shutil.copy(pvc, src / f"{name}.brdf.h5")
+    return src
+
+
+def test_batch_score_puts_each_materials_score_in_the_csv_and_table(
+    pvc, tmp_path, capsys, monkeypatch
+):
+    """A batch with --score scores every material (the score itself stubbed: fast; the real
+    one in the slow test below)."""
+    import csv
+
+    from gonio.fit import score as fit_score
+
+    seen = []
+
+    def stub(path, results):
+        seen.append(path.name)
+        for r in results:
+            r.appearance = {**dict.fromkeys(appearance.KEYS, 0.5), "hdr_flip": 0.25,
+                            "rel_l1": 0.125 * len(seen)}  # fmt: skip
+        return None
+
+    monkeypatch.setattr(fit_score, "score_results", stub)
+    out = tmp_path / "o"
+    src = _batch_of_two(pvc, tmp_path)
+    args = ["fit", str(src), "-m", "lambert", "--score", "--no-plots", "-j", "1", "-o", str(out)]
+    assert main(args) == 0  # in this process (-j 1): the stub applies
+    text = capsys.readouterr().out
+    assert sorted(seen) == ["a.brdf.h5", "b.brdf.h5"]
+    assert "HDR-FLIP" in text and "rel. L1" in text and "0.25" in text
+    rows = {r["material"]: r for r in csv.DictReader((out / "fits.csv").open())}
+    assert float(rows["a"]["hdr_flip"]) == 0.25 and float(rows["b"]["hdr_flip"]) == 0.25
+    assert {float(rows[m]["rel_l1"]) for m in "ab"} == {0.125, 0.25}
+
+
+@pytest.mark.slow
+def test_batch_score_carries_the_appearance_score_per_material(pvc, tmp_path, capsys):
+    import csv
+
+    src = _batch_of_two(pvc, tmp_path)
+    out = tmp_path / "o"
+    assert main(["fit", str(src), "-m", "lambert", "--score", "--no-plots", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "HDR-FLIP" in text and "rel. L1" in text
+    rows = list(csv.DictReader((out / "fits.csv").open()))
+    assert sorted(r["material"] for r in rows) == ["a", "b"]
+    for r in rows:
+        summary = json.loads((out / r["material"] / "summary.json").read_text())
+        score = summary["table"][0]["appearance"]
+        assert float(r["hdr_flip"]) == pytest.approx(score["hdr_flip"], rel=1e-12)
+        assert float(r["rel_l1"]) == pytest.approx(score["rel_l1"], rel=1e-12)
+        assert 0 < float(r["hdr_flip"]) < 1

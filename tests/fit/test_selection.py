@@ -103,3 +103,44 @@ def test_retro_reflective_tape_gets_a_peak_at_the_light():
     wo = np.broadcast_to(np.array([np.sin(np.radians(30)), 0, np.cos(np.radians(30))]), wi.shape)
     f = np.asarray(sel.result.model.f(wi, wo))[:, 0]
     assert round(float(np.degrees(th[np.argmax(f)]))) == 30
+
+
+@pytest.mark.slow
+def test_retro_tape_scores_better_than_every_family_without_the_retro_lobe(tmp_path):
+    """``gonio fit TAPE --score`` (console script): the chosen retro family's HDR-FLIP beats
+    the best family without the retro lobe, and the command prints the two side by side."""
+    from tests import console_script as cs
+    from tests.conftest import shared_file
+
+    out = tmp_path / "o"
+    proc = cs.run("fit", shared_file("alta", "retro-gray-tape.dat"), "--score", "--no-plots",
+                  "-o", out, columns=200)  # fmt: skip
+    cs.assert_clean(proc)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["recommended"] == "lambert+retro+gtr"
+    flip = {r["model"]: r["appearance"]["hdr_flip"] for r in summary["table"]}
+    best_without = min((v, k) for k, v in flip.items() if "retro" not in k)
+    assert flip["lambert+retro+gtr"] < 0.8 * best_without[0]
+    assert (f"appearance: recommended lambert+retro+gtr HDR-FLIP {flip['lambert+retro+gtr']:.3f}"
+            f", rel. L1") in proc.stdout  # fmt: skip
+    assert f"best other family by HDR-FLIP {best_without[1]}" in proc.stdout
+
+
+def test_appearance_line_puts_the_recommended_fit_beside_the_best_other():
+    from types import SimpleNamespace
+
+    from gonio.fit.cli import appearance_beside_next
+
+    def fit(name, flip, l1):
+        return SimpleNamespace(name=name, channel=None, appearance={"hdr_flip": flip, "rel_l1": l1})
+
+    fits = [
+        fit("lambert", 0.75, 2.4),
+        fit("lambert+gtr", 0.79, 3.5),
+        fit("lambert+retro", 0.5, 4.3),
+    ]
+    line = appearance_beside_next(fits, "lambert+retro")
+    assert line == ("appearance: recommended lambert+retro HDR-FLIP 0.500, rel. L1 4.300; best "
+                    "other family by HDR-FLIP lambert HDR-FLIP 0.750, rel. L1 2.400")  # fmt: skip
+    assert appearance_beside_next(fits[:1], "lambert") == ""
+    assert appearance_beside_next([fit("lambert", 0.7, 1.0), *fits[1:2]], "x") == ""

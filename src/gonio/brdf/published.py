@@ -22,8 +22,9 @@ Every model is ``Lambert(albedo) + lobe``; ``cos_i``, ``cos_o`` are the cosines 
 * ``LowCookTorrance``: bbm's ``albedo D G F / (pi cos_i cos_o)`` with the *unnormalized*
   Beckmann ``D = exp(-tan^2 theta_h / m^2) / (m^2 cos^4 theta_h)``, the V-groove ``G`` and the
   dielectric Fresnel term of index ``eta``, i.e. ``Scaled(TorranceSparrow(alpha=m, beckmann,
-  vcavity, Dielectric(eta)), 4 albedo)``; three published fits have ``m > 1``, outside
-  TorranceSparrow's range, and raise ParameterError.
+  vcavity, Dielectric(eta)), 4 albedo)``; the three published fits with ``m > 1`` (up to
+  2.09: the Beckmann distribution is normalized for any ``m``) are within TorranceSparrow's
+  range, above the box its fits search.
 * ``LowMicrofacetFit``: ``LowMicrofacet(A, B, C, eta)`` (the fits' ``1 / pi`` normalization).
 * ``LowSmooth``: ``LowSmooth(A, B, C, eta)``.
 * ``Bagher``: ``BagherSGD(rho_s=albedo, alpha, p, f0=eta[0], f1=eta[1], K, Lambda, c, k,

@@ -87,6 +87,10 @@ class ModelSummary:
     rmse: float | None = None
     rel_mse: float | None = None
     ssim: float | None = None
+    #: the appearance score (:mod:`gonio.appearance`) against the reference: HDR-FLIP and
+    #: relative L1, means over its four sphere images
+    hdr_flip: float | None = None
+    rel_l1: float | None = None
     truth_check: TruthCheck | None = None
     files: dict[str, Any] = field(default_factory=dict)
 
@@ -466,6 +470,7 @@ def _render_all(
 ) -> dict[str, Any]:
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+    from gonio import appearance
     from gonio.render.compare import compare_images, comparison_figure
     from gonio.render.integrator import render_sphere
     from gonio.render.lights import Environment
@@ -510,9 +515,13 @@ def _render_all(
         write_exr(renders_dir / f"{stem}.exr", images[stem])
         write_png(renders_dir / f"{stem}.png", images[stem], exposure)
         files[stem] = {"exr": f"renders/{stem}.exr", "png": f"renders/{stem}.png"}
-    for s, c in zip(summaries, comps, strict=True):
+    # the appearance score, as gonio fit --score gives it, against the same reference
+    ref = appearance.Reference.of(measured)
+    for s, c, r in zip(summaries, comps, results, strict=True):
         s.rmse, s.rel_mse, s.ssim = c.errors.rmse, c.errors.rel_mse, c.errors.ssim
         s.files["render"] = files[s.preset.replace("+", "-")]
+        score = appearance.score(ref, r.model)
+        s.hdr_flip, s.rel_l1 = score["hdr_flip"], score["rel_l1"]
     comparison_figure(
         out / "compare.png",
         reference,

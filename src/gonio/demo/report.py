@@ -82,12 +82,19 @@ def _models_table(models: list[Any]) -> str:
             f'<td class="num">{_num(m.reduced_chi2)}</td>'
             f'<td class="num">{_num(m.aic, 6)}</td><td class="num">{_num(m.bic, 6)}</td>'
             f'<td class="num">{_num(m.rmse)}</td><td class="num">{_num(m.rel_mse)}</td>'
-            f'<td class="num">{_num(m.ssim, 3)}</td><td class="num">{m.fit_s:.2f}</td>'
+            f'<td class="num">{_num(m.ssim, 3)}</td>'
+            f'<td class="num">{_num(getattr(m, "hdr_flip", None), 3)}</td>'
+            f'<td class="num">{_num(getattr(m, "rel_l1", None), 3)}</td>'
+            f'<td class="num">{m.fit_s:.2f}</td>'
             f"<td>{chk or '&ndash;'}</td></tr>"
         )
     head = (
         "<tr><th>model (fit JSON)</th><th>reduced &chi;&sup2;</th><th>AIC</th><th>BIC</th>"
-        "<th>render RMSE</th><th>render relMSE</th><th>SSIM</th><th>fit time (s)</th>"
+        "<th>render RMSE</th><th>render relMSE</th><th>SSIM</th>"
+        '<th title="appearance score: HDR-FLIP, mean over the spheres under a light at 0, 30 and'
+        ' 60 degrees and the studio">HDR-FLIP</th>'
+        '<th title="appearance score: relative L1 of the same spheres">rel. L1</th>'
+        "<th>fit time (s)</th>"
         "<th>ground truth (family-wise 1&nbsp;%)</th></tr>"
     )
     return f"<table>{head}{''.join(rows)}</table>"

@@ -102,7 +102,10 @@ def safe_stem(name: str) -> str:
 def fit_options_key(options: dict[str, Any]) -> Any:
     """The fit options (``options["fit"]``) as recorded in a material's ``summary.json``:
     JSON-normalized so that a rerun can tell whether a material was fitted the same way."""
-    return json.loads(dumps_json(options.get("fit", {}), sort_keys=True, default=str))
+    key = dict(options.get("fit", {}))
+    if options.get("score"):  # a scored run is not done by an earlier unscored one
+        key["score"] = True
+    return json.loads(dumps_json(key, sort_keys=True, default=str))
 
 
 def _summary(folder: Path) -> dict[str, Any]:
@@ -150,8 +153,18 @@ def fit_material(path: str, out_dir: str, options: dict[str, Any]) -> dict[str, 
         check_target(folder)  # never replace a folder of other files
         data = prepare(src, opts.get("theta_max_deg", 80.0), name=name)
         chosen = None if options.get("select") else models
-        results, comp, shown = fit_models(data, chosen, opts)
         skipped: list[str] = []
+
+        def score(fits: list[Any]) -> None:  # gonio fit --score: the appearance score
+            from gonio.fit.score import score_results
+
+            why = score_results(src, fits)
+            if why is not None:
+                skipped.append(f"appearance score skipped: {why}")
+
+        results, comp, shown = fit_models(
+            data, chosen, opts, score if options.get("score") else None
+        )
         log: list[str] = []
         with staging(folder) as tmp:  # one run per folder, swapped in whole (run_folder)
             files = []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +77,8 @@ def register(subparsers: Any) -> None:
         "measured and the model's spheres (96 px, light at 0, 30 and 60 deg from the view, and "
         "a generated studio environment) compared by HDR-FLIP and relative L1 "
         "(docs/guide/fitting.md). Without files: of the fitted models (also in the table and "
-        "the JSON). With files, score those instead of fitting: fit results (.json) or published "
+        "the JSON; with several inputs, in OUT/fits.csv and the table across materials). "
+        "With files, score those instead of fitting: fit results (.json) or published "
         "fits (any .fit file of Ngan et al., Low et al. or Bagher et al., for the input's "
         "material; or FILE.fit::MATERIAL); with several files, one without the material is "
         "skipped with a note",
@@ -266,6 +268,7 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     console = Console(stderr=True)
     opts = dict(options["fit"])
     results = []
+    clock = {"start": time.perf_counter()}
     with Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
@@ -276,6 +279,7 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
     ) as bar:
         task = bar.add_task(f"reading {path.name}")
         data = prepare(path, opts["theta_max_deg"])
+        clock["read"] = time.perf_counter()
         if data.source.get("sigma_ignored") and not as_json:
             console.print(f"{path.name}: {data.source['sigma_ignored']}")
         if opts.get("loss") == "auto" and data.sigma is None and not as_json:
@@ -297,6 +301,8 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         results, comp, shown = fit_models(
             data, chosen, {**opts, **say}, score if options.get("score") else None
         )
+        clock["fit"] = time.perf_counter()
+        plotting = 0.0
         # One run per folder: written into a hidden sibling, then swapped in as a whole
         # (gonio.fit.run_folder), so a rerun leaves nothing stale and an interrupted one leaves
         # the previous run as it was.
@@ -312,13 +318,23 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
                 if options["plots"] and (r.name == comp.recommended or not options.get("select")):
                     from gonio.fit.plots import plot_result
 
+                    t0 = time.perf_counter()
                     drawn = plot_result(r, shown, staging, stem, skipped=skipped, log=log)
+                    plotting += time.perf_counter() - t0
                     files += [str(out / p.name) for p in drawn]
+            done = time.perf_counter()
             summary = {
                 "material": data.source.get("name"),
                 "path": str(path),
                 "files": files,
                 **comp.to_json(),
+                # wall seconds of this command's stages (the fits' own are in their JSON)
+                "timings_s": {
+                    "read": clock["read"] - clock["start"],
+                    "fit": clock["fit"] - clock["read"],
+                    "plots": plotting,
+                    "write": done - clock["fit"] - plotting,
+                },
             }
             write_json(summary, staging / "summary.json")
             replaced = run_folder.publish(staging, out, log)
@@ -336,22 +352,38 @@ def _run_single(path: Path, out: Path, options: dict[str, Any], as_json: bool) -
         if options.get("score"):
             for r in results:
                 _print_score(out_console, r.name, r.metrics, data, r.appearance)
+            line = appearance_beside_next(results, summary["recommended"])
+            if line:
+                out_console.print(line, highlight=False, markup=False, soft_wrap=True)
     return 0
+
+
+def appearance_beside_next(results: list[Any], recommended: str | None) -> str:
+    """One line: the recommended fit's appearance score beside that of the best other family
+    by HDR-FLIP (e.g. a retro-reflective tape's ``lambert+retro+gtr`` beside the best family
+    without the retro lobe); empty when fewer than two fits carry a score."""
+    scored = [r for r in results if r.channel is None and r.appearance]
+    chosen = next((r for r in scored if r.name == recommended), None)
+    others = sorted((r for r in scored if r.name != recommended),
+                    key=lambda r: r.appearance["hdr_flip"])  # fmt: skip
+    if chosen is None or not others:
+        return ""
+    a, b = chosen.appearance, others[0].appearance
+    return (
+        f"appearance: recommended {chosen.name} HDR-FLIP {a['hdr_flip']:.3f}, rel. L1 "
+        f"{a['rel_l1']:.3f}; best other family by HDR-FLIP {others[0].name} HDR-FLIP "
+        f"{b['hdr_flip']:.3f}, rel. L1 {b['rel_l1']:.3f}"
+    )
 
 
 def _score_appearance(path: Path, results: list[Any], console: Any, quiet: bool) -> None:
     """Set each result's appearance score (per-channel fits have none: the score compares
     whole-colour images)."""
-    from gonio.fit.score import appearance_reference, appearance_score
+    from gonio.fit.score import score_results
 
-    ref, why = appearance_reference(path)
-    if ref is None:
-        if not quiet:
-            console.print(f"appearance score skipped: {why}", highlight=False, markup=False)
-        return
-    for r in results:
-        if r.channel is None:
-            r.appearance = appearance_score(ref, r.model)
+    why = score_results(path, results)
+    if why is not None and not quiet:
+        console.print(f"appearance score skipped: {why}", highlight=False, markup=False)
 
 
 def _print_score(
@@ -530,15 +562,16 @@ def _print_batch_table(console: Any, rows: list[dict[str, Any]], csv_path: Path)
 
     best = [r for r in rows if r["recommended"]]
     appearance = any("hdr_flip" in r["metrics"] for r in best)
+    scores = (("hdr_flip", "HDR-FLIP"), ("rel_l1", "rel. L1")) if appearance else ()
     table = Table(title=f"recommended fit per material (every model: {csv_path})",
                   box=box.SIMPLE_HEAD, title_justify="left", pad_edge=False)  # fmt: skip
-    for head in ("material", "family", "loss", *(["HDR-FLIP"] if appearance else []),
-                 "parameters", "flags"):  # fmt: skip
-        table.add_column(head, overflow="fold", justify="right" if head == "loss" else "left")
+    numeric = ("loss", *(head for _, head in scores))
+    for head in ("material", "family", *numeric, "parameters", "flags"):
+        table.add_column(head, overflow="fold", justify="right" if head in numeric else "left")
     for r in best:
         cells = [str(r["material"]), str(r["model"]), f"{r['metric']} {r['loss']:.4g}"]
-        if appearance:
-            v = r["metrics"].get("hdr_flip")
+        for key, _ in scores:
+            v = r["metrics"].get(key)
             cells.append("" if v is None else f"{v:.4g}")
         cells += [params_compact(r["params"]), ", ".join(r["flags"]) or "-"]
         table.add_row(*cells)

@@ -119,8 +119,8 @@ class Problem:
 
     def prepare(self, *names: str) -> None:
         """Compile (or load) the programs ``names`` (of ``"cost"``, ``"value_and_grad"``,
-        ``"value_and_grad_scored"``, ``"normal"``, ``"hessian"``) for this problem's data
-        without running them (:meth:`~gonio.fit.programs.Program.prepare`)."""
+        ``"value_and_grad_scored"``, ``"normal"``, ``"hessian"``, ``"predict"``) for this
+        problem's data without running them (:meth:`~gonio.fit.programs.Program.prepare`)."""
         u = jnp.zeros(self.n_params, jnp.float64)
         for name in names:
             extra = (self._score_data(),) if name == "value_and_grad_scored" else ()
@@ -333,7 +333,7 @@ class Compiled:
         self.normal = Program("normal", normal, key)
         self.hessian = Program("hessian", hessian, key)
         self.residuals = jax.jit(residuals)
-        self.predict = jax.jit(predict)
+        self.predict = Program("predict", predict, key)
         self.cluster_scores = jax.jit(cluster_scores, static_argnums=4)
 
 

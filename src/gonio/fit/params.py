@@ -65,7 +65,8 @@ class Entry:
 
 
 def _entry(key: str, spec: Param, size: int, offset: int) -> Entry:
-    lo, hi, d = float(spec.lower), float(spec.upper), float(spec.default)
+    lo, d = float(spec.lower), float(spec.default)
+    hi = float(spec.upper if spec.fit_upper is None else spec.fit_upper)  # the search box
     mag = max(abs(d), 1e-3)
     scale = spec.scale
     if scale == "logit" and not (math.isfinite(lo) and math.isfinite(hi)):

@@ -32,9 +32,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from scipy.stats import binned_statistic_2d
 
 from gonio.fit.data import FitData
+from gonio.fit.programs import model_f
 from gonio.io.atomic import atomic_output
 
 _EPS = 1e-3
@@ -99,14 +99,11 @@ def residual_figure(data: FitData, f: np.ndarray, title: str = "") -> Any:
     """The figure of :func:`residual_map`."""
     th, td, _ = data.half_diff()
     ratio = np.mean(np.log((np.maximum(f, 0) + _EPS) / (np.maximum(data.values, 0) + _EPS)), -1)
-    stat, xe, ye, _ = binned_statistic_2d(
-        np.degrees(th),
-        np.degrees(td),
-        ratio,
-        statistic="mean",
-        bins=45,
-        range=[[0, 90], [0, 90]],
-    )
+    x, y, bins, box = np.degrees(th), np.degrees(td), 45, [[0, 90], [0, 90]]
+    total, xe, ye = np.histogram2d(x, y, bins=bins, range=box, weights=ratio)
+    count = np.histogram2d(x, y, bins=bins, range=box)[0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        stat = total / count  # mean per bin, NaN where empty
     lim = np.nanpercentile(np.abs(stat), 98) if np.isfinite(stat).any() else 1.0
     lim = max(float(lim), 1e-3)
     fig, ax = plt.subplots(figsize=(5.2, 4.4))
@@ -118,15 +115,40 @@ def residual_figure(data: FitData, f: np.ndarray, title: str = "") -> Any:
     return fig
 
 
+#: Incident angles of the in-plane slices (degrees) and outgoing angles of their curves.
+SLICE_THETA_I = (0.0, 20.0, 40.0, 60.0)
+_SLICE_THETA_O = np.radians(np.linspace(-89, 89, 357))
+#: Samples drawn on the fitted-vs-measured scatter at most.
+SCATTER_POINTS = 6000
+
+
+def slice_directions() -> tuple[np.ndarray, np.ndarray]:
+    """``(wi, wo)``, each ``(len(SLICE_THETA_I) * 357, 3)``: the in-plane curves' directions
+    (wo in the plane of incidence, theta_o from -89 to 89 degrees, + on the mirror side)."""
+    wo = np.stack([-np.sin(_SLICE_THETA_O), np.zeros_like(_SLICE_THETA_O),
+                   np.cos(_SLICE_THETA_O)], -1)  # fmt: skip
+    ti = np.radians(np.asarray(SLICE_THETA_I))
+    wi = np.stack([np.sin(ti), np.zeros_like(ti), np.cos(ti)], -1)
+    return np.repeat(wi, len(wo), 0), np.tile(wo, (len(ti), 1))
+
+
 def polar_slices(
-    data: FitData, model: Any, path: str | Path, title: str = "", f: np.ndarray | None = None
-) -> Path:
+    data: FitData, model: Any, path: str | Path, title: str = "", f: np.ndarray | None = None,
+    curves: np.ndarray | None = None,
+) -> Path:  # fmt: skip
     """In-plane slices measured (dots) vs fitted (lines), plus fitted-vs-measured scatter."""
-    return _save(slices_figure(data, model, title, f), path)
+    return _save(slices_figure(data, model, title, f, curves), path)
 
 
-def slices_figure(data: FitData, model: Any, title: str = "", f: np.ndarray | None = None) -> Any:
-    """The figure of :func:`polar_slices`."""
+def slices_figure(
+    data: FitData, model: Any, title: str = "", f: np.ndarray | None = None,
+    curves: np.ndarray | None = None,
+) -> Any:  # fmt: skip
+    """The figure of :func:`polar_slices`. ``f``: the model at the data's directions
+    ``(N, C)``, ``curves``: at :func:`slice_directions` (each evaluated when not given)."""
+    if curves is None:
+        curves = model_f(model, *slice_directions())
+    curves = np.mean(curves, -1).reshape(len(SLICE_THETA_I), -1)
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10.5, 4.2))
     theta_i = np.degrees(np.arccos(np.clip(data.wi[:, 2], -1, 1)))
     phi_i = np.arctan2(data.wi[:, 1], data.wi[:, 0])
@@ -136,7 +158,7 @@ def slices_figure(data: FitData, model: Any, title: str = "", f: np.ndarray | No
     off_plane = np.degrees(np.arcsin(np.clip(np.abs(np.sin(dphi)) * sin_o, 0, 1)))
     colors = plt.cm.viridis(np.linspace(0, 0.9, 4))
     shown = 0
-    for target, col in zip((0.0, 20.0, 40.0, 60.0), colors, strict=True):
+    for target, col, fm in zip(SLICE_THETA_I, colors, curves, strict=True):
         sel = (np.abs(theta_i - target) < 3.0) & (off_plane < 3.0)
         if sel.sum() < 3:
             continue
@@ -145,12 +167,8 @@ def slices_figure(data: FitData, model: Any, title: str = "", f: np.ndarray | No
         signed = np.where(np.cos(dphi[sel]) < 0, theta_o, -theta_o)  # + on the mirror side
         y = np.mean(data.values[sel], -1)
         ax.scatter(signed, np.maximum(y, 1e-4), s=6, color=col, alpha=0.6)
-        ti = np.radians(target)
-        wi = np.array([np.sin(ti), 0.0, np.cos(ti)])
-        to = np.radians(np.linspace(-89, 89, 357))
-        wo = np.stack([-np.sin(to), np.zeros_like(to), np.cos(to)], -1)
-        fm = np.mean(np.asarray(model.f(np.broadcast_to(wi, wo.shape), wo)), -1)
-        ax.plot(np.degrees(to), np.maximum(fm, 1e-4), color=col, label=f"theta_i = {target:g}")
+        ax.plot(np.degrees(_SLICE_THETA_O), np.maximum(fm, 1e-4), color=col,
+                label=f"theta_i = {target:g}")  # fmt: skip
     ax.set_yscale("log")
     ax.set_xlabel("theta_o in the plane of incidence (deg, + = mirror side)")
     ax.set_ylabel("BRDF (1/sr), channel mean")
@@ -158,9 +176,9 @@ def slices_figure(data: FitData, model: Any, title: str = "", f: np.ndarray | No
     if shown:
         ax.legend(fontsize=MIN_FONT_PT)
     if f is None:
-        f = np.asarray(model.f(data.wi, data.wo))
+        f = model_f(model, data.wi, data.wo)
     f = np.broadcast_to(f, data.values.shape)
-    idx = np.random.default_rng(0).choice(data.n, size=min(data.n, 20000), replace=False)
+    idx = np.random.default_rng(0).choice(data.n, size=min(data.n, SCATTER_POINTS), replace=False)
     for c in range(data.channels):
         ax2.scatter(
             np.maximum(data.values[idx, c], 1e-5),
@@ -317,10 +335,15 @@ def _plots(
     truth: dict | None,
     skipped: list[str] | None,
 ) -> list[Path]:
-    f = np.asarray(result.model.f(data.wi, data.wo))
+    # the model at the data's cells and on the slices' curves in one compiled call
+    swi, swo = slice_directions()
+    both = model_f(result.model, np.concatenate([data.wi, swi]), np.concatenate([data.wo, swo]))
+    f, curves = both[: data.n], both[data.n :]
     paths = [
         residual_map(data, f, out_dir / f"{stem}-residuals.png", title=result.name),
-        polar_slices(data, result.model, out_dir / f"{stem}-slices.png", result.name, f=f),
+        polar_slices(
+            data, result.model, out_dir / f"{stem}-slices.png", result.name, f=f, curves=curves
+        ),
     ]
     unc = result.uncertainty
     if unc is None or unc.samples is None:

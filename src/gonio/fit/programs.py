@@ -76,7 +76,7 @@ class Program:
 
     def __init__(self, name: str, fn: Callable[..., Any], key: str) -> None:
         self.name, self.fn, self.key = name, fn, key
-        self.jitted = jax.jit(fn, compiler_options=_compiler_options())
+        self.jitted = jax.jit(fn, compiler_options=compiler_options())
         # signature -> the compiled callable, a Future while one thread resolves it (another
         # thread calling the same signature waits for it instead of compiling it again)
         self._calls: dict[Any, Future[Callable[..., Any]]] = {}
@@ -147,17 +147,31 @@ class Program:
                 self.last_source = "exported"
             except Exception:  # a program JAX cannot export: trace it every process
                 self.last_source = "jit"
-                return jax.jit(flat, compiler_options=_compiler_options())
-        return jax.jit(exp.call, compiler_options=_compiler_options())
+                return jax.jit(flat, compiler_options=compiler_options())
+        return jax.jit(exp.call, compiler_options=compiler_options())
 
 
-def _compiler_options() -> dict[str, Any]:
+def compiler_options() -> dict[str, Any]:
     """XLA options of the fit's programs: on the CPU, XLA's loop emitters instead of its MLIR
     fusion emitters, which take longer to compile these programs and run them slower: both a
     first fit on an empty compilation cache and a warm fit are faster with the loop emitters.
     Not set for the render kernels, whose cold first image is slower with it
     (``benchmarks/bench_first_image.py``)."""
     return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else {}
+
+
+_MODEL_VALUES: list[Any] = []
+
+
+def model_f(model: Any, wi: Any, wo: Any) -> np.ndarray:
+    """``model.f(wi, wo)`` of a gonio model (a JAX pytree) in sr^-1, ``(N, 3), (N, 3) -> (N, C)``,
+    as one compiled program per model structure and N, with the fit's compiler options: one
+    compilation instead of one per operation and shape when evaluated op by op."""
+    if not _MODEL_VALUES:
+        _MODEL_VALUES.append(
+            jax.jit(lambda m, a, b: m.f(a, b), compiler_options=compiler_options())
+        )
+    return np.asarray(_MODEL_VALUES[0](model, np.asarray(wi), np.asarray(wo)))
 
 
 def _dtype(x: Any) -> Any:

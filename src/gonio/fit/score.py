@@ -32,6 +32,7 @@ from gonio.brdf.models import BRDFModel
 from gonio.errors import FitError, FormatError, GonioError
 from gonio.fit.data import DEFAULT_THETA_MAX_DEG, FitData, prepare
 from gonio.fit.losses import evaluate_many
+from gonio.fit.programs import model_f
 
 #: The metrics reported by :func:`score` (keys of :data:`gonio.fit.losses.LOSSES`).
 SCORES = ("ngan", "low-e2")
@@ -39,9 +40,6 @@ SCORES = ("ngan", "low-e2")
 
 def _eval(model: Any, wi: Any, wo: Any) -> Any:
     return model.f(wi, wo)
-
-
-_EVAL_JIT: list[Any] = []
 
 
 def model_values(model: Any, data: FitData, chunk: int = 1 << 18) -> np.ndarray:
@@ -53,14 +51,7 @@ def model_values(model: Any, data: FitData, chunk: int = 1 << 18) -> np.ndarray:
     every operation separately and is slow on a MERL table). Anything else with ``f(wi, wo)``
     is called chunk by chunk as it is.
     """
-    if isinstance(model, BRDFModel):
-        if not _EVAL_JIT:
-            import jax
-
-            _EVAL_JIT.append(jax.jit(_eval))
-        fn = _EVAL_JIT[0]
-    else:
-        fn = _eval
+    fn = model_f if isinstance(model, BRDFModel) else _eval
     out = []
     for s in range(0, data.n, chunk):
         wi, wo = data.wi[s : s + chunk], data.wo[s : s + chunk]
@@ -131,3 +122,16 @@ def appearance_score(reference: Any, model: Any) -> dict[str, float]:
     from gonio import appearance
 
     return appearance.score(reference, model)
+
+
+def score_results(path: str | Path, results: list[Any]) -> str | None:
+    """Set the appearance score (``.appearance``) of every whole-colour result of ``results``
+    (per-channel fits have none: the score compares whole-colour images) against the sphere
+    images of the measurement at ``path``; returns why it was skipped, or None."""
+    ref, why = appearance_reference(path)
+    if ref is None:
+        return why
+    for r in results:
+        if r.channel is None:
+            r.appearance = appearance_score(ref, r.model)
+    return None

@@ -25,21 +25,23 @@ The families, the loss and the thresholds were chosen on the tuning half of the 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gonio.brdf.models import BRDFModel
-from gonio.errors import FitError
+from gonio.errors import FitError, GonioError
 from gonio.fit import presets
 from gonio.fit.api import FitOptions, fit
 from gonio.fit.compare import Comparison, summarize, with_nested
 from gonio.fit.data import FitData, prepare
-from gonio.fit.losses import get_loss
+from gonio.fit.losses import Loss, get_loss
 from gonio.fit.objective import Problem
 from gonio.fit.params import Layout
 from gonio.fit.result import FitResult
@@ -158,24 +160,60 @@ def select(
                                                "cells": "training"})  # fmt: skip
     timings["split"] = time.perf_counter() - t0
     results, cv = [], {}
-    for name in names:
-        t0 = time.perf_counter()
-        tmpl, fixed = _warm_template(name, results)
-        fixed = {**fixed, **(opts.fixed or {})}
-        # every stage on the training cells (no random subset of them: one compiled program)
-        r = fit(train, model=tmpl, options=dataclasses.replace(opts, fixed=fixed,
-                                                               subsample=train.n))  # fmt: skip
-        assert isinstance(r, FitResult) and r.u is not None
-        r.name = name
-        # the held-out loss through the fit's own compiled program (same layout, same shapes)
-        held_out = Problem(Layout(tmpl, train.channels, fixed=fixed), get_loss(loss), test)
-        cost = held_out.normal(r.u)[0]
-        cv[name] = get_loss(loss).value(cost) if np.isfinite(cost) else float("inf")
-        results.append(r)
-        timings[name] = time.perf_counter() - t0
+    with _compiled_ahead(names[1:], train, get_loss(loss), opts.fixed):
+        for name in names:
+            t0 = time.perf_counter()
+            r, cv[name] = _fit_family(name, results, train, test, loss, opts)
+            results.append(r)
+            timings[name] = time.perf_counter() - t0
     chosen, reason = _choose(results, cv)
     timings["total"] = time.perf_counter() - t_start
     return Selection(results, cv, chosen, reason, loss, train.n, test.n, timings)
+
+
+def _fit_family(
+    name: str, done: list[FitResult], train: FitData, test: FitData, loss: str, opts: FitOptions
+) -> tuple[FitResult, float]:
+    """One family's fit on the training cells and its loss on the held-out cells."""
+    tmpl, fixed = _warm_template(name, done)
+    fixed = {**fixed, **(opts.fixed or {})}
+    # every stage on the training cells (no random subset of them: one compiled program)
+    r = fit(train, model=tmpl, options=dataclasses.replace(opts, fixed=fixed,
+                                                           subsample=train.n))  # fmt: skip
+    assert isinstance(r, FitResult) and r.u is not None
+    r.name = name
+    # the held-out loss through the fit's own compiled program (same layout, same shapes)
+    held_out = Problem(Layout(tmpl, train.channels, fixed=fixed), get_loss(loss), test)
+    cost = held_out.normal(r.u)[0]
+    return r, get_loss(loss).value(cost) if np.isfinite(cost) else float("inf")
+
+
+@contextlib.contextmanager
+def _compiled_ahead(
+    names: Sequence[str], train: FitData, loss: Loss, extra_fixed: dict[str, Any] | None
+) -> Iterator[None]:
+    """Compile (or load) the programs the families ``names`` will run on ``train`` (the normal
+    equations, also of the held-out cells, which have the same size, and the predictions) on
+    a background thread while the body fits the first families: XLA's compiler releases the
+    GIL, so on an empty compilation cache a second core compiles the next family while this
+    one fits. A family's fit that needs a program first waits for it
+    (:meth:`~gonio.fit.programs.Program.prepare`); leaving the body cancels the rest."""
+    problems = []
+    for name in names:
+        try:
+            tmpl, fixed, _ = presets.build(name)
+            layout = Layout(tmpl, train.channels, fixed={**fixed, **(extra_fixed or {})})
+        except GonioError:  # e.g. a --fix key the family lacks: its fit reports it
+            continue
+        problems.append(Problem(layout, loss, train))
+    pool = ThreadPoolExecutor(1, thread_name_prefix="gonio-select-compile")
+    jobs = [pool.submit(p.prepare, what) for p in problems for what in ("normal", "predict")]
+    try:
+        yield
+    finally:
+        for job in jobs:
+            job.cancel()
+        pool.shutdown(wait=False)
 
 
 #: Albedo factors of lobes, and the value an added lobe starts at.

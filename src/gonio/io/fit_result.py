@@ -216,12 +216,31 @@ def _check(instance: Any, schema: dict[str, Any], source: str, what: str, at: st
     under ``schema``; ``at`` prefixes the field path."""
     import jsonschema
 
-    try:
-        jsonschema.validate(instance, schema)
-    except jsonschema.ValidationError as exc:
+    # what jsonschema.validate does, with the schema checked against its metaschema once per
+    # schema rather than at every record (most of the cost of writing a small result)
+    exc = jsonschema.exceptions.best_match(_validator(schema).iter_errors(instance))
+    if exc is not None:
         where = "/".join([*([at] if at else []), *map(str, exc.absolute_path)]) or "top level"
         message = " ".join(exc.message.split())[:120]
         raise FormatError(f"{source}: {what} ({where}: {message})") from None
+
+
+_SCHEMA_VALIDATOR: list[Any] = []
+
+
+def _validator(schema: dict[str, Any]) -> Any:
+    """A jsonschema validator of ``schema``, checked against its metaschema (that of
+    :data:`SCHEMA` built once)."""
+    import jsonschema
+
+    if schema is SCHEMA and _SCHEMA_VALIDATOR:
+        return _SCHEMA_VALIDATOR[0]
+    cls = jsonschema.validators.validator_for(schema)
+    cls.check_schema(schema)
+    v = cls(schema)
+    if schema is SCHEMA:
+        _SCHEMA_VALIDATOR.append(v)
+    return v
 
 
 def read_result(path: str | Path) -> dict[str, Any]:

@@ -50,6 +50,9 @@ class Param:
     scale : reparameterization a fitter should use: ``"linear"``, ``"log"`` (positive, spans
         decades, e.g. roughness) or ``"logit"`` (bounded on both sides, e.g. albedo).
     doc : one-line description.
+    fit_upper : upper end of a fitter's search box where it is narrower than the range the
+        model is defined on (``upper``): a value above it is a valid model (a published fit, a
+        hand-made material) but no fit searches there. None: ``upper``.
     """
 
     name: str
@@ -61,6 +64,7 @@ class Param:
     scale: Literal["linear", "log", "logit"] = "linear"
     doc: str = ""
     per_lobe: bool = False
+    fit_upper: float | None = None
 
 
 def is_concrete(x: Any) -> bool:

@@ -103,7 +103,7 @@ def ndf(h: Array, alpha: Array, dist: str) -> Array:
     Parameters
     ----------
     h : (..., 3) unit microfacet normal in the local frame.
-    alpha : scalar roughness in (0, 1].
+    alpha : scalar roughness > 0 (each distribution is normalized for any; fits search (0, 1]).
     dist : ``"blinn"``, ``"beckmann"`` or ``"ggx"``.
     """
     alpha = jnp.asarray(alpha).astype(h.dtype)

@@ -27,13 +27,20 @@ Array = jnp.ndarray
 SAMPLINGS = ("auto", "visible", "distribution")
 
 
+#: Largest roughness a TorranceSparrow lobe is defined for (fits search up to 1).
+ALPHA_MAX = 4.0
+
+
 class TorranceSparrow(BRDFModel):
     """Microfacet BRDF ``f = rho_d / pi + D(h) G(wi, wo) F(wi.h) / (4 cos_i cos_o)``.
 
     Parameters
     ----------
-    alpha : roughness in [1e-4, 1] (dimensionless; the RMS microfacet slope for Beckmann, the
-        Blinn exponent is ``2 / alpha^2 - 2``). Fitted on a log scale.
+    alpha : roughness in [1e-4, :data:`ALPHA_MAX`] (dimensionless; the RMS microfacet slope
+        for Beckmann, the Blinn exponent is ``2 / alpha^2 - 2``). Fitted on a log scale within
+        [1e-4, 1]; above 1 (normals steeper than 45 degrees on average, a Blinn exponent below
+        0) each distribution is still normalized, so a published fit there (three of Löw et
+        al.'s Cook-Torrance fits, up to 2.09) is a valid model.
     distribution : ``"blinn"``, ``"beckmann"`` or ``"ggx"`` (static; see :mod:`.microfacet`).
     shadowing : ``"vcavity"`` (Torrance-Sparrow's ``min(1, ...)``) or ``"smith"``
         (height-correlated, exact Lambda per distribution; static).
@@ -58,7 +65,7 @@ class TorranceSparrow(BRDFModel):
     """
 
     PARAMS = (
-        Param("alpha", 0.2, 1e-4, 1.0, "1", scale="log",
+        Param("alpha", 0.2, 1e-4, ALPHA_MAX, "1", scale="log", fit_upper=1.0,
               doc="microfacet roughness (RMS slope for Beckmann)"),
         Param("rho_d", 0.0, 0.0, 1.0, "1", per_channel=True, scale="logit",
               doc="Lambertian albedo added to the specular lobe"),
