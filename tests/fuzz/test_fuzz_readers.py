@@ -4,15 +4,15 @@ passes). The default run judges :data:`DEFAULT_CASES` cases; ``-m slow`` judges
 :data:`SLOW_CASES` more with another seed. A failure lists every failing case with its seed,
 mutation and source file, and the command that replays it.
 
-Counts of the default run (seed 23, 500 cases; cases / typed errors / loads / failures): alta
-30 / 22 / 8 / 0, cornell 37 / 24 / 13 / 0, exr 36 / 22 / 14 / 0, exr_slices 42 / 39 / 3 / 0,
-fit 30 / 24 / 6 / 0, merl 32 / 21 / 11 / 0, native 94 / 77 / 17 / 0, nbrdf 36 / 36 / 0 / 0, plan
-41 / 35 / 6 / 0, rgl 78 / 56 / 22 / 0, rig 44 / 36 / 8 / 0 (``nbrdf`` joins where
+Counts of the default run (seed 23, 500 cases; cases / typed errors / loads / failures): alta 29 /
+21 / 8 / 0, cornell 35 / 22 / 13 / 0, exr 32 / 17 / 15 / 0, exr_slices 42 / 40 / 2 / 0, fit 26 / 21
+/ 5 / 0, merl 29 / 20 / 9 / 0, native 89 / 70 / 19 / 0, nbrdf 31 / 29 / 2 / 0, plan 32 / 30 / 2 /
+0, prior 42 / 36 / 6 / 0, rgl 73 / 53 / 20 / 0, rig 40 / 34 / 6 / 0 (``nbrdf`` joins where
 ``gonio.io.nbrdf`` exists). Every load also goes through the round-trip oracle
-(:func:`tests.fuzz.worker.round_trip`: gonio's writers, then their readers), under the same
-time limits and 2 GiB memory watchdog as the load itself. The default count was 2,000 (64 s of
-a 2-core test run, the suite's slowest test); 500 still draws every kind at least 30 times,
-and ``-m slow`` runs the 20,000-case campaign.
+(:func:`tests.fuzz.worker.round_trip`: gonio's writers, then their readers), under the same time
+limits and 2 GiB memory watchdog as the load itself. The default count was 2,000 (64 s of a 2-core
+test run, the suite's slowest test); 500 still draws every kind at least 25 times, and ``-m slow``
+runs the 20,000-case campaign.
 """
 
 from __future__ import annotations
