@@ -55,7 +55,6 @@ float64; gradients do not flow through the plugin. Mitsuba's LLVM backend needs 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -63,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from gonio.errors import ParameterError
+from gonio.io.strict_json import dumps_json
 
 #: The BSDF type name the plugin registers (``<bsdf type="gonio">``).
 PLUGIN = "gonio"
@@ -274,7 +274,7 @@ def _plugin_class(mi: Any, dr: Any) -> type:
             pass
 
         def to_string(self) -> str:
-            spec = json.dumps(self._model.to_dict())
+            spec = dumps_json(self._model.to_dict(), source="gonio BSDF")
             return f"GonioBSDF[{spec[:200]}{'...' if len(spec) > 200 else ''}]"
 
     return GonioBSDF
@@ -320,7 +320,9 @@ def scene_fragment(name: str, model: Any, header: str) -> tuple[str, dict[str, A
     """
     import xml.etree.ElementTree as ET
 
-    spec = json.dumps(model.to_dict(), separators=(",", ":"))
+    spec = dumps_json(
+        model.to_dict(), nonfinite="refuse", source="gonio plugin fragment", separators=(",", ":")
+    )
     data = {"type": PLUGIN, "model": spec}
     el = ET.Element("bsdf", {"type": PLUGIN, "id": name})
     ET.SubElement(el, "string", {"name": "model", "value": spec})
