@@ -12,6 +12,9 @@ installed), where they fail. The vectorized ``llvm_ad_rgb`` checks are in
   view, the plugin's ``eval`` (times the irradiance) against gonio's render of the same fit,
   for the default fits of four shared-data materials (``tests/export/data/plugin_fits``):
   relative RMSE <= 2 % (measured: float32 rounding, about 1e-7).
+* The same fits under gonio's studio environment: each pixel the fixed sum over the appearance
+  studio's fixed-seed directions of radiance x ``f cos`` (``mitsuba_eval.studio_pairs``), the
+  plugin's ``eval`` against gonio's f: relative RMSE <= 2 % (measured: about 1e-8).
 * Its sampling passes gonio's chi-square test (:func:`gonio.brdf.chi2.chi2_test`) through
   Mitsuba's ``BSDF.sample`` and ``BSDF.pdf``.
 * ``mi.render`` of a sphere with it runs, and the ``gonio export --plugin`` fragment loads.
@@ -173,6 +176,20 @@ def test_sphere_per_pixel_matches_gonio_render(mi, name):
         img = plugin_sphere(mi, FITS / f"{name}.json", light_at(deg), size)
         err = np.sqrt(np.mean((img - ref) ** 2)) / np.sqrt(np.mean(ref**2))
         assert err <= 0.02, (name, deg, err)
+
+
+@pytest.mark.parametrize("name", MATERIALS)
+def test_sphere_under_the_studio_matches_gonio(mi, name):
+    """Under gonio's studio environment: the sphere image as the fixed sum over the appearance
+    studio's directions (16 px, 28 per pixel; the plugin is called once per pair) of radiance x
+    ``f cos``, the plugin's ``eval`` against gonio's f, within 2 % relative RMSE."""
+    from tests.export.mitsuba_eval import gonio_values, rel_rmse, studio_image, studio_pairs
+
+    wi, wo, weight, pixel = studio_pairs(16, 28)
+    bsdf = mi.load_dict({"type": "gonio", "filename": str(FITS / f"{name}.json")})
+    got = studio_image(mitsuba_eval(mi, bsdf, wo, wi), weight, pixel)
+    err = rel_rmse(got, studio_image(gonio_values(fit_model(name), wi, wo), weight, pixel))
+    assert err <= 0.02, (name, err)
 
 
 def mitsuba_sampler(mi, bsdf, view: np.ndarray):

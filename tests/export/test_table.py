@@ -79,6 +79,16 @@ def test_help_shows_the_table():
 MITSUBA_EXACT = [f for f, row in table.cells().items() if row["mitsuba"].kind == "exact"]
 
 
+def exact_cell_model(family: str):
+    """``family``'s model with the values the exact-cell checks use."""
+    model = presets.build(family)[0]
+    values = {"albedo": [0.6, 0.45, 0.3], "alpha": 0.3, "f0": [0.9, 0.6, 0.3]}
+    return model.replace(
+        **{k: values[k.rsplit(".", 1)[-1]] for k in model.param_specs() if
+           k.rsplit(".", 1)[-1] in values}
+    )  # fmt: skip
+
+
 @pytest.mark.parametrize("family", MITSUBA_EXACT)
 def test_mitsuba_exact_cells_by_bsdf_eval(family):
     """Every exact Mitsuba cell: ``BSDF.eval`` of the export within 2 % relative RMSE of gonio's
@@ -86,16 +96,34 @@ def test_mitsuba_exact_cells_by_bsdf_eval(family):
     pytest.importorskip("mitsuba")
     from tests.export.mitsuba_eval import directions, gonio_values, mitsuba_values, rel_rmse
 
-    model = presets.build(family)[0]
-    values = {"albedo": [0.6, 0.45, 0.3], "alpha": 0.3, "f0": [0.9, 0.6, 0.3]}
-    model = model.replace(
-        **{k: values[k.rsplit(".", 1)[-1]] for k in model.param_specs() if
-           k.rsplit(".", 1)[-1] in values}
-    )  # fmt: skip
+    model = exact_cell_model(family)
     e = export(fit_record(model), "mitsuba")
     assert e.mapping == "exact"
     wi, wo = directions()
     err = rel_rmse(mitsuba_values(e.data, wi, wo), gonio_values(model, wi, wo))
+    assert err <= 0.02, err
+
+
+@pytest.mark.parametrize("family", MITSUBA_EXACT)
+def test_mitsuba_exact_cells_under_the_studio(family):
+    """Every exact Mitsuba cell under gonio's studio environment: the sphere image as the fixed
+    sum over the appearance studio's directions (24 px, 70 per pixel) of radiance x ``f cos``,
+    Mitsuba's ``BSDF.eval`` of the export against gonio's f, within 2 % relative RMSE."""
+    pytest.importorskip("mitsuba")
+    from tests.export.mitsuba_eval import (
+        gonio_values,
+        mitsuba_values,
+        rel_rmse,
+        studio_image,
+        studio_pairs,
+    )
+
+    model = exact_cell_model(family)
+    e = export(fit_record(model), "mitsuba")
+    assert e.mapping == "exact"
+    wi, wo, weight, pixel = studio_pairs(24, 70)
+    got = studio_image(mitsuba_values(e.data, wi, wo), weight, pixel)
+    err = rel_rmse(got, studio_image(gonio_values(model, wi, wo), weight, pixel))
     assert err <= 0.02, err
 
 
