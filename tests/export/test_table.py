@@ -145,3 +145,18 @@ def test_mitsuba_ggx_is_exact_only_where_its_smith_term_agrees(alpha, exact):
     bsdf, _ = mitsuba.bsdf_dict(lobes)
     err = rel_rmse(mitsuba_values(bsdf, wi, wo), gonio_values(model, wi, wo))
     assert (err <= 0.02) == exact, err
+
+
+@pytest.mark.parametrize(("alpha", "family"), [(0.3, "ggx"), (0.52, "beckmann")])
+def test_mitsuba_refits_a_rough_ggx_result_as_beckmann(alpha, family):
+    """A GGX refit that ends above GGX_ALPHA_MAX (a felt's default fit did, at 0.52) is refitted
+    from the template Mitsuba names for that result: Beckmann, which it can hold exactly."""
+    from gonio.brdf import models
+    from gonio.export import mitsuba
+
+    rough = models.Lambert(0.3) + models.TorranceSparrow(
+        alpha=alpha, distribution="ggx", shadowing="smith", fresnel=models.Conductor(1.5, 0.0)
+    )
+    tmpl, _, name = mitsuba.refit_template(rough, split(rough))
+    assert f"TorranceSparrow({family}," in name
+    assert family in repr(tmpl)

@@ -128,6 +128,17 @@ def export(
             cache[key] = r
     new = split(r["model"])
     problem = mod.check(new)
+    if problem is not None:
+        # The refit left the target's exact domain (e.g. Mitsuba's GGX above GGX_ALPHA_MAX): the
+        # target names the family for such a result once more; refit that when it differs.
+        tmpl2, fixed2, family2 = mod.refit_template(src.model, new)
+        if family2 != family:
+            start = time.perf_counter()
+            rd2 = _data_for(src, refit_from, target, reason)
+            r = _best_refit(src, tmpl2, fixed2, family2, rd2, price)
+            r["total_seconds"] = time.perf_counter() - start
+            new = split(r["model"])
+            problem = mod.check(new)
     if problem is not None:  # e.g. a refitted value on a bound the target cannot take
         from gonio.errors import FitError
 
