@@ -16,11 +16,9 @@ import numpy as np
 import pytest
 
 from gonio.demo import builtin_material
+from tests.view.browser import CHROMEDRIVER, CHROMIUM, start
 
 pytestmark = pytest.mark.xdist_group("demo-e2e")
-
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMEDRIVER = Path("/usr/bin/chromedriver")
 
 
 def test_true_model_recovers_ground_truth_within_intervals(demo):
@@ -179,27 +177,10 @@ def test_report_survives_a_move(demo, tmp_path):
     "/usr/bin/chromedriver)",
 )
 def test_report_opens_in_headless_chromium_without_console_errors(demo, tmp_path):
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
-    from selenium.webdriver.chrome.service import Service
+    pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
 
     out, _, _ = demo
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for flag in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--window-size=4000,3000",
-    ):
-        options.add_argument(flag)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(str(CHROMEDRIVER)), options=options)
+    driver = start(tmp_path / "profile", window=(4000, 3000))
     try:
         driver.get((out / "index.html").resolve().as_uri())
         assert driver.title.startswith("gonio demo")

@@ -22,8 +22,9 @@ def missing(reason: str) -> None:
     pytest.skip(reason)
 
 
-def start(profile: Path):
-    """A headless Chromium driver rendering WebGL2 through SwiftShader (software)."""
+def start(profile: Path, window: tuple[int, int] = (1400, 1000)):
+    """A headless Chromium driver rendering WebGL2 through SwiftShader (software), with its
+    profile in ``profile`` and a ``window`` of (width, height) CSS pixels."""
     if not (CHROMIUM.exists() and CHROMEDRIVER.exists()):
         missing("Debian's chromium and chromium-driver are not installed")
     try:
@@ -44,7 +45,7 @@ def start(profile: Path):
         "--disable-component-update",
         "--disable-sync",
         f"--user-data-dir={profile}",
-        "--window-size=1400,1000",
+        f"--window-size={window[0]},{window[1]}",
     ):
         options.add_argument(flag)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
