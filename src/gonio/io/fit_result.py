@@ -140,6 +140,12 @@ SCHEMA: dict[str, Any] = {
     },
 }
 
+#: A model description's optional ``data`` object: :data:`SCHEMA`'s ``data`` without its
+#: required fields.
+DATA_FIELDS_SCHEMA: dict[str, Any] = {
+    k: v for k, v in SCHEMA["properties"]["data"].items() if k != "required"
+}
+
 _MAX_LOBES = 64
 _MAX_VALUE_RANK = 3
 
@@ -225,21 +231,20 @@ def _check(instance: Any, schema: dict[str, Any], source: str, what: str, at: st
         raise FormatError(f"{source}: {what} ({where}: {message})") from None
 
 
-_SCHEMA_VALIDATOR: list[Any] = []
+#: Validators of the module's schemas (:data:`SCHEMA`, :data:`DATA_FIELDS_SCHEMA`), by identity.
+_VALIDATORS: dict[int, Any] = {}
 
 
 def _validator(schema: dict[str, Any]) -> Any:
-    """A jsonschema validator of ``schema``, checked against its metaschema (that of
-    :data:`SCHEMA` built once)."""
+    """A jsonschema validator of ``schema`` (one of this module's schemas), checked against
+    its metaschema once."""
     import jsonschema
 
-    if schema is SCHEMA and _SCHEMA_VALIDATOR:
-        return _SCHEMA_VALIDATOR[0]
-    cls = jsonschema.validators.validator_for(schema)
-    cls.check_schema(schema)
-    v = cls(schema)
-    if schema is SCHEMA:
-        _SCHEMA_VALIDATOR.append(v)
+    v = _VALIDATORS.get(id(schema))
+    if v is None:
+        cls = jsonschema.validators.validator_for(schema)
+        cls.check_schema(schema)
+        v = _VALIDATORS[id(schema)] = cls(schema)
     return v
 
 
@@ -308,8 +313,7 @@ def fit_from_document(
     if not isinstance(spec, dict):
         raise FormatError(f"{source}: no model description (expected a 'model_spec' object)")
     check_model_spec(spec, source)
-    data_fields = {k: v for k, v in SCHEMA["properties"]["data"].items() if k != "required"}
-    _check(doc.get("data", {}), data_fields, source, "not a model description", "data")
+    _check(doc.get("data", {}), DATA_FIELDS_SCHEMA, source, "not a model description", "data")
     return doc, model_of(spec, source)
 
 
